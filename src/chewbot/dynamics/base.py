@@ -1,0 +1,54 @@
+"""What every inverse-dynamics formulation returns, and the registry that names them.
+
+A formulation is a function ``f(model, kin, **options) -> Dynamics``: the model, the kinematics of the
+whole task (:class:`~chewbot.kinematics.motion.Kinematics`), and options of its own (side, friction, goal, ...).
+Adding a formulation is adding one module that calls :func:`register`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+from chewbot.results import Table
+
+
+@dataclass(frozen=True, eq=False)
+class Dynamics:
+    """Result of an inverse-dynamics formulation along a task.
+
+    ``tau``: (N, 6) actuator torques, N m. ``table``: further named columns with units (forces, friction,
+    multipliers ...) that go into ``results.csv``. ``info``: scalars and notes for run.json and reports.
+    """
+
+    method: str
+    tau: np.ndarray
+    table: Table = field(default_factory=Table)
+    info: dict = field(default_factory=dict)
+
+
+Formulation = Callable[..., Dynamics]
+METHODS: dict[str, Formulation] = {}
+
+
+def register(name: str):
+    """Decorator: make a formulation available under ``name`` (``chewbot run --method NAME``)."""
+
+    def wrap(fn: Formulation) -> Formulation:
+        METHODS[name] = fn
+        return fn
+
+    return wrap
+
+
+def inverse_dynamics(model: Model, kin: Kinematics, method: str = "hessian", **options) -> Dynamics:
+    """Run the formulation ``method`` on the kinematics ``kin`` of ``model``."""
+    import chewbot.dynamics  # noqa: F401  (imports every formulation module, which registers itself)
+
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; available: {', '.join(sorted(METHODS))}")
+    return METHODS[method](model, kin, **options)

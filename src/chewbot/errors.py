@@ -1,0 +1,43 @@
+"""The errors chewbot raises for bad input: each names where the problem is and why."""
+
+from __future__ import annotations
+
+
+class ChewbotError(Exception):
+    """Base class of every error chewbot raises on purpose (bad input, unreachable poses, ...)."""
+
+
+class ParameterError(ChewbotError):
+    """A parameter file is missing, malformed or physically inconsistent.
+
+    The message names the file and the key.
+    """
+
+
+class TaskError(ChewbotError):
+    """A task (a CSV file or generator parameters) is malformed: names the file, row or column."""
+
+
+class KinematicsError(ChewbotError):
+    """A pose of the task cannot be reached, leaves the workspace or is singular.
+
+    ``sample`` (0-based row of the task) and ``chain`` (1-based, or None) tell where.
+    """
+
+    def __init__(self, message: str, sample: int | None = None, chain: int | None = None, time: float | None = None):
+        where = []
+        if sample is not None:
+            where.append(f"sample {sample}")
+        if time is not None:
+            where.append(f"t = {time:.6g} s")
+        if chain is not None:
+            where.append(f"chain {chain}")
+        prefix = ", ".join(where)
+        super().__init__(f"{prefix}: {message}" if prefix else message)
+        self.sample = sample
+        self.chain = chain
+        self.time = time
+
+
+class InfeasibleError(ChewbotError):
+    """No admissible torque distribution exists at a sample (names the sample and the limit)."""

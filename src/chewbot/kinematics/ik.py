@@ -1,0 +1,140 @@
+"""Inverse kinematics in closed form (one chain at a time) and forward kinematics by Newton's method.
+
+Inverse kinematics of chain i (MODEL.md): with d = O_M + R M_i - G_i and u, v the first two columns of R_C0,i,
+the closure equation abs(S_i - M_i)^2 = L_r^2 reads A cos(theta) + B sin(theta) = C with A = 2 L_c u.d,
+B = 2 L_c v.d, C = L_c^2 + abs(d)^2 - L_r^2. Its two solutions are theta = atan2(B, A) +/- acos(C / r),
+r = sqrt(A^2 + B^2); abs(C) > r means the chain cannot reach the pose, abs(C) = r is the singular
+configuration where crank and coupler are aligned and the two branches meet. The sign of
+dh_i/dtheta_i = r sin(theta - atan2(B, A)) tells the branch; the working branch is the one through
+theta = 0 at the home pose, kept along the whole trajectory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chewbot.casadi_tools import evaluate
+from chewbot.errors import KinematicsError
+from chewbot.kinematics.functions import closure_function
+from chewbot.model import Model
+
+# A chain closer than this to its singular configuration (sin of the angle between the crank's motion and the
+# coupler, 1 when they are perpendicular, 0 when aligned) is reported as singular: its theta_dot would be
+# more than 1e4 times the speed of the coupler end divided by the crank length.
+SINGULAR_TOLERANCE = 1e-4
+
+
+def _coefficients(model: Model, p: np.ndarray, R: np.ndarray):
+    Mi = p[:, None, :] + np.einsum("nij,kj->nki", R, model.M)  # (N, 6, 3)
+    d = Mi - model.G[None]
+    u = model.R_C0[:, :, 0]
+    v = model.R_C0[:, :, 1]
+    Lc, Lr = model.crank_length, model.coupler_length
+    A = 2 * Lc * np.einsum("nki,ki->nk", d, u)
+    B = 2 * Lc * np.einsum("nki,ki->nk", d, v)
+    C = Lc**2 + np.einsum("nki,nki->nk", d, d) - Lr**2
+    return A, B, C
+
+
+def branches(model: Model) -> np.ndarray:
+    """The working branch of each chain: the sign (+1/-1) of dh_i/dtheta_i at the home pose."""
+
+    def build():
+        A, B, C = _coefficients(model, np.zeros((1, 3)), np.eye(3)[None])
+        r = np.hypot(A, B)
+        phi = np.arctan2(B, A)
+        acos = np.arccos(np.clip(C / r, -1, 1))
+        plus, minus = _wrap(phi + acos), _wrap(phi - acos)
+        return np.where(np.abs(plus) <= np.abs(minus), 1.0, -1.0)[0]
+
+    return model.cached("ik_branches", build)
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def transmission(model: Model, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """sin of the angle between crank motion and coupler, per sample and chain (N, 6); 0 at a singularity."""
+    A, B, C = _coefficients(model, p, R)
+    return np.sqrt(np.clip(1 - (C / np.hypot(A, B)) ** 2, 0, None))
+
+
+def inverse_kinematics(model: Model, p: np.ndarray, R: np.ndarray, times: np.ndarray | None = None) -> np.ndarray:
+    """Actuator angles theta (N, 6) of the poses (p (N, 3) in m, R (N, 3, 3)), on the working branch.
+
+    The result is continuous along the samples (no 2 pi jumps) and starts in (-pi, pi]. A pose that a
+    chain cannot reach, or a chain at its singular configuration, raises :class:`KinematicsError` naming the
+    first such sample and chain.
+    """
+    p = np.atleast_2d(p)
+    R = np.asarray(R).reshape(-1, 3, 3)
+    A, B, C = _coefficients(model, p, R)
+    r = np.hypot(A, B)
+    ratio = C / r
+    _raise_first(np.abs(ratio) > 1, times, lambda n, k: f"pose out of reach of chain {k + 1}: "
+                 f"abs(C)/sqrt(A^2+B^2) = {abs(ratio[n, k]):.6f} > 1 (the coupler cannot close the loop)")
+    sin_tr = np.sqrt(np.clip(1 - ratio**2, 0, None))
+    _raise_first(sin_tr < SINGULAR_TOLERANCE, times, lambda n, k: f"chain {k + 1} is singular: crank and "
+                 f"coupler aligned (sin of transmission angle {sin_tr[n, k]:.2e} < {SINGULAR_TOLERANCE:g})")
+    theta = np.arctan2(B, A) + branches(model)[None, :] * np.arccos(ratio)
+    theta = np.unwrap(theta, axis=0)
+    return theta - 2 * np.pi * np.round(theta[:1] / (2 * np.pi))
+
+
+def _raise_first(mask: np.ndarray, times, message) -> None:
+    if mask.any():
+        n, k = np.argwhere(mask)[0]
+        raise KinematicsError(message(n, k), sample=int(n), chain=int(k) + 1, time=None if times is None else float(times[n]))
+
+
+def forward_kinematics(
+    model: Model,
+    theta: np.ndarray,
+    orientation: str = "euler-angles",
+    q0: np.ndarray | None = None,
+    tol: float = 1e-13,
+    max_iter: int = 30,
+) -> np.ndarray:
+    """Mandible coordinates q_EE (N, n) from actuator angles theta (N, 6), by Newton's method on H = 0.
+
+    All samples are solved at once (Gauss-Newton on the 6 closure equations, plus abs(e) = 1 for Euler
+    parameters; the target's 4 or 5 coordinates make the system overdetermined but consistent). ``q0`` is the
+    initial guess (default: home). Raises :class:`KinematicsError` for samples that do not converge to a
+    closure residual below ``tol`` (in units of the coordinates' step).
+    """
+    theta = np.atleast_2d(theta)
+    fn = closure_function(model, orientation)
+    n = fn.numel_in(1)
+    N = theta.shape[0]
+    if q0 is None:
+        q0 = _home(n, orientation)
+    q = np.array(np.broadcast_to(q0, (N, n)), dtype=float)
+    scale = model.coupler_length[None, :] ** 2  # H is in m^2: normalise each equation by L_r^2
+    for _ in range(max_iter):
+        H, J, unit, Ju = evaluate(fn, theta, q)
+        res = np.concatenate([H / scale, unit], axis=1)
+        Jac = np.concatenate([J / scale[:, :, None], Ju.reshape(N, 1, n)], axis=1)
+        step = _batched_lstsq(Jac, -res)
+        q = q + step
+        if np.abs(step).max() < tol:
+            break
+    H, _, unit, _ = evaluate(fn, theta, q)
+    bad = np.flatnonzero(np.abs(H / scale).max(axis=1) > 1e-9)
+    if bad.size:
+        raise KinematicsError(f"forward kinematics did not converge (closure residual {np.abs(H[bad[0]] / scale[0]).max():.2e})", sample=int(bad[0]))
+    return q
+
+
+def _batched_lstsq(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    # Normal equations, batched; J has full column rank away from singular configurations.
+    JtJ = np.einsum("nki,nkj->nij", J, J)
+    Jtr = np.einsum("nki,nk->ni", J, r)
+    return np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
+
+
+def _home(n: int, orientation: str) -> np.ndarray:
+    q = np.zeros(n)
+    if orientation == "euler-parameters":
+        q[n - 4 if n == 7 else 2] = 1.0  # e0 = 1
+    return q

@@ -1,0 +1,142 @@
+"""The robot model: everything about a mechanism that never changes, in SI units, immutable.
+
+Build one with :func:`chewbot.load_model` (``"target"``, ``"6rss"``, their ``-as-printed`` variants, or a
+TOML file). Arrays are read-only; a model is hashable by identity and safe to share.
+
+| field | shape | unit | meaning |
+|---|---|---|---|
+| ``G`` | (6, 3) | m | crank pivots G_i in {S} |
+| ``S0`` | (6, 3) | m | crank tips S_i at theta = 0 as printed (checks only) |
+| ``M`` | (6, 3) | m | coupler ends M_i in {M} |
+| ``crank_length`` | (6,) | m | abs(G_i S_i) |
+| ``coupler_length`` | (6,) | m | abs(S_i M_i) |
+| ``R_C0`` | (6, 3, 3) | - | actuator frames at theta = 0 (column 1: crank, column 3: shaft) |
+| ``crank_inertia`` | (6,) | kg m^2 | axial inertia of crank i about its shaft |
+| ``crank_mass`` | (6,) | kg | mass of crank i (centre at G_i) |
+| ``coupler_mass`` | (6,) | kg | rho A L_i of coupler i |
+| ``mandible_mass`` | () | kg | m_EE |
+| ``mandible_inertia`` | (3, 3) | kg m^2 | inertia about O_M in {M} |
+| ``incisor``, ``molar_left``, ``molar_right`` | (3,) | m | points I, B_L, B_R in {M} |
+| ``g`` | () | m/s^2 | gravity, along -Z_S |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+
+def _freeze(obj) -> None:
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, np.ndarray):
+            v = np.array(v, dtype=float)
+            v.setflags(write=False)
+            object.__setattr__(obj, f.name, v)
+
+
+@dataclass(frozen=True, eq=False)
+class HKPGeometry:
+    """The two higher kinematic pairs: condyle centres T_L, T_R (in {M}) on the plane p1 x + z + p2 = 0.
+
+    ``x_range``, ``y_left``, ``y_right`` bound the sockets in {S} (m).
+    """
+
+    p1: float
+    p2: float
+    x_range: np.ndarray
+    y_left: np.ndarray
+    y_right: np.ndarray
+    T_L: np.ndarray
+    T_R: np.ndarray
+
+    def __post_init__(self):
+        _freeze(self)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal of the plane, pointing up (positive z)."""
+        n = np.array([self.p1, 0.0, 1.0])
+        return n / np.linalg.norm(n)
+
+
+@dataclass(frozen=True, eq=False)
+class Friction:
+    """Coulomb + viscous friction coefficients (seed 001): HKPs and actuators. SI units."""
+
+    hkp_coulomb: float  # -
+    hkp_viscous: float  # N s/m
+    actuator_arm: float  # m
+    actuator_coulomb: float  # -
+    actuator_viscous: float  # N m s/rad
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """Actuator limits for the optimal torque distribution (seed 001, Sect. 4.5)."""
+
+    torque: float  # N m
+    power: float  # W
+    axial_load: float  # N, along the shaft, at G_i
+    radial_load: float  # N, across the shaft, at G_i
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """An immutable robot model in SI units (see the module docstring for the table of fields)."""
+
+    name: str
+    mechanism: str  # "target" or "6rss"
+    description: str
+    source: str
+    sha256: str
+    assumed: tuple[str, ...]
+    g: float
+    G: np.ndarray
+    S0: np.ndarray
+    M: np.ndarray
+    crank_length: np.ndarray
+    coupler_length: np.ndarray
+    R_C0: np.ndarray
+    crank_inertia: np.ndarray
+    crank_mass: np.ndarray
+    coupler_density: float
+    coupler_area: float
+    coupler_mass: np.ndarray
+    mandible_mass: float
+    mandible_inertia: np.ndarray
+    hkp: HKPGeometry
+    incisor: np.ndarray
+    molar_left: np.ndarray
+    molar_right: np.ndarray
+    friction: Friction
+    limits: Limits
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self):
+        _freeze(self)
+
+    @property
+    def has_hkp(self) -> bool:
+        """True for the target robot: the two HKPs constrain the mandible."""
+        return self.mechanism == "target"
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom: 4 for the target, 6 for the 6RSS."""
+        return 4 if self.has_hkp else 6
+
+    def molar(self, side: str) -> np.ndarray:
+        """The bite point B in {M} for ``side`` = ``"left"`` or ``"right"``."""
+        if side == "left":
+            return self.molar_left
+        if side == "right":
+            return self.molar_right
+        raise ValueError(f"side must be 'left' or 'right', not {side!r}")
+
+    def cached(self, key, build):
+        """Per-model cache of derived objects (symbolic graphs, compiled functions)."""
+        if key not in self._cache:
+            self._cache[key] = build()
+        return self._cache[key]

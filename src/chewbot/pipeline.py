@@ -1,0 +1,147 @@
+"""A run: model + task -> kinematics (-> dynamics, coupling ...) -> a results folder.
+
+The folder is written in a temporary sibling and moved into place at the end: a failed run leaves nothing
+behind, and an existing folder is replaced only when ``force`` is given.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+from chewbot.errors import ChewbotError
+from chewbot.kinematics.motion import Kinematics, solve_kinematics
+from chewbot.model import Model
+from chewbot.params import load_model
+from chewbot.report import figures
+from chewbot.results import Table, kinematics_table
+from chewbot.task.base import Task
+
+
+class OutputExistsError(ChewbotError):
+    """The results folder exists and ``force`` was not given."""
+
+
+@dataclass
+class RunOptions:
+    """Everything that defines a run (recorded in run.json)."""
+
+    model: str = "target"
+    task: str = "default"
+    side: str = "left"
+    orientation: str = "euler-angles"
+    method: str | None = None
+    goal: str = "min-torque"
+    friction: str = "on"
+
+
+@dataclass
+class RunResult:
+    """What a run computed, in memory (the folder holds the same)."""
+
+    options: RunOptions
+    model: Model
+    task: Task
+    kinematics: Kinematics
+    table: Table
+    figures: list[Path] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+
+def load_task(spec: str, model: Model, side: str) -> Task:
+    """``"default"`` (the synthetic chewing task) or the path of a CSV file."""
+    from chewbot.task.default import default_task
+
+    if spec == "default":
+        return default_task(model, side)
+    from chewbot.task.csvio import read_task_csv
+
+    return read_task_csv(Path(spec), side=side, mechanism=model.mechanism)
+
+
+def compute(options: RunOptions, progress=None) -> RunResult:
+    """Compute a run in memory (no files)."""
+    step = progress or (lambda msg: None)
+    model = load_model(options.model)
+    step("task")
+    task = load_task(options.task, model, options.side)
+    step("kinematics")
+    t0 = time.perf_counter()
+    kin = solve_kinematics(model, task, options.orientation)
+    timings = {"kinematics_s": time.perf_counter() - t0}
+    table = kinematics_table(kin)
+    return RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("chewbot", "numpy", "scipy", "casadi", "pydantic", "matplotlib", "plotly"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def run_json(result: RunResult) -> dict:
+    m, task = result.model, result.task
+    return {
+        "chewbot_run": 1,
+        "options": vars(result.options),
+        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed)},
+        "task": {"name": task.name, "source": task.source, "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
+        "versions": _versions(),
+        "platform": platform.platform(),
+        "columns": {name: {"unit": result.table.units[name], **({"description": d} if (d := result.table.descriptions.get(name)) else {})} for name in result.table.columns},
+        **result.info,
+    }
+
+
+def write(result: RunResult, out: Path, force: bool = False) -> Path:
+    """Write the results folder ``out`` (results.csv, run.json, figures) atomically."""
+    out = Path(out)
+    check_output(out, force)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        result.table.to_csv(tmp / "results.csv")
+        result.figures = [
+            figures.task_space(result.table, tmp / "task_space.png"),
+            figures.joint_space(result.table, tmp / "joint_space.png"),
+            figures.bite_force(result.table, tmp / "bite_force.png"),
+        ]
+        (tmp / "run.json").write_text(json.dumps(run_json(result), indent=2, default=_json_default) + "\n")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    result.figures = [out / p.name for p in result.figures]
+    return out
+
+
+def check_output(out: Path, force: bool) -> None:
+    if out.exists() and not force:
+        raise OutputExistsError(f"{out}: the results folder exists; choose another --out or pass --force to replace it")
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder")
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o)}")
