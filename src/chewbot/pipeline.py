@@ -53,6 +53,7 @@ class RunResult:
     table: Table
     figures: list[Path] = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    dynamics: object | None = None
 
 
 def load_task(spec: str, model: Model, side: str) -> Task:
@@ -77,7 +78,27 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     kin = solve_kinematics(model, task, options.orientation)
     timings = {"kinematics_s": time.perf_counter() - t0}
     table = kinematics_table(kin)
-    return RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
+    result = RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
+    if options.method:
+        _dynamics_stage(result, step)
+    return result
+
+
+def _dynamics_stage(result: RunResult, step) -> None:
+    """Inverse dynamics by the chosen formulation: tau1..tau6 and the formulation's own columns."""
+    from chewbot.dynamics import inverse_dynamics
+
+    o = result.options
+    step(f"inverse dynamics ({o.method})")
+    t0 = time.perf_counter()
+    dyn = inverse_dynamics(result.model, result.kinematics, o.method, goal=o.goal, friction=o.friction == "on")
+    result.info["timings"][f"dynamics_{o.method}_s"] = time.perf_counter() - t0
+    result.dynamics = dyn
+    result.table.add_block([f"tau{i + 1}" for i in range(6)], dyn.tau, "N*m", f"actuator torques ({o.method})")
+    for name, values in dyn.table.columns.items():
+        result.table.add(name, values, dyn.table.units[name], dyn.table.descriptions.get(name, ""))
+    if dyn.info:
+        result.info["dynamics"] = dyn.info
 
 
 def _versions() -> dict[str, str]:
