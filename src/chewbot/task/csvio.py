@@ -1,0 +1,191 @@
+"""Tasks from CSV files: a motion of the mandible in XYZ Euler angles and, optionally, its rates and the bite force.
+
+One header row of column names, then one row per sample, comma-separated. Columns (any order):
+
+* ``t`` (time, strictly increasing) and the coordinates: ``X, Y, alpha, beta`` for the target, plus ``Z, gamma``
+  for the 6RSS. A target file may carry ``Z`` and ``gamma`` too (both): they are kept and checked against the
+  sockets when the kinematics are solved.
+* optional rates ``dX, dY, ..., ddX, ddY, ...`` of any coordinate present: used as given; the missing ones are
+  estimated from the positions (:mod:`chewbot.task.smoothing`, uniform sampling only).
+* optional bite force ``Fx, Fy, Fz`` on the mandible in {S} (each one absent is zero).
+
+Values are SI (s, m, rad, N and their rates) unless the name carries a unit in brackets: ``X[mm]``,
+``alpha[deg]``, ``dX[mm/s]``, ``ddbeta[deg/s^2]``, ``t[ms]``, ``Fz[kN]`` (see :data:`UNITS`). Blank lines and
+lines starting with ``#`` are skipped. Every error is a :class:`~chewbot.errors.TaskError` naming the file and
+the line (1-based, as an editor shows it) or the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.errors import TaskError
+from chewbot.task import smoothing
+from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+
+# Units by kind, as factors to SI.
+UNITS = {
+    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6},
+    "angle": {"rad": 1.0, "mrad": 1e-3, "deg": np.pi / 180},
+    "time": {"s": 1.0, "ms": 1e-3},
+    "force": {"N": 1.0, "kN": 1e3},
+}
+KIND = {"X": "length", "Y": "length", "Z": "length", "alpha": "angle", "beta": "angle", "gamma": "angle"}
+FORCES = ("Fx", "Fy", "Fz")
+# Fewest samples a task file may have: enough for the derivative estimate's local polynomial.
+MIN_ROWS = smoothing.POLYORDER + 2
+
+_HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
+_RATE_UNIT = re.compile(r"^(.+?)\s*/\s*(\w+)\s*(\^\s*2|2|²)?$")
+
+
+def _columns() -> dict[str, tuple[str, int]]:
+    """Every known column name -> (kind, order of the time derivative)."""
+    known = {"t": ("time", 0), **{f: ("force", 0) for f in FORCES}}
+    for name, kind in KIND.items():
+        for order, prefix in enumerate(("", "d", "dd")):
+            known[prefix + name] = (kind, order)
+    return known
+
+
+COLUMNS = _columns()
+
+
+def _unit_factor(unit: str, kind: str, order: int) -> float:
+    """Factor to SI of ``unit`` for a column of ``kind`` differentiated ``order`` times; ValueError says why not."""
+    if order:
+        m = _RATE_UNIT.match(unit)
+        if m is None:
+            raise ValueError(f"a rate of order {order} needs a unit like '{next(iter(UNITS[kind]))}/s{'^2' if order == 2 else ''}'")
+        base, per, squared = m.group(1), m.group(2), m.group(3)
+        if (2 if squared else 1) != order:
+            raise ValueError(f"the unit is per time{'^2' if squared else ''}, the column is a derivative of order {order}")
+        if per not in UNITS["time"]:
+            raise ValueError(f"unknown time unit {per!r} (known: {', '.join(UNITS['time'])})")
+        return _unit_factor(base, kind, 0) / UNITS["time"][per] ** order
+    if unit in UNITS[kind]:
+        return UNITS[kind][unit]
+    for other, table in UNITS.items():
+        if unit in table:
+            raise ValueError(f"{unit!r} is a unit of {other}, the column is a {kind}")
+    raise ValueError(f"unknown unit {unit!r} (known {kind} units: {', '.join(UNITS[kind])})")
+
+
+def _parse_header(path: Path, line: int, cells: list[str]) -> tuple[list[str], np.ndarray]:
+    names, factors = [], []
+    for j, cell in enumerate(cells):
+        m = _HEADER.match(cell)
+        if m is None:
+            raise TaskError(f"{path}: line {line}, column {j + 1}: cannot read the column name {cell!r} (expected NAME or NAME[unit])")
+        name, unit = m.group(1), m.group(2)
+        if name not in COLUMNS:
+            raise TaskError(f"{path}: line {line}: unknown column {name!r} (known: {', '.join(COLUMNS)})")
+        if name in names:
+            raise TaskError(f"{path}: line {line}: column {name!r} appears twice")
+        kind, order = COLUMNS[name]
+        try:
+            factors.append(1.0 if unit is None else _unit_factor(unit, kind, order))
+        except ValueError as exc:
+            raise TaskError(f"{path}: line {line}: column {cell.strip()!r}: {exc}") from None
+        names.append(name)
+    return names, np.array(factors)
+
+
+def _read_rows(path: Path) -> tuple[int, list[str], list[tuple[int, list[str]]]]:
+    """(header line, header cells, [(line, cells)]) skipping blank and comment lines."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise TaskError(f"{path}: no such task file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TaskError(f"{path}: cannot read the task file ({exc})") from None
+    reader = csv.reader(text.splitlines())
+    rows = [(reader.line_num, cells) for cells in reader if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#")]
+    if not rows:
+        raise TaskError(f"{path}: empty task file (expected a header such as 't,X,Y,alpha,beta' and one row per sample)")
+    (header_line, header), body = rows[0], rows[1:]
+    return header_line, header, body
+
+
+def _to_float(path: Path, names: list[str], lines: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    try:
+        return cells.astype(float)
+    except ValueError:
+        for j, name in enumerate(names):
+            for i, cell in enumerate(cells[:, j]):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise TaskError(f"{path}: line {lines[i]}, column {name!r}: {cell.strip()!r} is not a number") from None
+        raise
+
+
+def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target", name: str | None = None) -> Task:
+    """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at ``side``."""
+    path = Path(path)
+    if mechanism not in ("target", "6rss"):
+        raise TaskError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
+    header_line, header, body = _read_rows(path)
+    names, factors = _parse_header(path, header_line, header)
+
+    required = ("t",) + (TARGET_COORDS if mechanism == "target" else FULL_COORDS)
+    missing = [c for c in required if c not in names]
+    if missing:
+        raise TaskError(f"{path}: missing column(s) {', '.join(missing)} (a {mechanism} task needs {', '.join(required)})")
+    has_full = "Z" in names or "gamma" in names
+    if has_full and not ("Z" in names and "gamma" in names):
+        raise TaskError(f"{path}: columns Z and gamma come together (the target computes both from its sockets when neither is given)")
+    coords = FULL_COORDS if has_full else TARGET_COORDS
+    for n in names:
+        kind, order = COLUMNS[n]
+        base = n[order:]
+        if order and base not in coords:
+            raise TaskError(f"{path}: column {n!r} is a rate of {base!r}, which the file does not give")
+
+    if len(body) < MIN_ROWS:
+        raise TaskError(f"{path}: {len(body)} data row(s); a task needs at least {MIN_ROWS}")
+    lines = np.array([line for line, _ in body])
+    for line, cells in body:
+        if len(cells) != len(names):
+            raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(names)} columns")
+    data = _to_float(path, names, lines, np.array([cells for _, cells in body], dtype=object).astype(str))
+    bad = np.argwhere(~np.isfinite(data))
+    if bad.size:
+        i, j = bad[0]
+        raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {data[i, j]} is not a finite number")
+    data = data * factors
+    col = {n: data[:, j] for j, n in enumerate(names)}
+
+    t = col["t"]
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise TaskError(f"{path}: line {lines[i]}, column 't': time {t[i]:.9g} s does not increase (previous row {t[i - 1]:.9g} s)")
+
+    q = np.column_stack([col[c] for c in coords])
+    rates = []
+    estimated = [prefix + c for prefix in ("d", "dd") for c in coords if prefix + c not in col]
+    if estimated:
+        try:
+            smooth = smoothing.derivatives(t, q)
+        except smoothing.IrregularSampling as exc:
+            raise TaskError(f"{path}: line {lines[exc.sample]}: {exc} (missing: {', '.join(estimated)})") from None
+        except TaskError as exc:
+            raise TaskError(f"{path}: {exc}") from None
+    for order, prefix in ((1, "d"), (2, "dd")):
+        rates.append(np.column_stack([col[prefix + c] if prefix + c in col else smooth[order - 1][:, j] for j, c in enumerate(coords)]))
+    force = np.column_stack([col.get(f, np.zeros_like(t)) for f in FORCES])
+    units = {n: (h.split("[", 1)[1].rstrip("] ") if "[" in h else "SI") for n, h in zip(names, header)}
+    meta = {
+        "file": str(path),
+        "units": units,
+        "derivatives_estimated": estimated,
+        **({"smoothing": {"method": "savgol", "polyorder": smoothing.POLYORDER, "window_s": smoothing.WINDOW_S}} if estimated else {}),
+    }
+    return Task(name=name or path.stem, t=t, coords=coords, q=q, dq=rates[0], ddq=rates[1], force=force,
+                side=side, source=str(path), meta=meta)

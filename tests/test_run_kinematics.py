@@ -1,0 +1,90 @@
+"""`chewbot run` and its results folder, kinematics only: column names, exact numbers, run.json, atomicity."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from chewbot.cli import app
+from chewbot.pipeline import RunOptions, compute, write
+from chewbot.results import Table
+
+COORDS = ("X", "Y", "Z", "alpha", "beta", "gamma")
+ISSUE_COLUMNS = (
+    ["t"] + list(COORDS) + ["d" + c for c in COORDS] + ["dd" + c for c in COORDS]
+    + [f"{p}theta{i}" for p in ("", "d", "dd") for i in range(1, 7)] + ["Fx", "Fy", "Fz"]
+)
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory):
+    result = compute(RunOptions(model="target", method=None))
+    out = write(result, tmp_path_factory.mktemp("runs") / "left")
+    return result, out
+
+
+def test_results_csv_has_the_issue_columns_and_exact_numbers(run_folder):
+    result, out = run_folder
+    header = (out / "results.csv").read_text().split("\n", 1)[0].split(",")
+    assert header == ISSUE_COLUMNS
+    back = Table.read_csv(out / "results.csv")
+    for name in ISSUE_COLUMNS:
+        assert np.array_equal(back[name], result.table[name]), name  # bit-exact round trip
+    assert back.n == 5001
+
+
+def test_run_json_records_model_options_versions_and_units(run_folder):
+    result, out = run_folder
+    info = json.loads((out / "run.json").read_text())
+    assert info["model"]["file"].endswith("target.toml") and len(info["model"]["sha256"]) == 64
+    assert info["options"]["model"] == "target" and info["options"]["side"] == "left"
+    assert {"python", "numpy", "scipy", "casadi"} <= set(info["versions"])
+    units = {name: c["unit"] for name, c in info["columns"].items()}
+    assert set(units) == set(ISSUE_COLUMNS)
+    assert units["t"] == "s" and units["X"] == "m" and units["dalpha"] == "rad/s" and units["ddZ"] == "m/s^2"
+    assert units["ddtheta3"] == "rad/s^2" and units["Fz"] == "N"
+
+
+def test_figures_exist(run_folder):
+    _, out = run_folder
+    pngs = sorted(out.glob("*.png"))
+    assert pngs and all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
+
+
+def _cli(args):
+    return CliRunner().invoke(app, ["run", "--quiet", *args])
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--task", "absent.csv"], "no such task file"),
+        (["--model", "absent.toml"], "no such parameter file"),
+    ],
+)
+def test_cli_bad_input_leaves_no_folder(tmp_path, args, message):
+    out = tmp_path / "run"
+    res = _cli([*args, "--out", str(out)])
+    assert res.exit_code != 0 and message in res.output
+    assert list(tmp_path.iterdir()) == []  # neither the folder nor a partial one
+
+
+def test_cli_condyle_outside_socket_leaves_no_folder(tmp_path):
+    csv = tmp_path / "out_of_socket.csv"
+    csv.write_text("t,X[mm],Y,alpha,beta\n" + "\n".join(f"{i / 1000!r},8,0,0,0" for i in range(10)) + "\n")
+    out = tmp_path / "run"
+    res = _cli(["--task", str(csv), "--out", str(out)])
+    assert res.exit_code != 0 and "condyle leaves its socket" in res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out_of_socket.csv"]
+
+
+def test_cli_refuses_an_existing_folder_without_force(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    res = _cli(["--out", str(out)])
+    assert res.exit_code != 0 and "--force" in res.output
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]
