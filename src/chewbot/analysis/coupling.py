@@ -1,0 +1,83 @@
+"""Inertia coupling among the six actuated joints (seed 000, Sect. 6), and the related indices it cites.
+
+Joint-space inertia (Eqs. 58-59): q_dot = J_theta5 theta_dot with J_theta5 = [I6; J_theta1^+], so
+T = 1/2 theta_dot' M_A theta_dot with M_A = J_theta5' M J_theta5 (6 x 6, kg m^2, every theta in rad). For the 6RSS
+J_theta1^+ = J_theta1^-1. For the target J_theta1 (6 x 4) has full column rank and J_theta1^+ = (J_theta1' J_theta1)^-1
+J_theta1' is its left inverse: it maps a theta_dot outside the range of J_theta1 (one the HKPs forbid) to its
+least-squares q_EE_dot in the metric of theta (all rad). It does not depend on how q_EE is scaled or
+parametrised (pinv(J T) = T^-1 pinv(J) for any invertible T), so M_A is the same in mm or m, Euler angles or
+parameters.
+
+Indices, per sample (d_i = M_A(i,i), o_ik = abs(M_A(i,k)) for i != k; 6 joints, 30 off-diagonal entries):
+
+* MCI_i = ln(sum_{k != i} o_ik / (5 d_i) + 1)     (Eq. 60, Guo et al. 2022): coupling of joint i to the others.
+* joint-reflected inertia = mean_i d_i                      (Shao et al. 2012), kg m^2.
+* inertia variation = std_i d_i / mean_i d_i               (coefficient of variation, Mo et al. 2017): imbalance
+  of the inertia among the chains (0: isotropic).
+* branch-coupling absolute inertia = mean_{i != k} o_ik     (kg m^2) and
+* branch-coupling inertia variation = std_{i != k} o_ik / mean_{i != k} o_ik: the off-diagonal counterparts of the
+  two above, as Zou et al. (2022) name them. Zou et al.'s own formulas are not reproduced in seed 000; these are
+  our definitions, built to mirror the diagonal pair (std: population standard deviation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from chewbot.casadi_tools import evaluate
+from chewbot.dynamics.energy import energies, generalised_state
+from chewbot.kinematics.functions import jacobians_function
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+
+_OFF = ~np.eye(6, dtype=bool)
+
+
+@dataclass(frozen=True, eq=False)
+class Coupling:
+    """Inertia coupling along a task (arrays samples first).
+
+    ``M_A``: (N, 6, 6) joint-space inertia, kg m^2; ``MCI``: (N, 6) Eq. (60), dimensionless;
+    ``reflected``: (N,) joint-reflected inertia, kg m^2; ``variation``: (N,) its coefficient of variation;
+    ``branch``: (N,) branch-coupling absolute inertia, kg m^2; ``branch_variation``: (N,) its variation.
+    """
+
+    M_A: np.ndarray
+    MCI: np.ndarray
+    reflected: np.ndarray
+    variation: np.ndarray
+    branch: np.ndarray
+    branch_variation: np.ndarray
+
+    def means(self) -> dict[str, float | list[float]]:
+        """Each index averaged over the task (MCI per joint, as seed 000's Fig. 8)."""
+        return {"MCI": self.MCI.mean(axis=0).tolist(), "reflected": float(self.reflected.mean()),
+                "variation": float(self.variation.mean()), "branch": float(self.branch.mean()),
+                "branch_variation": float(self.branch_variation.mean())}
+
+
+def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:
+    """M_A = J_theta5' M J_theta5 along the task (Eqs. 58-59), (N, 6, 6), kg m^2."""
+    q, _, _ = generalised_state(kin)
+    J_theta1 = evaluate(jacobians_function(model, "euler-angles"), q[:, :6], q[:, 6:])[2]
+    _, _, M = energies(model, kin)
+    J5 = np.concatenate([np.broadcast_to(np.eye(6), (len(q), 6, 6)), np.linalg.pinv(J_theta1)], axis=1)
+    return np.swapaxes(J5, 1, 2) @ M @ J5
+
+
+def mci(M_A: np.ndarray) -> np.ndarray:
+    """MCI_i = ln(sum_{k != i} abs(M_A(i,k)) / (5 abs(M_A(i,i))) + 1) (Eq. 60), (N, 6)."""
+    a = np.abs(M_A)
+    diag = np.diagonal(a, axis1=1, axis2=2)
+    return np.log((a.sum(axis=2) - diag) / (5 * diag) + 1)
+
+
+def coupling(model: Model, kin: Kinematics) -> Coupling:
+    """All inertia-coupling indices of the module docstring along the task."""
+    M_A = joint_space_inertia(model, kin)
+    d = np.diagonal(M_A, axis1=1, axis2=2)
+    o = np.abs(M_A[:, _OFF])
+    return Coupling(M_A, mci(M_A), d.mean(axis=1), d.std(axis=1) / d.mean(axis=1), o.mean(axis=1),
+                    o.std(axis=1) / o.mean(axis=1))

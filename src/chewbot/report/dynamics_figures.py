@@ -1,0 +1,88 @@
+"""PNG figures of the inverse dynamics and the inertia coupling, after seed 000's Figs. 6-8. Every axis says its unit.
+
+The first two take a run's results table (``tau1..tau6``, ``MCI1..MCI6``); the others take arrays from several runs
+and serve the seed-000 study.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.report.figures import _save, plt
+from chewbot.results import Table
+
+JOINTS = range(1, 7)
+
+
+def _per_joint(ax, t, values, label, unit):
+    """One line per actuator on ``ax``."""
+    for i in JOINTS:
+        ax.plot(t, values[:, i - 1], lw=0.9, label=f"{label}{i}")
+    ax.set_ylabel(f"{label} [{unit}]")
+    ax.legend(loc="upper right", fontsize=8, ncol=6)
+    ax.grid(alpha=0.3)
+
+
+def _columns(table: Table, prefix: str) -> np.ndarray:
+    return np.column_stack([table[f"{prefix}{i}"] for i in JOINTS])
+
+
+def torques(table: Table, path: Path, method: str = "") -> Path:
+    """Actuator torques over time with the bite force below them (seed 000, Fig. 6a)."""
+    fig, (ax, axf) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, height_ratios=(2, 1))
+    t = table["t"]
+    _per_joint(ax, t, _columns(table, "tau"), "τ", "N·m")
+    ax.set_title(f"Actuator torques{f' ({method})' if method else ''}")
+    for name in ("Fx", "Fy", "Fz"):
+        axf.plot(t, table[name], label=name)
+    axf.set_ylabel("bite force F_B [N]")
+    axf.set_xlabel("time t [s]")
+    axf.legend(loc="lower right", ncol=3, fontsize=8)
+    axf.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def coupling_indices(table: Table, path: Path) -> Path:
+    """MCI_i of the six joints over time (seed 000, Fig. 7, one column)."""
+    fig, ax = plt.subplots(figsize=(11, 4))
+    _per_joint(ax, table["t"], _columns(table, "MCI"), "MCI", "-")
+    ax.set_xlabel("time t [s]")
+    ax.set_title("Inertia coupling index MCI_i (Eq. 60)")
+    return _save(fig, path)
+
+
+def torque_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
+    """Torques or torque differences (N, 6), one panel per entry, e.g. left, differences between methods, right
+    (seed 000, Fig. 6)."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, squeeze=False)
+    for ax, (title, tau) in zip(axes[:, 0], panels.items()):
+        _per_joint(ax, t, tau, "τ", "N·m")
+        ax.set_title(title)
+    axes[-1, 0].set_xlabel("time t [s]")
+    return _save(fig, path)
+
+
+def mci_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
+    """MCI_i over time, one panel per mechanism (seed 000, Fig. 7)."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, sharey=True, squeeze=False)
+    for ax, (title, values) in zip(axes[:, 0], panels.items()):
+        _per_joint(ax, t, values, "MCI", "-")
+        ax.set_title(title)
+    axes[-1, 0].set_xlabel("time t [s]")
+    return _save(fig, path)
+
+
+def mci_means(means: dict[str, np.ndarray], path: Path) -> Path:
+    """Mean MCI_i over the task as grouped bars, one colour per mechanism (seed 000, Fig. 8)."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    width = 0.8 / len(means)
+    x = np.arange(6)
+    for k, (label, values) in enumerate(means.items()):
+        ax.bar(x + (k - (len(means) - 1) / 2) * width, values, width, label=label)
+    ax.set_xticks(x, [f"MCI{i}" for i in JOINTS])
+    ax.set_ylabel("mean MCI_i over the task [-]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
