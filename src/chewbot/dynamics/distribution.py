@@ -1,0 +1,207 @@
+"""Optimal distribution of the redundant unknowns of an inverse-dynamics model (seed 001, Sect. 4.5).
+
+A problem is given by two CasADi functions of (D, x, friction): D the sample's data, x the free unknowns:
+``residual`` r, whose squared norm is the goal (minimise |r|^2), and ``limits`` c with |c| <= bound
+component-wise (the actuators' physical limits). Each sample is solved in two stages:
+
+1. Unconstrained, all samples at once: x starts at the friction-free optimum of the same sample (with
+   friction off r is affine in x, so one Newton step from 0 gives it exactly), then damped Newton on the
+   exact Hessian (Gauss-Newton where the exact one is not positive definite) with an Armijo backtracking
+   line search, vectorised over the samples that have not converged.
+2. Where that optimum breaks a limit: SQP (CasADi ``sqpmethod``, exact Hessian) with the limits as
+   inequality constraints, sample after sample in time order, each warm-started from the solution of the
+   previous sample. A sample where no admissible x exists is recorded (which sample, which limit), never
+   clipped; ``strict`` raises :class:`~chewbot.errors.InfeasibleError` instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from chewbot.casadi_tools import compiled
+from chewbot.errors import InfeasibleError
+
+# Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
+STEP_TOL = 1e-10
+MAX_NEWTON = 60
+MAX_HALVINGS = 40
+ARMIJO = 1e-4
+# Relative decrease of J below which a line search cannot tell progress from rounding (J carries ~1e-16).
+MEASURABLE = 1e-10
+# A limit counts as broken above bound (1 + LIMIT_RTOL): the SQP's own feasibility tolerance is 1e-8 or so.
+LIMIT_RTOL = 1e-6
+
+
+@dataclass
+class Problem:
+    """A distribution problem: the goal's residual and the limits, as per-sample CasADi functions.
+
+    ``objective``: (D, x, friction) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian (compiled);
+    ``value``: (D, x, friction) -> J alone (for the line search);
+    ``limits``: (D, x, friction) -> c; ``bound``: |c| <= bound; ``limit_names``: a label per entry of c;
+    ``nlp``: the SQP solver over x with parameters (D, friction), built on first use.
+    """
+
+    objective: ca.Function
+    value: ca.Function
+    limits: ca.Function
+    bound: np.ndarray
+    limit_names: list[str]
+    nx: int
+    _nlp_args: tuple = field(repr=False, default=())
+    _nlp: object = field(repr=False, default=None)
+
+    @property
+    def nlp(self):
+        if self._nlp is None:
+            self._nlp = ca.nlpsol("distribution", "sqpmethod", *self._nlp_args)
+        return self._nlp
+
+
+def build_problem(name: str, D: ca.SX, x: ca.SX, friction: ca.SX, residual: ca.SX, limits: ca.SX,
+                  bound, limit_names) -> Problem:
+    """Wrap the goal's residual r(D, x, friction) and the limits c(D, x, friction) into a :class:`Problem`."""
+    J = ca.sumsqr(residual)
+    Jr = ca.jacobian(residual, x)
+    H, grad = ca.hessian(J, x)
+    objective = ca.Function(f"{name}_objective", [D, x, friction], [J, grad, H, 2 * ca.mtimes(Jr.T, Jr)],
+                            ["D", "x", "friction"], ["J", "grad", "H", "H_gn"])
+    value = ca.Function(f"{name}_value", [D, x, friction], [J], ["D", "x", "friction"], ["J"])
+    limits_fn = ca.Function(f"{name}_limits", [D, x, friction], [limits], ["D", "x", "friction"], ["c"])
+    nlp = {"x": x, "p": ca.vertcat(D, friction), "f": J, "g": limits}
+    opts = {"qpsol": "qrqp", "print_header": False, "print_iteration": False, "print_time": False,
+            "print_status": False, "error_on_fail": False, "max_iter": 200,
+            "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}}
+    return Problem(compiled(objective), compiled(value), compiled(limits_fn), np.asarray(bound, dtype=float), list(limit_names),
+                   x.numel(), (nlp, opts))
+
+
+@dataclass
+class Solution:
+    """The distributed unknowns x (N, nx) and what it took: iterations, SQP samples, infeasible samples."""
+
+    x: np.ndarray
+    newton_iterations: int
+    unconverged: list[int]
+    constrained: list[int]
+    infeasible: list[dict]
+
+
+_MAPS: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
+
+
+def _mapped(fn: ca.Function, n: int) -> ca.Function:
+    """``fn`` mapped over n samples, kept: building a map costs about 10 us per sample, more than a call."""
+    entry = _MAPS.get((id(fn), n))
+    if entry is None or entry[0] is not fn:
+        if len(_MAPS) > 256:
+            _MAPS.clear()
+        entry = _MAPS[id(fn), n] = (fn, fn.map(n, "serial"))
+    return entry[1]
+
+
+class SampleData:
+    """The per-sample data of a whole task as a CasADi matrix (one column per sample), kept in CasADi.
+
+    Copying a (k, N) array between NumPy and CasADi costs about 0.1 us per entry, as much as evaluating the
+    compiled kernels on it: the data is converted once, only the small unknowns and results cross over.
+    Selecting a subset of the columns costs as much as converting them, so every call runs on all samples
+    (a compiled kernel costs about 1 us per sample).
+    """
+
+    def __init__(self, D: ca.DM):
+        self.D = D
+        self.n = D.size2()
+
+    def column(self, k: int) -> np.ndarray:
+        return np.asarray(self.D[:, k]).ravel()
+
+    def __call__(self, fn: ca.Function, *args) -> list[np.ndarray]:
+        """``fn(D, *args)`` on every sample; args (N, k) or scalars; outputs as
+        :func:`chewbot.casadi_tools.evaluate` gives them: (N, rows) or (N, rows, cols)."""
+        ins = [self.D] + [np.atleast_2d(np.asarray(a, dtype=float).T) if np.ndim(a) else a for a in args]
+        out = []
+        for j, o in enumerate(_mapped(fn, self.n).call(ins)):
+            r, c = fn.size1_out(j), fn.size2_out(j)
+            o = o.full()
+            out.append(o.T if c == 1 else o.reshape(r, self.n, c).transpose(1, 0, 2))
+        return out
+
+
+def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float) -> np.ndarray:
+    """(N, n_limits) boolean: which limits each sample breaks."""
+    (c,) = data(problem.limits, x, friction)
+    return np.abs(c) > problem.bound * (1 + LIMIT_RTOL)
+
+
+def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, strict: bool = False) -> Solution:
+    """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports."""
+    x = np.zeros((data.n, problem.nx))
+    iterations, unconverged = 0, []
+    if problem.nx:
+        _, g, H, _ = data(problem.objective, x, 0.0)
+        x = -np.linalg.solve(H, g[..., None])[..., 0]  # friction-free optimum: r is affine in x there
+        if friction:
+            x, iterations, unconverged = _newton(problem, data, x, friction)
+    broken = broken_limits(problem, data, x, friction)
+    rows = np.flatnonzero(broken.any(axis=1))
+    constrained, infeasible = [], []
+    if problem.nx and rows.size:
+        x, constrained = _constrained(problem, data, x, friction, rows)
+        broken = broken_limits(problem, data, x, friction)
+        rows = np.flatnonzero(broken.any(axis=1))
+    for k in rows:
+        names = [problem.limit_names[j] for j in np.flatnonzero(broken[k])]
+        infeasible.append({"sample": int(k), "t": float(t[k]), "limits": names})
+    if infeasible and strict:
+        first = infeasible[0]
+        raise InfeasibleError(f"sample {first['sample']} (t = {first['t']:.6g} s): no admissible distribution, "
+                              f"limits broken: {', '.join(first['limits'])} ({len(infeasible)} sample(s) in all)")
+    return Solution(x, iterations, unconverged, constrained, infeasible)
+
+
+def _newton(problem: Problem, data: SampleData, x, friction):
+    """Damped Newton on all samples at once; returns x, the iteration count, the samples left unconverged."""
+    active = np.ones(data.n, dtype=bool)
+    eye = np.eye(problem.nx)
+    for it in range(1, MAX_NEWTON + 1):
+        J, g, H, H_gn = data(problem.objective, x, friction)
+        convex = np.linalg.eigvalsh(H).min(axis=1) > 0
+        H = np.where(convex[:, None, None], H, H_gn + 1e-12 * eye)
+        step = np.where(active[:, None], -np.linalg.solve(H, g[..., None])[..., 0], 0.0)
+        slope = np.einsum("ij,ij->i", g, step)
+        alpha = np.ones(data.n)
+        # Near the optimum the predicted decrease -slope/2 falls to the rounding level of J, where the Armijo
+        # test is noise: there the full Newton step is taken (quadratic convergence region).
+        todo = -slope > MEASURABLE * np.abs(J[:, 0])
+        for _ in range(MAX_HALVINGS):
+            if not todo.any():
+                break
+            (Jt,) = data(problem.value, x + alpha[:, None] * step, friction)
+            todo &= Jt[:, 0] > J[:, 0] + ARMIJO * alpha * slope
+            alpha[todo] /= 2
+        alpha[todo] = 0.0  # no decrease along a descent direction: the sample is at its optimum to rounding
+        moved = alpha[:, None] * step
+        x = x + moved
+        active &= np.abs(moved).max(axis=1) > STEP_TOL * (1 + np.abs(x).max(axis=1))
+        if not active.any():
+            return x, it, []
+    return x, MAX_NEWTON, np.flatnonzero(active).tolist()
+
+
+def _constrained(problem: Problem, data: SampleData, x, friction, rows):
+    """SQP with the limits, sample after sample in time order, each warm-started from the previous one."""
+    x = x.copy()
+    solver = problem.nlp
+    lb, ub = -problem.bound, problem.bound
+    for k in rows:
+        x0 = x[k - 1] if k > 0 else x[k]
+        sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction]]), lbg=lb, ubg=ub)
+        xk = np.asarray(sol["x"]).ravel()
+        c = np.asarray(sol["g"]).ravel()
+        if np.all(np.abs(c) <= problem.bound * (1 + LIMIT_RTOL)):
+            x[k] = xk
+    return x, [int(k) for k in rows]

@@ -1,0 +1,328 @@
+"""Newton–Euler inverse dynamics with friction at the HKPs and the actuators (seed 001, Sects. 4.1–4.4).
+
+Free bodies and the forces they exchange (all vectors in {S}):
+
+* coupler i, a uniform thin rod S_i M_i (mass m_i, length L_i, unit axis u_i from S_i to M_i): the crank
+  pushes on it at S_i with ``f_i`` ("FS"), the mandible at M_i with ``-g_i``. Newton and the two transverse
+  Euler equations about its centre E_i (its angular momentum is m L^2/12 u x u_dot; the spin is idle)
+  fix the transverse part of g_i; the axial force k_i = g_i . u_i is the one unknown per coupler
+  (seed 001, Eqs. 33–36):  u x g_i = u x c_i,  c_i = -(m_i/2)(a_E - g) - (m_i L_i/12) u_ddot,
+  f_i = g_i + m_i (a_E - g).
+* mandible: the six g_i at M_i, the normal forces N_j n of the two planes at T_j (n = (p1, 0, 1)/|.|,
+  N_j > 0 pushes the ball up), their friction forces f_T,j, the bite force F_B at B, gravity
+  (Eqs. 28–32): m a_O = sum g_i + sum (N_j n + f_T,j) + F_B + m g,
+  I w_dot + w x I w = sum r_i x g_i + sum r_T,j x (N_j n + f_T,j) + r_B x F_B, I = R I_M R'.
+  Six equations, linear in k, give k = A^-1 (...) as an affine function of N and |N| (Eqs. 45–49).
+* crank i, turning about its shaft z_i at G_i with its mass centre on the shaft (axisymmetric, so
+  w x I w = 0): the base holds it at G_i with the force ``F_G,i`` and the moment ``M_G,i`` (across z_i),
+  the actuator drives it with tau_i and loses tau_f,i to friction (Eqs. 37–44):
+  F_G,i = f_i - m_c,i g,  M_G,i = ((S_i - G_i) x f_i) across z_i,
+  tau_i = I_i theta_ddot_i + z_i . ((S_i - G_i) x f_i) + tau_f,i.
+
+Friction (MODEL.md): f_T,j = -(mu_c |N_j| + mu_v |v_T,j|) v_T,j/|v_T,j| and
+tau_f,i = R_i mu_c,i |F_G,i| sgn(theta_dot_i) + mu_v,i theta_dot_i. The velocity directions are inputs and
+are regularised, v/sqrt(|v|^2 + eps^2); the magnitudes |N_j| and |F_G,i| depend on the unknowns and are
+smoothed, sqrt(x^2 + delta^2) (max error delta). The constants are below; docs/newton_euler.md explains them.
+
+The unknowns N_L, N_R (two for the target, none for the 6RSS) are distributed by
+:mod:`chewbot.dynamics.distribution`; the six torques then follow in closed form (Eq. 50).
+The equations are built from the kinematics of the chosen parametrisation (Euler angles or Euler
+parameters, :func:`chewbot.kinematics.symbolic.symbolic`), each a complete model of its own.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from chewbot.analysis.indices import friction_share, performance_indices
+from chewbot.casadi_tools import compiled
+from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.distribution import Problem, SampleData, build_problem, solve
+from chewbot.kinematics.motion import Kinematics
+from chewbot.kinematics.symbolic import symbolic
+from chewbot.model import Model
+from chewbot.results import Table
+
+# Regularisation of sgn(theta_dot) and v_T/|v_T| (known inputs per sample): below these speeds Coulomb
+# friction fades linearly to zero instead of jumping (static friction is indeterminate at rest anyway).
+EPS_THETA_DOT = 1e-3  # rad/s
+EPS_V_T = 1e-5  # m/s
+# Smoothing of |N_j| and |F_G,i| (functions of the unknowns): sqrt(x^2 + delta^2) - |x| lies in (0, delta],
+# so the friction forces are off by at most mu_c delta = 1e-4 N (HKP) and R mu_c delta = 2.5e-7 N m (actuator).
+DELTA_N = 1e-3  # N
+DELTA_F_G = 1e-3  # N
+
+GOALS = ("min-torque", "min-coupler-force", "min-hkp-force")
+LIMIT_NAMES = ("torque", "power", "axial_load", "radial_load")
+
+
+def n_unknowns(model: Model) -> int:
+    """Number of HKP normal forces to distribute: 2 for the target, 0 for the 6RSS."""
+    return 2 if model.has_hkp else 0
+
+
+def _layout(nN: int) -> dict[str, tuple[int, int]]:
+    """Offsets of the blocks of the per-sample data vector D (what the distribution needs of a sample)."""
+    sizes = {"f0": 18, "fV": 18, "F1": 18 * nN, "F2": 18 * nN, "fE": 18, "r_GS": 18, "inertial": 6, "dtheta": 6}
+    out, at = {}, 0
+    for key, size in sizes.items():
+        out[key] = (at, at + size)
+        at += size
+    out["size"] = (at, at)
+    return out
+
+
+def coefficients_function(model: Model, orientation: str) -> ca.Function:
+    """(theta, q, dq, ddq, F_B, B) -> D: the sample's equations with N and |N| left free (compiled, cached).
+
+    D packs (see :func:`_layout`) the forces f_i at S_i as f = f0 + fV + F1 N + F2 |N| (fV: the share of
+    the HKP viscous friction, F2: of the HKP Coulomb friction, both to be switched with the friction flag),
+    m_i (a_E,i - g) (so that the force on the mandible at M_i is f_i - m_i (a_E,i - g)), the crank vectors S_i - G_i, the crank inertia torques I_i theta_ddot_i and theta_dot. Also returned:
+    the unit direction v_T/|v_T| (regularised, 3 x nN) and velocity v_T (3 x nN) of the ball centres.
+    """
+
+    def build():
+        m = model
+        s = symbolic(m, orientation)
+        nN = n_unknowns(m)
+        F_B, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
+        dth, ddth = s.theta_rates()
+        tw, twr = s.twist(), s.twist_rate()
+        v_O, w, a_O, dw = tw[0:3], tw[3:6], twr[0:3], twr[3:6]
+        grav = ca.DM([0.0, 0.0, -m.g])
+        I_S = ca.mtimes([s.R, ca.DM(m.mandible_inertia), s.R.T])
+        r_B = ca.mtimes(s.R, B)
+
+        cols_A, rest_F, rest_M, f_const, u_all, r_GS, fE = [], ca.SX.zeros(3), ca.SX.zeros(3), [], [], [], []
+        for i in range(6):
+            z = ca.DM(m.R_C0[i][:, 2])
+            rGS = s.crank_tip(i) - ca.DM(m.G[i])
+            a_S = ddth[i] * ca.cross(z, rGS) - dth[i] ** 2 * rGS
+            r_i = ca.mtimes(s.R, ca.DM(m.M[i]))
+            a_M = a_O + ca.cross(dw, r_i) + ca.cross(w, ca.cross(w, r_i))
+            L, mc = m.coupler_length[i], m.coupler_mass[i]
+            u = (s.p + r_i - s.crank_tip(i)) / L
+            u_ddot = (a_M - a_S) / L
+            a_E = (a_S + a_M) / 2
+            c = -(mc / 2) * (a_E - grav) - (mc * L / 12) * u_ddot
+            g_perp = c - ca.dot(u, c) * u  # transverse force on the mandible, fixed by the rod's Euler equations
+            cols_A.append(ca.vertcat(u, ca.cross(r_i, u)))
+            rest_F += g_perp
+            rest_M += ca.cross(r_i, g_perp)
+            fE.append(mc * (a_E - grav))
+            f_const.append(g_perp + fE[-1])
+            u_all.append(u)
+            r_GS.append(rGS)
+        A = ca.horzcat(*cols_A)
+        wrench = ca.vertcat(
+            m.mandible_mass * (a_O - grav) - F_B - rest_F,
+            ca.mtimes(I_S, dw) + ca.cross(w, ca.mtimes(I_S, w)) - ca.cross(r_B, F_B) - rest_M,
+        )
+        fr = m.friction
+        rhs = [wrench, ca.SX.zeros(6)]
+        P, Q, vhat, v_T = [], [], [], []
+        if nN:
+            n = ca.DM(m.hkp.normal)
+            for T in (m.hkp.T_L, m.hkp.T_R):
+                r_T = ca.mtimes(s.R, ca.DM(T))
+                v = v_O + ca.cross(w, r_T)
+                e = v / ca.sqrt(ca.sumsqr(v) + EPS_V_T**2)
+                P.append(ca.vertcat(n, ca.cross(r_T, n)))
+                Q.append(ca.vertcat(e, ca.cross(r_T, e)))
+                rhs[1] += fr.hkp_viscous * ca.vertcat(v, ca.cross(r_T, v))
+                vhat.append(e)
+                v_T.append(v)
+            # A k = wrench - P N - sum_j wrench of f_T,j, f_T,j = -mu_c |N_j| e_j - mu_v v_j
+            rhs += [-ca.horzcat(*P), fr.hkp_coulomb * ca.horzcat(*Q)]
+        X = ca.solve(A, ca.horzcat(*rhs))
+        k0, kV = X[:, 0], X[:, 1]
+        U = ca.horzcat(*u_all)  # 3 x 6
+        f0 = ca.vertcat(*[k0[i] * U[:, i] + f_const[i] for i in range(6)])
+        fV = ca.vertcat(*[kV[i] * U[:, i] for i in range(6)])
+        blocks = [f0, fV]
+        if nN:
+            blocks += [ca.vec(ca.vertcat(*[ca.mtimes(U[:, i], X[i, 2 + 2 * j: 4 + 2 * j]) for i in range(6)]))
+                       for j in range(2)]
+        inertial = ca.DM(m.crank_inertia) * ddth
+        D = ca.vertcat(*blocks, *fE, *r_GS, inertial, dth)
+        vh = ca.horzcat(*vhat) if nN else ca.SX(3, 0)
+        vt = ca.horzcat(*v_T) if nN else ca.SX(3, 0)
+        fn = ca.Function(f"ne_coefficients_{m.mechanism}_{orientation.replace('-', '_')}",
+                         [s.theta, s.q, s.dq, s.ddq, F_B, B], [D, vh, vt],
+                         ["theta", "q", "dq", "ddq", "F_B", "B"], ["D", "vhat_T", "v_T"])
+        return compiled(fn)
+
+    return model.cached(("ne", "coefficients", orientation), build)
+
+
+def _unpack(D, nN: int) -> dict:
+    lay = _layout(nN)
+    out = {key: D[a:b] for key, (a, b) in lay.items() if key != "size"}
+    out["F1"] = ca.reshape(out["F1"], 18, nN)
+    out["F2"] = ca.reshape(out["F2"], 18, nN)
+    return out
+
+
+def forces_sx(model: Model, D, N, friction):
+    """Every force of the sample as CasADi expressions of the data D, the normal forces N and the friction
+    flag (0 or 1): a dict of tau, tau_f, tau_fT (HKP friction mapped onto the shafts), f (FS), F_G, M_G,
+    axial and radial loads at G_i, |N| smoothed, f_M (force of coupler i on the mandible at M_i). Shared by the solver, its limits and the outputs.
+    """
+    m, fr = model, model.friction
+    nN = N.numel()
+    d = _unpack(D, nN)
+    absN = ca.sqrt(N**2 + DELTA_N**2)
+    f_fT = friction * (d["fV"] + (ca.mtimes(d["F2"], absN) if nN else 0))  # HKP friction's share of f
+    f = d["f0"] + f_fT + (ca.mtimes(d["F1"], N) if nN else 0)
+    dth = d["dtheta"]
+    sgn = dth / ca.sqrt(dth**2 + EPS_THETA_DOT**2)
+    tau, tau_f, tau_fT, F_G, M_G, axial, radial = [], [], [], [], [], [], []
+    for i in range(6):
+        x, y, z = (ca.DM(m.R_C0[i][:, k]) for k in range(3))
+        fi, ri = f[3 * i: 3 * i + 3], d["r_GS"][3 * i: 3 * i + 3]
+        FG = fi + ca.DM([0.0, 0.0, m.crank_mass[i] * m.g])
+        tf = friction * (fr.actuator_arm * fr.actuator_coulomb * ca.sqrt(ca.sumsqr(FG) + DELTA_F_G**2) * sgn[i]
+                         + fr.actuator_viscous * dth[i])
+        tau.append(d["inertial"][i] + ca.dot(ca.cross(z, ri), fi) + tf)
+        tau_f.append(tf)
+        tau_fT.append(ca.dot(ca.cross(z, ri), f_fT[3 * i: 3 * i + 3]))
+        F_G.append(FG)
+        M_G.append(ca.vertcat(ca.dot(ca.cross(x, ri), fi), ca.dot(ca.cross(y, ri), fi)))
+        ax = ca.dot(z, FG)
+        axial.append(ax)
+        radial.append(ca.sqrt(ca.sumsqr(FG - ax * z)))
+    return {"tau": ca.vertcat(*tau), "tau_f": ca.vertcat(*tau_f), "tau_fT": ca.vertcat(*tau_fT), "f": f,
+            "F_G": ca.vertcat(*F_G), "M_G": ca.vertcat(*M_G), "axial": ca.vertcat(*axial),
+            "radial": ca.vertcat(*radial), "absN": absN, "f_M": f - d["fE"]}
+
+
+def forces_function(model: Model) -> ca.Function:
+    """(D, N, friction) -> tau, tau_f, tau_fT, f (FS), F_G, M_G, axial, radial, |N|, f_M (compiled, cached)."""
+
+    def build():
+        nN = n_unknowns(model)
+        D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
+        out = forces_sx(model, D, N, fl)
+        return compiled(ca.Function(f"ne_forces_{model.mechanism}", [D, N, fl], list(out.values()),
+                                    ["D", "N", "friction"], list(out)))
+
+    return model.cached(("ne", "forces"), build)
+
+
+def sample_data(model: Model, kin: Kinematics, side: str | None = None):
+    """Per-sample data D (kept in CasADi), ball-centre directions and velocities (N, 3, nN) along the task."""
+    B = model.molar(side or kin.side)
+    fn = coefficients_function(model, kin.orientation)
+    args = [np.asarray(a, dtype=float).T for a in (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)]
+    D, vhat, v_T = fn.map(kin.n, "serial").call([*args, B])
+    nN = n_unknowns(model)
+    return (SampleData(D), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
+            v_T.full().reshape(3, kin.n, nN).transpose(1, 0, 2))
+
+
+def problem(model: Model, goal: str) -> Problem:
+    """The distribution problem of ``goal`` on ``model`` (seed 001, Eqs. 52–54), with the actuator limits.
+
+    Goals: ``min-torque`` (G1, |tau|^2), ``min-coupler-force`` (G2, sum |f_i|^2 over S_1..S_6),
+    ``min-hkp-force`` (G3, N_L^2 + N_R^2). Limits (MODEL.md): |tau_i| <= torque, |tau_i theta_dot_i| <= power,
+    |F_G,i . z_i| <= axial load, |F_G,i x z_i| <= radial load.
+    """
+    check_goal(goal)
+
+    def build():
+        nN = n_unknowns(model)
+        D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
+        out = forces_sx(model, D, N, fl)
+        residual = {"min-torque": out["tau"], "min-coupler-force": out["f"], "min-hkp-force": N}[goal]
+        dth = _unpack(D, nN)["dtheta"]
+        lim = model.limits
+        limits = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
+        bound = np.repeat([lim.torque, lim.power, lim.axial_load, lim.radial_load], 6)
+        names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
+        return build_problem(f"ne_{model.mechanism}_{goal.replace('-', '_')}", D, N, fl, residual, limits, bound, names)
+
+    return model.cached(("ne", "problem", goal), build)
+
+
+def check_goal(goal: str) -> None:
+    """Raise ValueError unless ``goal`` is one of :data:`GOALS`."""
+    if goal not in GOALS:
+        raise ValueError(f"goal must be one of {', '.join(GOALS)}, not {goal!r}")
+
+
+@register("newton-euler")
+def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
+                 friction: bool = True, strict: bool = False, **ignored) -> Dynamics:
+    """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
+
+    ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
+    ``friction``: HKP and actuator friction on or off; ``strict``: raise
+    :class:`~chewbot.errors.InfeasibleError` at a sample with no admissible distribution instead of recording
+    it in ``info["infeasible"]``. Columns of the table: see docs/newton_euler.md.
+    """
+    check_goal(goal)
+    fl = 1.0 if friction else 0.0
+    data, vhat, v_T = sample_data(model, kin, side)
+    sol = solve(problem(model, goal), data, fl, kin.t, strict=strict)
+    out = dict(zip(forces_function(model).name_out(), data(forces_function(model), sol.x, fl)))
+    table = Table()
+    table.add_block([f"tau_f{i + 1}" for i in range(6)], out["tau_f"], "N*m", "actuator friction torque (in tau)")
+    table.add_block([f"tau_fT{i + 1}" for i in range(6)], out["tau_fT"], "N*m",
+                    "HKP friction mapped onto the actuator shaft (in tau)")
+    fT = np.zeros((kin.n, 3, 0))
+    if model.has_hkp:
+        fr = model.friction
+        fT = -fl * (fr.hkp_coulomb * out["absN"][:, None, :] * vhat + fr.hkp_viscous * v_T)
+        table.add_block(["N_L", "N_R"], sol.x, "N", "normal force of the plane on the condyle, along n = (p1, 0, 1)/|.|")
+        table.add_block([f"fT_{j}_{c}" for j in "LR" for c in "xyz"], fT.transpose(0, 2, 1).reshape(kin.n, 6), "N",
+                        "HKP friction force on the condyle, {S}")
+    table.add_block([f"FS{i + 1}_{c}" for i in range(6) for c in "xyz"], out["f"], "N", "force of crank i on coupler i at S_i, {S}")
+    table.add_block([f"FM{i + 1}_{c}" for i in range(6) for c in "xyz"], out["f_M"], "N", "force of coupler i on the mandible at M_i, {S}")
+    table.add_block([f"FG{i + 1}_{c}" for i in range(6) for c in "xyz"], out["F_G"], "N", "force of the base on crank i at G_i, {S}")
+    table.add_block([f"MG{i + 1}_{c}" for i in range(6) for c in "xy"], out["M_G"], "N*m",
+                    "constraint moment of the base on crank i at G_i, about x, y of {C_i0}")
+    table.add_block([f"FG{i + 1}_axial" for i in range(6)], out["axial"], "N", "F_G,i along the shaft z_i")
+    table.add_block([f"FG{i + 1}_radial" for i in range(6)], out["radial"], "N", "abs(F_G,i) across the shaft z_i")
+    share = friction_share(out["tau"], out["tau_f"], out["tau_fT"])
+    table.add_block([f"friction_share{i + 1}" for i in range(6)], share, "%", "friction torque over actuating torque (seed 001, Eq. 75)")
+    indices = performance_indices(out["tau"], out["f"], sol.x, out["tau_f"], out["M_G"], out["F_G"],
+                                  fT.reshape(kin.n, -1) if model.has_hkp else None)
+    info = {"goal": goal if model.has_hkp else "none (6RSS: closed form)", "friction": bool(friction),
+            "orientation": kin.orientation, "indices": indices,
+            "newton_iterations": sol.newton_iterations, "unconverged": sol.unconverged,
+            "constrained_samples": len(sol.constrained), "infeasible": sol.infeasible,
+            "smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
+                          "delta_F_G_N": DELTA_F_G}}
+    return Dynamics("newton-euler", out["tau"], table, info)
+
+
+def benchmark_cases() -> dict:
+    """Name -> zero-argument callable: Newton–Euler on the whole default task (left side), kinematics excluded.
+
+    Target with Euler angles and Euler parameters under each goal, and the 6RSS with both (closed form).
+    The kinematics and the compiled kernels are built on the first call of each case.
+    """
+    from chewbot.kinematics.motion import solve_kinematics
+    from chewbot.params import load_model
+    from chewbot.task.default import default_task
+
+    models = {name: load_model(name) for name in ("target", "6rss")}
+
+    def case(name, orientation, goal):
+        m = models[name]
+
+        def run():
+            kin = m.cached(("benchmark-kinematics", orientation),
+                           lambda: solve_kinematics(m, default_task(m, "left"), orientation))
+            return newton_euler(m, kin, goal=goal)
+
+        return run
+
+    cases = {}
+    for name, goals in (("target", GOALS), ("6rss", ("min-torque",))):
+        for orientation in ("euler-parameters", "euler-angles"):
+            for goal in goals:
+                label = goal if name == "target" else "closed-form"
+                cases[f"newton-euler/{name}/{orientation}/{label}"] = case(name, orientation, goal)
+    return cases

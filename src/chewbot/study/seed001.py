@@ -1,0 +1,124 @@
+"""Seed 001's dynamic performances on our models: the equivalent of its Table 3 and Figs. 10–14.
+
+Newton–Euler with friction on the default task (left side): the target under the three goals with Euler
+parameters and with Euler angles, and the 6RSS (closed form) with both. Writes ``table3.csv`` and
+``table3.md`` (indices F1..F7, the median time of the run, and whether each goal gives the smallest value of
+its own index), ``study.json`` and the figures: Figs. 10, 12, 13 for goal G1, Fig. 11 (friction share) for
+each goal, and Fig. 14 (times, Euler parameters against Euler angles).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.analysis.indices import INDEX_UNITS
+from chewbot.dynamics.newton_euler import GOALS, newton_euler
+from chewbot.kinematics.motion import solve_kinematics
+from chewbot.kinematics.symbolic import ORIENTATIONS
+from chewbot.params import load_model
+from chewbot.report import newton_euler_figures
+from chewbot.report.figures import _save, plt
+from chewbot.results import kinematics_table
+from chewbot.task.default import default_task
+
+GOAL_LABELS = {"min-torque": "G1", "min-coupler-force": "G2", "min-hkp-force": "G3"}
+OWN_INDEX = {"min-torque": "F1", "min-coupler-force": "F2", "min-hkp-force": "F3"}
+REPEATS = 5  # timed runs per row after a first (warm-up) run; the median is reported
+
+
+def _rows(step) -> list[dict]:
+    rows = []
+    for name, goals in (("target", GOALS), ("6rss", ("min-torque",))):
+        model = load_model(name)
+        for orientation in ORIENTATIONS:
+            step(f"Newton-Euler: {name}, {orientation}")
+            kin = solve_kinematics(model, default_task(model, "left"), orientation)
+            for goal in goals:
+                dyn = newton_euler(model, kin, goal=goal)
+                times = []
+                for _ in range(REPEATS):
+                    t0 = time.perf_counter()
+                    newton_euler(model, kin, goal=goal)
+                    times.append(time.perf_counter() - t0)
+                rows.append({"mechanism": name, "orientation": orientation,
+                             "goal": GOAL_LABELS[goal] if name == "target" else "-",
+                             **dyn.info["indices"], "time_s": statistics.median(times),
+                             "infeasible_samples": len(dyn.info["infeasible"]), "_dyn": dyn, "_kin": kin})
+    for row in rows:
+        if row["mechanism"] == "target":
+            own = OWN_INDEX[next(g for g, lab in GOAL_LABELS.items() if lab == row["goal"])]
+            peers = [r[own] for r in rows if r["mechanism"] == "target" and r["orientation"] == row["orientation"]]
+            row["smallest_own_index"] = "yes" if row[own] <= min(peers) else "no"
+        else:
+            row["smallest_own_index"] = "-"
+    return rows
+
+
+COLUMNS = ["mechanism", "orientation", "goal", *INDEX_UNITS, "time_s", "infeasible_samples", "smallest_own_index"]
+
+
+def _header() -> list[str]:
+    return [f"{c} [{INDEX_UNITS[c]}]" if c in INDEX_UNITS else ("time [s]" if c == "time_s" else c) for c in COLUMNS]
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return "-" if np.isnan(value) else f"{value:.6g}"
+    return str(value)
+
+
+def _fig14(rows: list[dict], path: Path) -> Path:
+    """Computation time of each row, Euler parameters beside Euler angles (seed 001, Fig. 14)."""
+    fig, ax = plt.subplots(figsize=(9, 4))
+    labels = [f"{r['mechanism']} {r['goal']}" for r in rows if r["orientation"] == ORIENTATIONS[0]]
+    xs = np.arange(len(labels))
+    for k, orientation in enumerate(ORIENTATIONS):
+        times = [r["time_s"] * 1e3 for r in rows if r["orientation"] == orientation]
+        ax.bar(xs + (k - 0.5) * 0.4, times, width=0.4, label=orientation)
+    ax.set_xticks(xs, labels)
+    ax.set_ylabel("Newton–Euler, whole task (5001 samples) [ms]")
+    ax.legend()
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
+def run(out: Path, force: bool = False, progress=None) -> Path:
+    """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
+    from chewbot.pipeline import atomic_folder, check_output
+
+    step = progress or (lambda msg: None)
+    out = Path(out)
+    check_output(out, force)
+    rows = _rows(step)
+    with atomic_folder(out, force) as tmp:
+        with open(tmp / "table3.csv", "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(_header())
+            writer.writerows([[repr(r[c]) if isinstance(r[c], float) else r[c] for c in COLUMNS] for r in rows])
+        lines = ["| " + " | ".join(_header()) + " |", "|" + "---|" * len(COLUMNS)]
+        lines += ["| " + " | ".join(_cell(r[c]) for c in COLUMNS) + " |" for r in rows]
+        (tmp / "table3.md").write_text("\n".join(lines) + "\n")
+        summary = {"rows": [{c: r[c] for c in COLUMNS} for r in rows],
+                   "notes": "Newton-Euler with friction, default task, left side; time: median of "
+                            f"{REPEATS} runs after a warm-up, kinematics excluded"}
+        (tmp / "study.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+        step("figures")
+        for r in rows:
+            if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":
+                table = kinematics_table(r["_kin"])
+                table.add_block([f"tau{i + 1}" for i in range(6)], r["_dyn"].tau, "N*m")
+                for name, values in r["_dyn"].table.columns.items():
+                    table.add(name, values, r["_dyn"].table.units[name])
+                newton_euler_figures.friction_share(table, tmp / f"fig11_friction_share_{r['goal']}.png")
+                if r["goal"] == "G1":
+                    newton_euler_figures.torques_and_contacts(table, tmp / "fig10_torques_contacts_G1.png")
+                    newton_euler_figures.coupler_forces(table, tmp / "fig12_coupler_forces_G1.png")
+                    newton_euler_figures.crank_moments(table, tmp / "fig13_crank_moments_G1.png")
+        _fig14(rows, tmp / "fig14_times.png")
+    return out
