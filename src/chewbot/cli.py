@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from chewbot.errors import ChewbotError
 
@@ -16,11 +18,28 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    epilog="Exit codes: 0 success; 1 unexpected error (a bug); 2 bad input or usage; 3 unreachable or singular pose; "
+           "4 infeasible torque distribution; 5 results folder exists or cannot be written. See docs/cli.md.",
 )
 console = Console(stderr=True)
 
-EXIT_BAD_INPUT = 2  # typer's own usage errors use 2 as well
-EXIT_UNREACHABLE = 3
+# Exit codes (docs/cli.md). 1 is left to Python: an unexpected error, printed with its traceback.
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2  # bad parameter file, task, option or missing file; typer's own usage errors use 2 as well
+EXIT_UNREACHABLE = 3  # a pose of the task is out of reach, outside the sockets or singular
+EXIT_INFEASIBLE = 4  # no torque distribution within the actuator limits
+EXIT_OUTPUT = 5  # the results folder exists (no --force) or cannot be written
+
+
+def exit_code(exc: BaseException) -> int:
+    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md)."""
+    from chewbot.errors import InfeasibleError, KinematicsError
+    from chewbot.pipeline import OutputError
+
+    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (InfeasibleError, EXIT_INFEASIBLE), (OutputError, EXIT_OUTPUT)):
+        if isinstance(exc, kind):
+            return code
+    return EXIT_BAD_INPUT
 
 
 class Side(str, Enum):
@@ -33,6 +52,19 @@ class Orientation(str, Enum):
     euler_parameters = "euler-parameters"
 
 
+class Goal(str, Enum):
+    """Optimal distribution of the target's redundant actuation (Newton-Euler, seed 001 Sect. 4.5)."""
+
+    min_torque = "min-torque"
+    min_coupler_force = "min-coupler-force"
+    min_hkp_force = "min-hkp-force"
+
+
+class Switch(str, Enum):
+    on = "on"
+    off = "off"
+
+
 @app.callback()
 def _root() -> None:
     """chewbot: run a chewing task on the robot model and write its results.
@@ -41,9 +73,19 @@ def _root() -> None:
     """
 
 
-def _fail(exc: Exception, code: int) -> None:
-    console.print(f"[bold red]error:[/] {exc}", highlight=False)
-    raise typer.Exit(code)
+def _fail(exc: Exception, code: int | None = None) -> None:
+    """Print the error (its message names the file, row, key or sample) and exit with its code."""
+    console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)  # unwrapped: paths stay whole
+    raise typer.Exit(exit_code(exc) if code is None else code)
+
+
+def _check_method(name: str) -> str:
+    """Accept the name of a registered inverse-dynamics formulation (the registry is the list of choices)."""
+    from chewbot.dynamics import METHODS
+
+    if name not in METHODS:
+        raise typer.BadParameter(f"{name!r} is not a formulation; choose one of {', '.join(sorted(METHODS))}")
+    return name
 
 
 @app.command()
@@ -52,13 +94,17 @@ def run(
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts, and side of the default task."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation of the mandible's orientation."),
+    method: str = typer.Option("hessian", "--method", callback=_check_method, help="Inverse-dynamics formulation: one of `chewbot.dynamics.METHODS` (hessian, lagrange, liang, ...)."),
+    goal: Goal = typer.Option(Goal.min_torque, "--goal", help="newton-euler: what the redundant torques minimise (torques, forces at S_i, HKP normal forces)."),
+    friction: Switch = typer.Option(Switch.on, "--friction", help="newton-euler: friction at the HKPs and the actuators."),
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
     force: bool = typer.Option(False, "--force", help="Replace the results folder if it exists."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
-    """Compute the kinematics of a task and write a results folder.
+    """Compute the kinematics and inverse dynamics of a task and write a results folder.
 
-    Writes results.csv (one row per sample, SI units), run.json (model, options, versions, units) and figures.
+    Writes results.csv (one row per sample, SI units; torques tau1..tau6 and inertia coupling MCI1..MCI6 included),
+    run.json (model, options, versions, units) and figures.
 
     Examples:
 
@@ -67,30 +113,191 @@ def run(
       chewbot run --model 6rss --side right --out runs/6rss-right
 
       chewbot run --task my_chewing.csv --orientation euler-parameters --out runs/mine
+
+      chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
     """
-    from chewbot.errors import KinematicsError
     from chewbot.pipeline import RunOptions, check_output, compute, write
 
-    options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value)
+    options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
+                         goal=goal.value, friction=friction.value)
+    try:
+        check_output(out, force)  # before the work, not after it
+        with _progress(quiet, "run") as step:
+            result = compute(options, progress=step)
+            write(result, out, force=force, progress=step)
+    except ChewbotError as exc:
+        _fail(exc)
+    if not quiet:
+        _print_run_summary(result, out)
+
+
+@contextmanager
+def _progress(quiet: bool, label: str):
+    """A status line that shows the current step (or nothing with --quiet); yields the step callback."""
+    if quiet:
+        yield None
+        return
+    with console.status(label, spinner="dots") as status:
+        yield lambda msg: status.update(f"{label}: {msg}")
+
+
+def _print_run_summary(result, out: Path) -> None:
+    """The lines a person wants after a run: where the report is, the peak torque, and any warning."""
+    from chewbot.report.summary import column_stats, infeasible_samples, near_singular, numbered_columns
+
+    console.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
+                  f"open {escape(str(out / 'report.html'))}", highlight=False)
+    taus = numbered_columns(result.table, "tau")
+    if taus:
+        top = max(column_stats(result.table, taus), key=lambda s: abs(s.peak))
+        console.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
+    for i in near_singular(result.kinematics.t, result.kinematics.transmission):
+        console.print(f"[yellow]warning:[/] chain {i.chain} near-singular from t = {i.t_first:.3f} s to {i.t_last:.3f} s "
+                      f"(transmission angle down to {i.min_deg:.1f} deg)", highlight=False)
+    bad = infeasible_samples(result.info.get("dynamics", {}), result.table["t"])
+    if bad:
+        console.print(f"[yellow]warning:[/] {len(bad)} infeasible sample(s), first at t = {bad[0]['t']:.3f} s (see report.html)", highlight=False)
+
+
+@app.command()
+def bench(
+    repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
+) -> None:
+    """Time each inverse-dynamics formulation on the default task (5001 samples), both mechanisms, in one run.
+
+    Prints the first call (graph build + kernel load or compile), the median and the minimum of the further runs,
+    and the ratios of the medians (Hessian vs Liang, target vs 6RSS). Pin to one core for single-core figures:
+    taskset -c 0 chewbot bench
+    """
+    import platform
+
+    from rich.table import Table as RichTable
+
+    from chewbot.bench import bench as run_bench
+    from chewbot.bench import ratios
+
+    with console.status("timing", spinner="dots"):
+        timings = run_bench(repeats=repeats)
+    out = Console()
+    table = RichTable(title=f"inverse dynamics, default task ({timings[0].samples} samples), {platform.processor() or platform.machine()}")
+    for col in ("mechanism", "case", "first call (s)", "median (ms)", "min (ms)"):
+        table.add_column(col, justify="right" if "(" in col else "left")
+    for t in timings:
+        table.add_row(t.mechanism, t.case, f"{t.first_s:.3f}", f"{t.median_s * 1e3:.2f}", f"{t.min_s * 1e3:.2f}")
+    out.print(table)
+    for name, value in ratios(timings).items():
+        out.print(f"{name}: {value:.3f}")
+
+
+@app.command()
+def study(
+    name: str = typer.Argument(..., help="The study to run: seed000 (inverse dynamics and inertia coupling, seed 000)."),
+    out: Path = typer.Option(Path("runs/seed000"), "--out", help="Folder to write the table and figures to."),
+    force: bool = typer.Option(False, "--force", help="Replace the folder if it exists."),
+) -> None:
+    """Reproduce a paper's findings on the default models and write a table of claims and figures.
+
+    Example: chewbot study seed000 --out runs/seed000
+    """
+    from chewbot.pipeline import check_output
+    from chewbot.study import STUDIES
+
+    if name not in STUDIES:
+        _fail(ValueError(f"unknown study {name!r}; available: {', '.join(sorted(STUDIES))}"), EXIT_BAD_INPUT)
     try:
         check_output(out, force)
-        with console.status("computing", spinner="dots") if not quiet else _Null() as status:
-            result = compute(options, progress=(lambda msg: status.update(msg)) if not quiet else None)
-            write(result, out, force=force)
-    except KinematicsError as exc:
-        _fail(exc, EXIT_UNREACHABLE)
+        with console.status(f"study {name}", spinner="dots") as status:
+            written = STUDIES[name](out, force=force, progress=status.update)
     except ChewbotError as exc:
-        _fail(exc, EXIT_BAD_INPUT)
-    if not quiet:
-        console.print(f"wrote [bold]{out}[/] ({result.table.n} samples, {len(result.table.columns)} columns)")
+        _fail(exc)
+    console.print(f"wrote [bold]{written}[/]")
 
 
-class _Null:
-    def __enter__(self):
-        return self
+@app.command()
+def models() -> None:
+    """List the built-in models: name, mechanism, description and parameter file.
 
-    def __exit__(self, *a):
-        return False
+    Copy one of the files to describe your own robot, then check it with `chewbot check-model FILE`.
+
+    Example: chewbot models
+    """
+    from rich.table import Table as RichTable
+
+    from chewbot.params import BUILTIN_MODELS, builtin_model_path, load_model
+
+    table = RichTable(title="built-in models")
+    for col in ("name", "mechanism", "description", "file"):
+        table.add_column(col, overflow="fold")
+    for name in BUILTIN_MODELS:
+        m = load_model(name)
+        table.add_row(name, f"{m.mechanism} ({m.dof} DOF)", m.description, str(builtin_model_path(name)))
+    Console().print(table)
+
+
+@app.command("check-model")
+def check_model(
+    model: str = typer.Argument(..., help="A TOML parameter file, or the name of a built-in model."),
+) -> None:
+    """Validate a parameter file and print what follows from it.
+
+    Prints the lengths and masses of the chains (couplers: density x area x length), the total moving mass,
+    the home pose (theta_i and their largest absolute value, transmission angles), the condyles at home and
+    whether they lie on their planes inside the sockets, and the values the file marks as assumed.
+    Exit code 2 names the file and the key of the first problem; 3 means the home pose is out of reach.
+
+    Examples:
+
+      chewbot check-model target
+
+      chewbot check-model my_robot.toml
+    """
+    from chewbot.params import load_model
+
+    try:
+        m = load_model(model)
+        Console().print(_model_report(m))
+    except ChewbotError as exc:
+        _fail(exc)
+
+
+def _model_report(m):
+    """Tables of a model's derived quantities (SI inside, printed in mm, g and degrees)."""
+    import numpy as np
+    from rich.console import Group
+    from rich.table import Table as RichTable
+
+    from chewbot.report.summary import assumed_values, home_pose
+
+    home = home_pose(m)
+    theta = np.degrees(home["theta"])
+    chains = RichTable(title=f"{m.name}: {m.mechanism}, {m.dof} DOF, {m.source}", title_justify="left")
+    for col in ("chain", "crank [mm]", "coupler [mm]", "coupler mass [g]", "crank mass [g]", "crank inertia [g·mm²]",
+                "θ home [deg]", "transm. home [deg]"):
+        chains.add_column(col, justify="right")
+    for i in range(6):
+        chains.add_row(str(i + 1), f"{m.crank_length[i] * 1e3:.4g}", f"{m.coupler_length[i] * 1e3:.4g}", f"{m.coupler_mass[i] * 1e3:.4g}",
+                       f"{m.crank_mass[i] * 1e3:.5g}", f"{m.crank_inertia[i] * 1e9:.6g}", f"{theta[i]:.4f}",
+                       f"{np.degrees(np.arcsin(home['transmission'][i])):.2f}")
+    couplers, cranks = m.coupler_mass.sum() * 1e3, m.crank_mass.sum() * 1e3
+    facts = RichTable(show_header=False, box=None)
+    facts.add_column(style="bold")
+    facts.add_column()
+    facts.add_row("masses", f"couplers {couplers:.4g} g, cranks {cranks:.5g} g, mandible {m.mandible_mass * 1e3:.5g} g; "
+                            f"total moving {couplers + cranks + m.mandible_mass * 1e3:.5g} g")
+    facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home)")
+    h = m.hkp
+    for label, T, y_range in (("left condyle T_L", h.T_L, h.y_left), ("right condyle T_R", h.T_R, h.y_right)):
+        text = f"({', '.join(f'{v * 1e3:.4g}' for v in T)}) mm in {{S}} at home"
+        if m.has_hkp:
+            inside = h.x_range[0] <= T[0] <= h.x_range[1] and y_range[0] <= T[1] <= y_range[1]
+            text += (f"; plane residual p1 x + z + p2 = {(h.p1 * T[0] + T[2] + h.p2) * 1e3:.3g} mm; "
+                     f"{'inside' if inside else 'OUTSIDE'} its socket")
+        facts.add_row(label, text)
+    for label, p in (("incisor I", m.incisor), ("molars B_L, B_R", np.hstack([m.molar_left, m.molar_right]))):
+        facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
+    assumed = assumed_values(m)
+    facts.add_row("assumed", "\n".join(f"{k} = {v}" for k, v in assumed.items()) or "none")
+    return Group(chains, facts, f"[green]valid:[/] {escape(m.source)}")
 
 
 def main() -> None:  # pragma: no cover

@@ -12,6 +12,7 @@ import platform
 import shutil
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -20,12 +21,17 @@ from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
 from chewbot.params import load_model
-from chewbot.report import figures
+from chewbot.report import dynamics_figures, figures
+from chewbot.report.html import write_report
 from chewbot.results import Table, kinematics_table
 from chewbot.task.base import Task
 
 
-class OutputExistsError(ChewbotError):
+class OutputError(ChewbotError):
+    """The results folder cannot be written (the file system refused; names the folder and the reason)."""
+
+
+class OutputExistsError(OutputError):
     """The results folder exists and ``force`` was not given."""
 
 
@@ -99,6 +105,19 @@ def _dynamics_stage(result: RunResult, step) -> None:
         result.table.add(name, values, dyn.table.units[name], dyn.table.descriptions.get(name, ""))
     if dyn.info:
         result.info["dynamics"] = dyn.info
+    _coupling_stage(result, step)
+
+
+def _coupling_stage(result: RunResult, step) -> None:
+    """Inertia coupling MCI1..MCI6 (seed 000, Eq. 60) and the means of the related indices."""
+    from chewbot.analysis.coupling import coupling
+
+    step("inertia coupling")
+    t0 = time.perf_counter()
+    c = coupling(result.model, result.kinematics)
+    result.info["timings"]["coupling_s"] = time.perf_counter() - t0
+    result.table.add_block([f"MCI{i + 1}" for i in range(6)], c.MCI, "1", "inertia coupling index of joint i (seed 000, Eq. 60)")
+    result.info["coupling_means"] = c.means()
 
 
 def _versions() -> dict[str, str]:
@@ -112,6 +131,7 @@ def _versions() -> dict[str, str]:
 
 
 def run_json(result: RunResult) -> dict:
+    """The run record (run.json): options, model and task identity, versions, platform, column units, info."""
     m, task = result.model, result.task
     return {
         "chewbot_run": 1,
@@ -125,35 +145,76 @@ def run_json(result: RunResult) -> dict:
     }
 
 
-def write(result: RunResult, out: Path, force: bool = False) -> Path:
-    """Write the results folder ``out`` (results.csv, run.json, figures) atomically."""
+def write(result: RunResult, out: Path, force: bool = False, progress=None) -> Path:
+    """Write the results folder ``out`` (results.csv, run.json, figures, report.html) atomically.
+
+    Everything is written in a temporary sibling folder that replaces ``out`` only once complete: a failure
+    at any step (a figure, the report) leaves ``out`` as it was. ``progress(message)`` is told each step.
+    """
+    step = progress or (lambda msg: None)
     out = Path(out)
-    check_output(out, force)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    try:
+    with atomic_folder(out, force) as tmp:
+        step("writing results.csv")
         result.table.to_csv(tmp / "results.csv")
+        step("drawing figures")
         result.figures = [
             figures.task_space(result.table, tmp / "task_space.png"),
             figures.joint_space(result.table, tmp / "joint_space.png"),
             figures.bite_force(result.table, tmp / "bite_force.png"),
         ]
+        if result.dynamics is not None:
+            result.figures += [
+                dynamics_figures.torques(result.table, tmp / "torques.png", result.options.method),
+                dynamics_figures.coupling_indices(result.table, tmp / "coupling.png"),
+            ]
+            if result.options.method == "newton-euler":
+                from chewbot.report.newton_euler_figures import run_figures
+
+                result.figures += run_figures(result.table, tmp)
         (tmp / "run.json").write_text(json.dumps(run_json(result), indent=2, default=_json_default) + "\n")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        step("writing report.html")
+        write_report(result, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))
     result.figures = [out / p.name for p in result.figures]
     return out
 
 
+@contextmanager
+def atomic_folder(out: Path, force: bool = False):
+    """Yield a temporary sibling folder of ``out`` to write into; it becomes ``out`` when the block ends without
+    an error (replacing ``out`` only with ``force``), and is removed otherwise.
+
+    The old folder is moved aside, not deleted, until the new one is in place, and restored if that fails:
+    there is no moment without a complete result. File-system errors become :class:`OutputError`.
+    """
+    out = Path(out)
+    check_output(out, force)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot create the results folder ({exc.strerror or exc})") from exc
+    old = out.parent / f".{out.name}.replaced-{tmp.name.rsplit('-', 1)[-1]}"
+    try:
+        yield tmp
+        if out.exists():
+            os.replace(out, old)
+        os.replace(tmp, out)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old.exists() and not out.exists():
+            os.replace(old, out)
+        if isinstance(exc, OSError):
+            raise OutputError(f"{out}: cannot write the results ({exc.strerror or exc}{f': {exc.filename}' if exc.filename else ''})") from exc
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
 def check_output(out: Path, force: bool) -> None:
+    """Refuse an ``out`` that exists and is not a folder, or exists at all without ``force``."""
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder; choose another --out")
     if out.exists() and not force:
         raise OutputExistsError(f"{out}: the results folder exists; choose another --out or pass --force to replace it")
-    if out.exists() and not out.is_dir():
-        raise OutputExistsError(f"{out}: exists and is not a folder")
 
 
 def _json_default(o):

@@ -1,0 +1,140 @@
+"""The command line end to end: help, models, check-model, run, exit codes, and bad input of every kind."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE, app
+from chewbot.params import BUILTIN_MODELS, builtin_model_path
+
+runner = CliRunner()
+
+
+def invoke(*args: str):
+    return runner.invoke(app, list(args))
+
+
+def _assert_nothing_written(folder, out_name: str) -> None:
+    """No results folder and no temporary sibling left behind."""
+    assert not (folder / out_name).exists()
+    assert [p.name for p in folder.iterdir() if out_name in p.name] == []
+
+
+@pytest.fixture(scope="module")
+def task_csv(tmp_path_factory):
+    """A small reachable target task: 0.5 s at 100 Hz, millimetres and degrees, with a bite force."""
+    t = np.linspace(0.0, 0.5, 51)
+    s = np.sin(np.pi * t / 0.5) ** 2
+    rows = ["t,X[mm],Y[mm],alpha[deg],beta[deg],Fz"] + [f"{a:.3f},{2 * b:.6f},{b:.6f},{b:.6f},{5 * b:.6f},{-20 * b:.6f}" for a, b in zip(t, s)]
+    path = tmp_path_factory.mktemp("tasks") / "task.csv"
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _edited(task_csv, tmp_path, name: str, edit) -> str:
+    lines = task_csv.read_text().splitlines()
+    path = tmp_path / name
+    path.write_text("\n".join(edit(lines)) + "\n")
+    return str(path)
+
+
+def test_help_everywhere_with_examples():
+    top = invoke("--help")
+    assert top.exit_code == 0 and "Exit codes" in top.output
+    for command in ("run", "models", "check-model", "study", "bench"):
+        result = invoke(command, "--help")
+        assert result.exit_code == 0, command
+        assert "chewbot " + command in result.output or "Example" in result.output, command
+
+
+def test_models_lists_the_builtin_files():
+    result = runner.invoke(app, ["models"], env={"COLUMNS": "250"})
+    assert result.exit_code == 0
+    for name in BUILTIN_MODELS:
+        assert name in result.output and builtin_model_path(name).name in result.output
+
+
+def test_check_model_prints_derived_quantities():
+    result = runner.invoke(app, ["check-model", "target"], env={"COLUMNS": "250"})
+    assert result.exit_code == 0, result.output
+    # rho A L = 7.8e-3 g/mm^3 x 17.3494 mm^2 x 33 mm = 4.466 g; 4 x 4.466 + 2 x 7.037 = 31.94 g (MODEL.md)
+    assert "4.466" in result.output and "7.037" in result.output and "couplers 31.94 g" in result.output
+    assert "inside its socket" in result.output and "hkp.T_L_mm = [-2.5, 72.0, 15.965]" in result.output
+    assert "valid:" in result.output
+
+
+def test_check_model_names_the_file_and_key_of_a_bad_parameter(tmp_path):
+    text = builtin_model_path("target").read_text().replace("mass_g = 340.22", "mass_g = -340.22")
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    result = invoke("check-model", str(bad))
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert str(bad) in result.output and "mandible.mass_g" in result.output
+    missing = invoke("check-model", str(tmp_path / "nothing.toml"))
+    assert missing.exit_code == EXIT_BAD_INPUT and "no such parameter file" in missing.output
+
+
+def test_run_writes_the_folder_and_never_overwrites_silently(task_csv, tmp_path):
+    out = tmp_path / "run"
+    first = invoke("run", "--task", str(task_csv), "--out", str(out))
+    assert first.exit_code == 0, first.output
+    assert {"results.csv", "run.json", "report.html", "task_space.png"} <= {p.name for p in out.iterdir()}
+    assert "report.html" in first.output
+    before = (out / "results.csv").read_bytes()
+    (out / "mine.txt").write_text("a note of the user")
+    again = invoke("run", "--task", str(task_csv), "--out", str(out))
+    assert again.exit_code == EXIT_OUTPUT and "--force" in again.output
+    assert (out / "mine.txt").exists() and (out / "results.csv").read_bytes() == before
+    forced = invoke("run", "--task", str(task_csv), "--out", str(out), "--force", "--quiet")
+    assert forced.exit_code == 0 and forced.output == ""
+    assert not (out / "mine.txt").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no temporary or replaced folder left
+
+
+def test_an_unwritable_destination_is_an_output_error(task_csv, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    result = invoke("run", "--task", str(task_csv), "--out", str(blocker / "run"), "--quiet")
+    assert result.exit_code == EXIT_OUTPUT and str(blocker) in result.output
+
+
+@pytest.mark.parametrize(
+    "name, edit, expected",
+    [
+        ("missing.csv", None, "no such task file"),
+        ("backwards.csv", lambda ls: ls[:5] + [ls[6], ls[5]] + ls[7:], "does not increase"),
+        ("nan.csv", lambda ls: ls[:9] + [ls[9].replace(ls[9].split(",")[2], "nan", 1)] + ls[10:], "line 10"),
+        ("no_beta.csv", lambda ls: [",".join(c for j, c in enumerate(line.split(",")) if j != 4) for line in ls], "beta"),
+        ("furlong.csv", lambda ls: [ls[0].replace("X[mm]", "X[furlong]")] + ls[1:], "unknown unit 'furlong'"),
+    ],
+)
+def test_bad_task_files_name_the_problem_and_write_nothing(task_csv, tmp_path, name, edit, expected):
+    path = _edited(task_csv, tmp_path, name, edit) if edit else str(tmp_path / name)
+    result = invoke("run", "--task", path, "--out", str(tmp_path / "out"), "--quiet")
+    assert result.exit_code == EXIT_BAD_INPUT, result.output
+    assert name in result.output and expected in result.output
+    _assert_nothing_written(tmp_path, "out")
+
+
+def test_an_unreachable_pose_names_the_sample_and_writes_nothing(task_csv, tmp_path):
+    """X = 40 mm at one row drives the condyles out of their sockets (x at most 5 mm)."""
+    def push(lines):
+        cells = lines[20].split(",")
+        cells[1] = "40"
+        return lines[:20] + [",".join(cells)] + lines[21:]
+
+    path = _edited(task_csv, tmp_path, "far.csv", push)
+    result = invoke("run", "--task", path, "--out", str(tmp_path / "out"), "--quiet")
+    assert result.exit_code == EXIT_UNREACHABLE, result.output
+    assert "sample 19" in result.output and "socket" in result.output
+    _assert_nothing_written(tmp_path, "out")
+
+
+def test_a_bad_parameter_file_in_a_run_names_the_key(tmp_path):
+    bad = tmp_path / "robot.toml"
+    bad.write_text(builtin_model_path("target").read_text().replace("p1 = 1.1\n", ""))
+    result = invoke("run", "--model", str(bad), "--out", str(tmp_path / "out"), "--quiet")
+    assert result.exit_code == EXIT_BAD_INPUT and "robot.toml" in result.output and "hkp.p1" in result.output
+    _assert_nothing_written(tmp_path, "out")

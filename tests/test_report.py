@@ -1,0 +1,205 @@
+"""The run summary, the HTML report and the atomic results folder; the report opened in headless Chromium."""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from plotly.offline import get_plotlyjs
+
+from chewbot import pipeline
+from chewbot.pipeline import OutputExistsError, RunOptions, compute, write
+from chewbot.report import html as report_html
+from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
+from chewbot.results import Table
+from conftest import default_kinematics, model
+
+ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
+CHROMIUM = Path("/usr/bin/chromium")
+
+
+@pytest.fixture(scope="session")
+def run_with_dynamics():
+    """The default task on the target with the Hessian formulation, computed once."""
+    return compute(RunOptions(method="hessian"))
+
+
+@pytest.fixture(scope="session")
+def run_folder(run_with_dynamics, tmp_path_factory):
+    """The folder that `chewbot run` writes for that run."""
+    return write(run_with_dynamics, tmp_path_factory.mktemp("runs") / "default")
+
+
+# --- positions of the drawn robot ------------------------------------------------------------------------
+
+
+def test_crank_tips_and_mandible_points_close_every_chain():
+    """S_i from theta and M_i from the pose are two routes to the same loop: |G S| = L_c and |S M| = L_r.
+
+    The inverse kinematics is closed form, so the loops close to rounding: 1e-9 m (a nanometre) is far above
+    float error on 0.1 m and far below any drawing error.
+    """
+    m, kin = model("target"), default_kinematics()
+    idx = np.arange(0, kin.n, 7)
+    pos = report_html.robot_positions(m, kin, idx)
+    assert np.abs(np.linalg.norm(pos["S"] - m.G, axis=2) - m.crank_length).max() < 1e-9
+    assert np.abs(np.linalg.norm(pos["S"] - pos["body"][:, :6], axis=2) - m.coupler_length).max() < 1e-9
+
+
+def test_mandible_points_agree_with_the_kinematics():
+    """T_L, T_R, I, B_L, B_R from the pose (NumPy) equal Kinematics.points (CasADi graph) to 1e-12 m."""
+    m, kin = model("target"), default_kinematics()
+    idx = np.arange(kin.n)
+    body = report_html.robot_positions(m, kin, idx)["body"]
+    for j, name in enumerate(report_html.MANDIBLE_POINTS):
+        assert np.abs(body[:, 6 + j] - kin.points[name]).max() < 1e-12, name
+
+
+def test_frames_cover_the_task_within_the_budget():
+    t = np.arange(0, 60.0, 1e-3)  # a minute: longer than MAX_FRAMES frames at FRAME_STEP_S
+    idx = report_html.frame_samples(t)
+    assert idx[0] == 0 and idx[-1] == len(t) - 1
+    assert len(idx) <= report_html.MAX_FRAMES + 1  # + the last sample
+    short = report_html.frame_samples(np.arange(0, 5.0005, 1e-3))
+    assert np.diff(short).min() == 40  # 40 ms at 1 kHz
+
+
+# --- the summary's numbers ---------------------------------------------------------------------------------
+
+
+def test_column_stats_of_a_known_signal():
+    """sin(2 pi t) over whole periods: peak 2 at t = 0.25 s, RMS sqrt(2), mean 0 (exact on this grid)."""
+    t = np.arange(0, 2.0, 1e-3)
+    table = Table()
+    table.add("t", t, "s")
+    table.add("tau1", 2 * np.sin(2 * np.pi * t), "N*m")
+    table.add("tau2", -3 + 0 * t, "N*m")
+    s1, s2 = column_stats(table, ["tau1", "tau2"])
+    assert s1.peak == pytest.approx(2.0, abs=1e-12) and s1.t_peak == pytest.approx(0.25, abs=1e-12)
+    assert s1.rms == pytest.approx(math.sqrt(2), rel=1e-12) and abs(s1.mean) < 1e-12
+    assert s2.peak == -3 and s2.rms == pytest.approx(3)
+
+
+def test_near_singular_runs_are_found_chain_by_chain():
+    t = np.arange(10) * 0.1
+    sin_tr = np.ones((10, 6))
+    sin_tr[2:5, 3] = np.sin(np.radians([14.0, 5.0, 10.0]))
+    sin_tr[8, 3] = np.sin(np.radians(14.9))
+    sin_tr[:, 0] = np.sin(np.radians(15.01))  # just above the threshold
+    runs = near_singular(t, sin_tr, threshold_deg=15.0)
+    assert [(r.chain, r.first, r.last) for r in runs] == [(4, 2, 4), (4, 8, 8)]
+    assert runs[0].min_deg == pytest.approx(5.0) and runs[0].t_min == pytest.approx(0.3)
+
+
+def test_indices_and_infeasible_samples_are_read_where_the_formulations_put_them():
+    info = {"indices": {"F1": 0.5, "F3": float("nan")}, "F2": 2.0, "goal": "min-torque",
+            "infeasible": [{"sample": 3, "t": 0.003, "limits": ["torque 2"]}, 7]}
+    assert list(performance_indices(info)) == ["F1", "F2", "F3"]
+    bad = infeasible_samples(info, np.arange(10) * 1e-3)
+    assert bad == [{"sample": 3, "t": 0.003, "limits": ["torque 2"]}, {"sample": 7, "t": 0.007, "limits": []}]
+
+
+# --- the page -------------------------------------------------------------------------------------------
+
+
+def _page(folder: Path) -> str:
+    return (folder / "report.html").read_text("utf-8")
+
+
+def test_report_is_self_contained_and_shows_what_ran(run_folder, run_with_dynamics):
+    page = _page(run_folder)
+    # Nothing is fetched: no external script, style, image or frame outside plotly.js (whose code names URLs it
+    # never loads here; the browser test below watches the requests), links to the folder's files are relative.
+    assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", page.replace(get_plotlyjs(), ""))
+    assert "Plotly" in page and "</html>" in page
+    # plotly.js alone is ~4.8 MB; the data must stay small beside it.
+    assert (run_folder / "report.html").stat().st_size < 8e6
+    for text in ("Actuator torques", "Inertia coupling (MCI)", "Transmission angles", "No near-singular sample"):
+        assert text in page, text
+    for name in ("results.csv", "run.json", "task_space.png"):
+        assert f'href="{name}"' in page
+    # every column group of the table has a plot: tau1..6 and MCI1..6 are groups of their own
+    assert "Actuator torques (hessian) (tau1, tau2, tau3, tau4, tau5, tau6)" in page
+
+
+def test_report_degrades_without_dynamics_and_plots_unknown_columns(tmp_path):
+    result = compute(RunOptions(method=None))
+    n = result.table.n
+    result.table.add_block(["widget_a", "widget_b"], np.ones((n, 2)), "N", "a quantity from a later stage")
+    out = write(result, tmp_path / "kin-only")
+    page = _page(out)
+    assert "Inverse dynamics did not run" in page
+    assert "Actuator torques" not in page and "Performance indices" not in page
+    assert "A quantity from a later stage (widget_a, widget_b)" in page
+
+
+def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_folder(run_with_dynamics, tmp_path, monkeypatch):
+    out = tmp_path / "run"
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("report failed")
+
+    monkeypatch.setattr(pipeline, "write_report", broken)
+    with pytest.raises(RuntimeError):
+        write(run_with_dynamics, out)
+    assert list(tmp_path.iterdir()) == []
+    out.mkdir()
+    (out / "keep.txt").write_text("old result")
+    with pytest.raises(OutputExistsError):
+        write(run_with_dynamics, out)
+    with pytest.raises(RuntimeError):
+        write(run_with_dynamics, out, force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    assert (out / "keep.txt").read_text() == "old result"
+
+
+# --- in a real browser ----------------------------------------------------------------------------------
+
+
+@pytest.mark.browser
+def test_report_renders_in_headless_chromium(run_folder):
+    """Open report.html from disk in Chromium: no console error, every plot drawn, the 3D robot animated."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')")
+    if not CHROMIUM.exists():
+        pytest.skip(f"no browser: {CHROMIUM} is missing (Debian: apt-get install chromium)")
+    errors: list[str] = []
+    profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch_persistent_context(
+                profile, executable_path=str(CHROMIUM), headless=True, viewport={"width": 1400, "height": 1000},
+                args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                      "--disable-component-update", "--disable-sync"])
+            page = browser.new_page()
+            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
+            page.goto((run_folder / "report.html").as_uri())
+            page.wait_for_selector("body[data-plots-drawn]", timeout=60_000)
+            drawn = int(page.get_attribute("body", "data-plots-drawn"))
+            plots = page.eval_on_selector_all(".js-plotly-plot", "els => els.map(e => e.id)")
+            assert drawn == len(plots) >= 7  # robot, task space, joint space, bite force, transmission, tau, MCI
+            # each 2D plot has drawn its lines as SVG paths with data
+            lines = page.eval_on_selector_all(".js-plotly-plot:not(#robot)",
+                                              "els => els.map(e => e.querySelectorAll('.scatterlayer .trace path.js-line').length)")
+            assert all(n > 0 for n in lines), lines
+            # the 3D scene is a WebGL canvas of real size, with its animation frames
+            size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
+            assert size[0] > 300 and size[1] > 300
+            frames = page.evaluate("document.getElementById('robot')._transitionData._frames.length")
+            assert frames > 100
+            # jump to a frame inside a bite-force burst (the arrow shows) and keep a picture
+            assert page.evaluate("Plotly.animate('robot', ['1.640'], {frame: {duration: 0, redraw: true}, mode: 'immediate'}).then(() => 'shown')") == 'shown'
+            page.wait_for_timeout(500)
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "report.png"))
+            page.screenshot(path=str(ARTIFACTS / "report-full.png"), full_page=True)
+            browser.close()
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)
+    assert errors == []
