@@ -7,6 +7,7 @@ of its generated source) and falls back to CasADi's virtual machine where no com
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shutil
@@ -36,15 +37,15 @@ def c_compiler() -> str | None:
     return None
 
 
-def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
-    """``fn`` compiled to C and loaded back; ``fn`` itself if there is no C compiler.
+def compile_library(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> Path:
+    """Generate C for ``fn``, compile it to a shared library with the system C compiler and return its path.
 
-    The library is cached under :func:`cache_dir` by the SHA-256 of the generated C source and the flags,
-    so a kernel is compiled once per machine.
+    The library is cached under :func:`cache_dir` by the SHA-256 of the generated C source and the flags, so a
+    kernel is compiled once per machine. Raises RuntimeError where there is no C compiler.
     """
     cc = c_compiler()
-    if cc is None or os.environ.get("CHEWBOT_NO_COMPILE"):
-        return fn
+    if cc is None:
+        raise RuntimeError("no C compiler found (set $CC, or install cc/gcc/clang)")
     with tempfile.TemporaryDirectory() as tmp:
         cname = f"{fn.name()}.c"
         cg = ca.CodeGenerator(cname, {"with_header": False})
@@ -65,7 +66,48 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
             if result.returncode != 0:
                 raise RuntimeError(f"compiling kernel {fn.name()} failed:\n{result.stderr[-2000:]}")
             os.replace(partial, lib)  # atomic: a concurrent process never loads a half-written library
-    return ca.external(fn.name(), str(lib))
+    return lib
+
+
+def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
+    """``fn`` compiled to C and loaded back as a CasADi function; ``fn`` itself if there is no C compiler
+    (or ``$CHEWBOT_NO_COMPILE`` is set): the results are the same, only slower."""
+    if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
+        return fn
+    return ca.external(fn.name(), str(compile_library(fn, flags)))
+
+
+class NativeFunction:
+    """A compiled kernel called straight through ctypes, for one sample at a time with little overhead.
+
+    CasADi's own Python call costs tens of microseconds; this one copies the inputs into preallocated buffers and
+    calls the C function, a few microseconds. ``fn(*inputs)`` returns the outputs as new NumPy arrays (column
+    vectors flattened, matrices with their shape).
+    """
+
+    def __init__(self, fn: ca.Function, flags: tuple[str, ...] = ("-O3",)):
+        self._lib = ctypes.CDLL(str(compile_library(fn, flags)))
+        self._c = getattr(self._lib, fn.name())
+        self._c.restype = ctypes.c_int
+        dbl_p = ctypes.POINTER(ctypes.c_double)
+        self._c.argtypes = [ctypes.POINTER(dbl_p), ctypes.POINTER(dbl_p), ctypes.POINTER(ctypes.c_longlong), dbl_p, ctypes.c_int]
+        self.name = fn.name()
+        self._in = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
+        self._out = [np.zeros(fn.nnz_out(j)) for j in range(fn.n_out())]
+        self._shapes = [(fn.size1_out(j), fn.size2_out(j)) for j in range(fn.n_out())]
+        if any(fn.nnz_in(i) != fn.numel_in(i) for i in range(fn.n_in())) or any(fn.nnz_out(j) != fn.numel_out(j) for j in range(fn.n_out())):
+            raise ValueError(f"{fn.name()}: NativeFunction needs dense inputs and outputs")
+        self._arg = (dbl_p * max(fn.sz_arg(), 1))(*[a.ctypes.data_as(dbl_p) for a in self._in])
+        self._res = (dbl_p * max(fn.sz_res(), 1))(*[a.ctypes.data_as(dbl_p) for a in self._out])
+        self._iw = (ctypes.c_longlong * max(fn.sz_iw(), 1))()
+        self._w = (ctypes.c_double * max(fn.sz_w(), 1))()
+
+    def __call__(self, *inputs) -> list[np.ndarray]:
+        for buf, x in zip(self._in, inputs):
+            buf[:] = np.ravel(x, order="F")
+        if self._c(self._arg, self._res, self._iw, self._w, 0):
+            raise RuntimeError(f"kernel {self.name} failed")
+        return [o.reshape(shape, order="F") if shape[1] > 1 else o.copy() for o, shape in zip(self._out, self._shapes)]
 
 
 def evaluate(fn: ca.Function, *inputs: np.ndarray) -> list[np.ndarray]:

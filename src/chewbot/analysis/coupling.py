@@ -26,9 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate
-from chewbot.dynamics.energy import energies, generalised_state
-from chewbot.kinematics.functions import jacobians_function
+import casadi as ca
+
+from chewbot.casadi_tools import compiled, evaluate
+from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 
@@ -58,13 +59,34 @@ class Coupling:
                 "branch_variation": float(self.branch_variation.mean())}
 
 
+def coupling_kernel(model: Model) -> ca.Function:
+    """Per-sample kernel (theta, q_EE) -> M_A (6 x 6, kg m^2), MCI (6) (Eqs. 58-60), q_EE in Euler angles.
+
+    J_theta1^+ is (J_theta1' J_theta1)^-1 J_theta1' for the target and J_theta1^-1 for the 6RSS, solved inside the
+    graph, so the kernel is one straight-line C function (exported for the controller by ``chewbot export-c``).
+    """
+
+    def build():
+        e = energy(model)
+        s = e.kin
+        J1 = s.J_theta1()
+        J1_pinv = ca.solve(ca.mtimes(J1.T, J1), J1.T) if model.has_hkp else ca.inv(J1)
+        J5 = ca.vertcat(ca.SX.eye(6), J1_pinv)
+        M_A = ca.mtimes([J5.T, e.M, J5])
+        a = ca.fabs(M_A)
+        diag = ca.diag(a)
+        MCI = ca.log((ca.sum2(a) - diag) / (5 * diag) + 1)
+        return ca.Function(f"coupling_{model.mechanism.replace('6rss', 'sixrss')}", [s.theta, s.q], [M_A, MCI],
+                           ["theta", "q"], ["M_A", "MCI"], {"cse": True})
+
+    return model.cached(("fn", "coupling_kernel"), build)
+
+
 def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:
     """M_A = J_theta5' M J_theta5 along the task (Eqs. 58-59), (N, 6, 6), kg m^2."""
     q, _, _ = generalised_state(kin)
-    J_theta1 = evaluate(jacobians_function(model, "euler-angles"), q[:, :6], q[:, 6:])[2]
-    _, _, M = energies(model, kin)
-    J5 = np.concatenate([np.broadcast_to(np.eye(6), (len(q), 6, 6)), np.linalg.pinv(J_theta1)], axis=1)
-    return np.swapaxes(J5, 1, 2) @ M @ J5
+    fn = model.cached(("fn", "coupling_kernel", "compiled"), lambda: compiled(coupling_kernel(model)))
+    return evaluate(fn, q[:, :6], q[:, 6:])[0]
 
 
 def mci(M_A: np.ndarray) -> np.ndarray:

@@ -74,7 +74,12 @@ def _layout(nN: int) -> dict[str, tuple[int, int]]:
 
 
 def coefficients_function(model: Model, orientation: str) -> ca.Function:
-    """(theta, q, dq, ddq, F_B, B) -> D: the sample's equations with N and |N| left free (compiled, cached).
+    """:func:`coefficients_sx_function` compiled to C (cached)."""
+    return model.cached(("ne", "coefficients", orientation, "compiled"), lambda: compiled(coefficients_sx_function(model, orientation)))
+
+
+def coefficients_sx_function(model: Model, orientation: str) -> ca.Function:
+    """(theta, q, dq, ddq, F_B, B) -> D: the sample's equations with N and |N| left free (cached).
 
     D packs (see :func:`_layout`) the forces f_i at S_i as f = f0 + fV + F1 N + F2 |N| (fV: the share of
     the HKP viscous friction, F2: of the HKP Coulomb friction, both to be switched with the friction flag),
@@ -148,10 +153,9 @@ def coefficients_function(model: Model, orientation: str) -> ca.Function:
         D = ca.vertcat(*blocks, *fE, *r_GS, inertial, dth)
         vh = ca.horzcat(*vhat) if nN else ca.SX(3, 0)
         vt = ca.horzcat(*v_T) if nN else ca.SX(3, 0)
-        fn = ca.Function(f"ne_coefficients_{m.mechanism}_{orientation.replace('-', '_')}",
-                         [s.theta, s.q, s.dq, s.ddq, F_B, B], [D, vh, vt],
-                         ["theta", "q", "dq", "ddq", "F_B", "B"], ["D", "vhat_T", "v_T"])
-        return compiled(fn)
+        return ca.Function(f"ne_coefficients_{m.mechanism}_{orientation.replace('-', '_')}",
+                           [s.theta, s.q, s.dq, s.ddq, F_B, B], [D, vh, vt],
+                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["D", "vhat_T", "v_T"])
 
     return model.cached(("ne", "coefficients", orientation), build)
 

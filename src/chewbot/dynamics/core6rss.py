@@ -1,0 +1,171 @@
+"""Inverse dynamics on a 6RSS core: the 6RSS model in X_EE, then the HKP constraints projected out.
+
+The 6RSS's dynamics are written once in the six coordinates x = X_EE = [X, Y, Z, alpha, beta, gamma], with the
+crank angles eliminated in closed form (Cheng et al., Mech. Ind. 24:28, 2023 build the target on this core):
+
+* chain i: theta_i from the closed-form inverse kinematics on the working branch, S_i(theta_i),
+  d_i = S_i - M_i, s_i = dS_i/dtheta_i, r_i = R M_i^M. Differentiating abs(d_i)^2 = L_r^2 gives
+  theta_i_dot = j_i' t with j_i = [d_i; r_i x d_i] / (d_i . s_i) and the twist t = [v_OM; omega] = M_0a x_dot;
+* kinetic energy T = 1/2 t' Lambda t, with the mandible's spatial inertia diag(m I3, R I_M R') plus, per chain,
+  the crank I_i j_i j_i' and the coupler as an exact thin-rod integral m/3 (B'B + A'A) + m/6 (B'A + A'B),
+  A = [I3, -[r_i]x] (velocity of M_i), B = s_i j_i' (velocity of S_i); M_6(x) = M_0a' Lambda M_0a;
+* potential V = m g Z + sum m_i g (S_iz + M_iz) / 2; the actuators' virtual work theta_dot' tau with
+  theta_dot = J_6 x_dot, J_6 = [j_i'] M_0a; the bite force's Q_6 = J_B6' F_B:
+
+      J_6' tau = M_6 x_ddot + C_6 x_dot + G_6 - Q_6                     (the 6RSS, unique tau)
+
+For the target x = phi(q_EE) carries the parasitic Z and gamma, x_dot = M_J q_EE_dot,
+x_ddot = M_J q_EE_ddot + M_J_dot q_EE_dot. The HKP forces do no work along M_J (they are normal to the planes the
+condyles slide on), so projecting onto M_J removes them:
+
+      J_theta1' tau = M_f q_EE_ddot + C_f q_EE_dot + G_f - Q_B,   J_theta1 = J_6 M_J,
+      M_f = M_J' M_6 M_J,  C_f = M_J' (M_6 M_J_dot + C_6 M_J),  G_f = M_J' G_6,  Q_B = M_J' Q_6,
+
+the same Eq. (53) as the Hessian method (M_f and G_f identical, C_f q_EE_dot identical), solved for the
+minimum-norm torques. C_6 comes from the bodies' velocity Jacobians W (v = W x_dot): C_6 = W' K W_dot plus the
+mandible's gyroscopic term, so that C_6 x_dot is exact and M_6_dot - 2 C_6 is skew-symmetric (the property
+passivity-based controllers use); it needs one directional derivative of W instead of the six partial derivatives
+of M_6 a Christoffel form takes.
+
+Everything, the inverse kinematics included, is one CasADi graph per sample, compiled to C: the per-sample
+kernel of :func:`torque_kernel` is what ``chewbot export-c`` writes for the robot's controller.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from chewbot.casadi_tools import compiled, evaluate
+from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.energy import require_euler_angles
+from chewbot.kinematics.ik import branches
+from chewbot.kinematics.motion import Kinematics
+from chewbot.kinematics.symbolic import Z_parasitic_sx, gamma_parasitic_sx
+from chewbot.model import Model
+from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
+
+KERNEL_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "Q_B")
+
+
+def _skew(v):
+    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]), ca.horzcat(-v[1], v[0], 0))
+
+
+CORE_OUTPUTS = ("theta", "J6", "M6", "C6", "G6", "Q6")
+
+
+def core_function(model: Model) -> ca.Function:
+    """The 6RSS core per sample: (x, x_dot, B, F_B) -> theta, J_6, M_6, C_6, G_6, Q_6 (module docstring)."""
+    return model.cached(("fn", "core6rss", "core"), lambda: _core(model))
+
+
+def _core(model: Model) -> ca.Function:
+    x, dx, B, F = ca.SX.sym("x", 6), ca.SX.sym("dx", 6), ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+    p, R = x[0:3], matrix_from_euler_angles_sx(x[3], x[4], x[5])
+    W_omega = ca.horzcat(ca.SX(3, 3), R_omega_sx(x[3], x[4]))  # omega = W_omega x_dot
+    M_0a = ca.diagcat(ca.SX.eye(3), R_omega_sx(x[3], x[4]))
+    I_S = ca.mtimes([R, ca.DM(model.mandible_inertia), R.T])
+    sigma = branches(model)
+    # Velocity Jacobians of every body (rows: theta_i_dot of each crank, v_S and v_M of each coupler) and the
+    # constant weights of their kinetic energies: T = 1/2 x_dot' W' K W x_dot + mandible.
+    blocks, weights, theta = [], [], []
+    V = model.mandible_mass * model.g * p[2]
+    for i in range(6):
+        u, v = ca.DM(model.R_C0[i][:, 0]), ca.DM(model.R_C0[i][:, 1])
+        Lc, Lr = model.crank_length[i], model.coupler_length[i]
+        r = ca.mtimes(R, ca.DM(model.M[i]))
+        Mi = p + r
+        d0 = Mi - ca.DM(model.G[i])
+        A_, B_, C_ = 2 * Lc * ca.dot(u, d0), 2 * Lc * ca.dot(v, d0), Lc**2 + ca.dot(d0, d0) - Lr**2
+        th = ca.atan2(B_, A_) + sigma[i] * ca.acos(C_ / ca.sqrt(A_**2 + B_**2))
+        S = ca.DM(model.G[i]) + Lc * (ca.cos(th) * u + ca.sin(th) * v)
+        s = Lc * (-ca.sin(th) * u + ca.cos(th) * v)
+        d = S - Mi
+        J6_i = ca.mtimes(ca.vertcat(d, ca.cross(r, d)).T / ca.dot(d, s), M_0a)  # theta_i_dot = J6_i x_dot
+        W_M = ca.mtimes(ca.horzcat(ca.SX.eye(3), -_skew(r)), M_0a)  # v_M = v + omega x r
+        m = model.coupler_mass[i]
+        blocks += [J6_i, ca.mtimes(s, J6_i), W_M]
+        weights += [ca.DM(model.crank_inertia[i]), ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3)) * m)]
+        V += m * model.g * (S[2] + Mi[2]) / 2
+        theta.append(th)
+    W = ca.vertcat(*blocks)
+    K = ca.diagcat(*weights)
+    # d/dt W along x_dot: one forward sweep. For a kinetic energy 1/2 (Wx')' K (Wx') the equations of motion carry
+    # W' K (W x'' + W' x'), and for the mandible's rotation also omega x I_S omega: C_6 below has C_6 x_dot exact
+    # and M_6_dot - 2 C_6 skew-symmetric.
+    W_dot = ca.reshape(ca.jtimes(ca.vec(W), x, dx), W.size1(), W.size2())
+    W_omega_dot = ca.reshape(ca.jtimes(ca.vec(W_omega), x, dx), 3, 6)
+    omega = ca.mtimes(W_omega, dx)
+    mm = model.mandible_mass
+    M6 = mm * ca.diagcat(ca.SX.eye(3), ca.SX(3, 3)) + ca.mtimes([W_omega.T, I_S, W_omega]) + ca.mtimes([W.T, K, W])
+    C6 = ca.mtimes([W.T, K, W_dot]) + ca.mtimes(W_omega.T, ca.mtimes(I_S, W_omega_dot) + ca.mtimes(_skew(omega), ca.mtimes(I_S, W_omega)))
+    J6 = ca.vertcat(*blocks[0::3])
+    Q6 = ca.mtimes(ca.jacobian(p + ca.mtimes(R, B), x).T, F)
+    return ca.Function("core6rss", [x, dx, B, F], [ca.vertcat(*theta), J6, M6, C6, ca.gradient(V, x), Q6],
+                       ["x", "dx", "B", "F_B"], list(CORE_OUTPUTS))
+
+
+def _lift(model: Model, q: ca.SX) -> ca.SX:
+    """x = phi(q_EE): the target's X_EE with its parasitic Z and gamma."""
+    gamma = gamma_parasitic_sx(model, q[2], q[3])
+    Z = Z_parasitic_sx(model, q[0], matrix_from_euler_angles_sx(q[2], q[3], gamma))
+    return ca.vertcat(q[0], q[1], Z, q[2], q[3], gamma)
+
+
+def torque_kernel(model: Model) -> ca.Function:
+    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B) -> tau, theta, theta_dot, J_theta1, M_f, C_f, G_f, Q_B.
+
+    q_EE in Euler angles ([X, Y, alpha, beta] for the target, X_EE for the 6RSS; m, rad), B the bite point in
+    {M} (m), F_B the bite force on the mandible in {S} (N). tau (N m) is the minimum-norm solution of Eq. (53)
+    (unique for the 6RSS). Uncompiled: see :func:`compiled_torque_kernel`.
+    """
+
+    def build():
+        n = model.dof
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+        B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+        x = _lift(model, q) if model.has_hkp else q
+        M_J = ca.jacobian(x, q)
+        dx = ca.mtimes(M_J, dq)
+        core = dict(zip(CORE_OUTPUTS, core_function(model)(x, dx, B, F)))
+        dM_J = ca.jtimes(M_J, q, dq)
+        J1 = ca.mtimes(core["J6"], M_J)
+        M_f = ca.mtimes([M_J.T, core["M6"], M_J])
+        C_f = ca.mtimes(M_J.T, ca.mtimes(core["M6"], dM_J) + ca.mtimes(core["C6"], M_J))
+        G_f = ca.mtimes(M_J.T, core["G6"])
+        Q_B = ca.mtimes(M_J.T, core["Q6"])
+        rhs = ca.mtimes(M_f, ddq) + ca.mtimes(C_f, dq) + G_f - Q_B
+        tau = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
+        return ca.Function(
+            f"tau_{model.mechanism.replace('6rss', 'sixrss')}", [q, dq, ddq, B, F],
+            [tau, core["theta"], ca.mtimes(J1, dq), J1, M_f, C_f, G_f, Q_B],
+            ["q", "dq", "ddq", "B", "F_B"], list(KERNEL_OUTPUTS), {"cse": True})
+
+    return model.cached(("fn", "core6rss"), build)
+
+
+def compiled_torque_kernel(model: Model) -> ca.Function:
+    """:func:`torque_kernel` compiled to C (cached on disk)."""
+    return model.cached(("fn", "core6rss", "compiled"), lambda: compiled(torque_kernel(model), flags=("-O3",)))
+
+
+def _coordinates(model: Model, kin: Kinematics):
+    cols = [0, 1, 3, 4] if model.has_hkp else list(range(6))
+    return kin.X[:, cols], kin.dX[:, cols], kin.ddX[:, cols]
+
+
+def core_terms(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
+    """All kernel outputs along the task (arrays samples first)."""
+    q, dq, ddq = _coordinates(model, kin)
+    out = evaluate(compiled_torque_kernel(model), q, dq, ddq, model.molar(side or kin.side), kin.force)
+    return dict(zip(KERNEL_OUTPUTS, out))
+
+
+@register("6rss-core")
+def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
+    """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring).
+    ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""
+    require_euler_angles(kin, "6rss-core")
+    tau = core_terms(model, kin, side)["tau"]
+    return Dynamics("6rss-core", tau, info={"equations": "6RSS core in X_EE, HKPs projected out (Eq. 53)", "friction": False})
