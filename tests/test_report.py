@@ -13,7 +13,8 @@ import pytest
 from plotly.offline import get_plotlyjs
 
 from chewbot import pipeline
-from chewbot.pipeline import OutputExistsError, RunOptions, compute, write
+from chewbot.outputs import OutputExistsError
+from chewbot.pipeline import RunOptions, compute, write
 from chewbot.report import html as report_html
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
 from chewbot.results import Table

@@ -1,41 +1,106 @@
-"""Timing of the inverse-dynamics formulations on the default task (``chewbot bench``).
+"""Timing of every inverse-dynamics formulation and of the real-time kernels (``chewbot bench``).
 
-Each case is one entry of :data:`CASES`: a label and a callable ``(model, kinematics) -> anything`` that computes
-the torques of the whole task. Adding a formulation (Newton-Euler, a 6RSS-core formulation, a compiled kernel) to
-the benchmark is adding one entry. Every case runs on every mechanism of :data:`MECHANISMS` in one process, so the
-medians and ratios printed are measured under the same conditions.
+Everything is measured in one process, one run, on the default task (5001 samples), so the medians and the
+ratios compare like with like. A case is one entry of :data:`TASK_CASES`: a label, the mechanisms and the
+orientation it runs on, and a callable ``(model, kinematics)`` that computes the whole task. Adding a
+formulation to the benchmark is adding one entry. The kinematics are computed once per (mechanism,
+orientation) and left out of the timings; the first call of a case (graph build, kernel compile or load) is
+reported apart from the median of the further calls.
 
-The first call of a case builds its CasADi graph and loads (or, with an empty kernel cache, compiles) its C code:
-it is reported apart from the steady-state median.
+The plain references are the straightforward ways: the Newton–Euler torques in NumPy, vectorised
+(:func:`chewbot.reference.frictionless_torques`), and the friction-aware distribution by SciPy's SLSQP, sample
+by sample (:func:`chewbot.reference.slsqp_min_torque`, timed on a stretch of :data:`SLSQP_SAMPLES` samples
+and scaled to the task).
 """
 
 from __future__ import annotations
 
+import os
+import platform
 import statistics
+import subprocess
+import tempfile
 import time
 from dataclasses import dataclass
 from functools import partial
+from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
+from chewbot.casadi_tools import c_compiler, native
 from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.core6rss import core_terms
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.params import load_model
+from chewbot.reference import frictionless_torques, slsqp_min_torque
 from chewbot.task.default import default_task
 
-CASES: dict[str, Callable] = {
-    "hessian": partial(inverse_dynamics, method="hessian"),
-    "liang": partial(inverse_dynamics, method="liang"),
-    "lagrange": partial(inverse_dynamics, method="lagrange"),
-}
-MECHANISMS = ("target", "6rss")
-# Ratios printed: (numerator case, denominator case) on each mechanism.
-CASE_RATIOS = (("hessian", "liang"), ("lagrange", "liang"))
+SLSQP_SAMPLES = 100  # consecutive samples from t = 2 s (inside a bite), SLSQP costs milliseconds each
+BOTH = ("target", "6rss")
+EA, EP = "euler-angles", "euler-parameters"
+
+
+@dataclass(frozen=True)
+class Case:
+    """A whole-task benchmark case: ``run(model, kin)`` on each of ``mechanisms`` in ``orientation``;
+    ``samples``: the samples it computes when not all (then the times are scaled to the whole task)."""
+
+    label: str
+    run: Callable
+    mechanisms: tuple[str, ...] = BOTH
+    orientation: str = EA
+    samples: int | None = None
+
+
+def _slsqp(model, kin):
+    start = int(np.searchsorted(kin.t, 2.0))
+    return slsqp_min_torque(model, kin, np.arange(start, start + SLSQP_SAMPLES))
+
+
+def _g1_kernel(model, kin):
+    from chewbot.realtime import g1_distribution
+
+    return g1_distribution(model, kin)
+
+
+TASK_CASES: tuple[Case, ...] = (
+    Case("hessian", partial(inverse_dynamics, method="hessian")),
+    Case("liang", partial(inverse_dynamics, method="liang")),
+    Case("lagrange", partial(inverse_dynamics, method="lagrange")),
+    Case("6rss-core", partial(inverse_dynamics, method="6rss-core")),
+    Case("6rss-core with M_f, C_f, G_f", core_terms),
+    Case("reference: NumPy Newton-Euler", frictionless_torques),
+    Case("newton-euler G1 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-torque")),
+    Case("newton-euler G1 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-torque"), orientation=EP),
+    Case("newton-euler G2 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-coupler-force"), ("target",)),
+    Case("newton-euler G2 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-coupler-force"), ("target",), EP),
+    Case("newton-euler G3 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",)),
+    Case("newton-euler G3 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",), EP),
+    Case("G1 kernel, friction (EP)", _g1_kernel, ("target",), EP),
+    Case("reference: SciPy SLSQP G1", _slsqp, ("target",), EA, SLSQP_SAMPLES),
+)
+
+# (numerator, denominator) of the ratios printed, per mechanism where both ran.
+RATIOS = (
+    ("hessian", "liang"),
+    ("lagrange", "liang"),
+    ("6rss-core", "hessian"),
+    ("newton-euler G1 (EP)", "newton-euler G1 (EA)"),
+    ("newton-euler G2 (EP)", "newton-euler G2 (EA)"),
+    ("newton-euler G3 (EP)", "newton-euler G3 (EA)"),
+    ("hessian", "reference: NumPy Newton-Euler"),
+    ("6rss-core", "reference: NumPy Newton-Euler"),
+    ("6rss-core with M_f, C_f, G_f", "reference: NumPy Newton-Euler"),
+    ("G1 kernel, friction (EP)", "reference: SciPy SLSQP G1"),
+    ("newton-euler G1 (EA)", "reference: SciPy SLSQP G1"),
+)
 
 
 @dataclass(frozen=True)
 class Timing:
     """One case on one mechanism: ``first_s`` (graph build + kernel load or compile + run), ``median_s`` and
-    ``min_s`` over ``repeats`` further runs, for ``samples`` samples of the task."""
+    ``min_s`` over ``repeats`` further runs, scaled to the ``samples`` of the whole task."""
 
     mechanism: str
     case: str
@@ -45,6 +110,10 @@ class Timing:
     min_s: float
     repeats: int
 
+    @property
+    def per_sample_us(self) -> float:
+        return 1e6 * self.median_s / self.samples
+
 
 def _time(fn) -> float:
     t0 = time.perf_counter()
@@ -52,30 +121,97 @@ def _time(fn) -> float:
     return time.perf_counter() - t0
 
 
-def bench(repeats: int = 11, cases: dict[str, Callable] | None = None, mechanisms=MECHANISMS, side: str = "left") -> list[Timing]:
-    """Time every case on every mechanism on the default task; the models are loaded fresh, so the first call of
-    a case includes building its graph."""
+def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: str = "left", progress=None) -> list[Timing]:
+    """Time every case on its mechanisms on the default task; models are loaded fresh, so the first call of a
+    case includes building its graph and loading (or compiling) its kernel."""
+    models = {name: load_model(name) for name in BOTH}
+    kins: dict[tuple[str, str], object] = {}
     out = []
-    for name in mechanisms:
-        model = load_model(name)
-        kin = solve_kinematics(model, default_task(model, side))
-        for label, case in (cases or CASES).items():
-            run = partial(case, model, kin)
+    for case in cases:
+        for name in case.mechanisms:
+            if progress:
+                progress(f"{case.label} ({name})")
+            model = models[name]
+            key = (name, case.orientation)
+            if key not in kins:
+                kins[key] = solve_kinematics(model, default_task(model, side), case.orientation)
+            kin = kins[key]
+            run = partial(case.run, model, kin)
+            scale = kin.n / (case.samples or kin.n)
             first = _time(run)
-            times = [_time(run) for _ in range(repeats)]
-            out.append(Timing(name, label, kin.n, first, statistics.median(times), min(times), repeats))
+            times = [scale * _time(run) for _ in range(repeats if case.samples is None else max(1, repeats // 5))]
+            out.append(Timing(name, case.label, kin.n, first, statistics.median(times), min(times), len(times)))
     return out
 
 
 def ratios(timings: list[Timing]) -> dict[str, float]:
-    """Median ratios: each pair of :data:`CASE_RATIOS` per mechanism, and target over 6RSS per case."""
+    """Median ratios: each pair of :data:`RATIOS` per mechanism, and target over 6RSS per case."""
     med = {(t.mechanism, t.case): t.median_s for t in timings}
     out = {}
-    for mech in dict.fromkeys(t.mechanism for t in timings):
-        for a, b in CASE_RATIOS:
+    for mech in BOTH:
+        for a, b in RATIOS:
             if (mech, a) in med and (mech, b) in med:
                 out[f"{mech}: {a} / {b}"] = med[mech, a] / med[mech, b]
     for case in dict.fromkeys(t.case for t in timings):
         if ("target", case) in med and ("6rss", case) in med:
             out[f"{case}: target / 6rss"] = med["target", case] / med["6rss", case]
     return out
+
+
+@dataclass(frozen=True)
+class KernelTiming:
+    """One per-sample kernel: a call from Python (ctypes, median over ``calls``) and, where a C compiler is
+    found, a call from C (mean over ``calls`` in the exported example program)."""
+
+    name: str
+    python_us: float
+    c_ns: float | None
+    calls: int
+
+
+def bench_kernels(calls: int = 20000) -> list[KernelTiming]:
+    """Time the exported kernels (:func:`chewbot.realtime.kernels`) for one sample, from Python and from C."""
+    from chewbot.export import export_c
+    from chewbot.realtime import kernels
+
+    target, sixrss = load_model("target"), load_model("6rss")
+    ks = kernels(target, sixrss)
+    c_times: dict[str, float] = {}
+    if c_compiler():
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = export_c(ks, Path(tmp) / "kernels")
+            exe = folder / "example"
+            subprocess.run([c_compiler(), "-O3", "-std=c99", "-o", str(exe), str(folder / "example.c"),
+                            str(folder / "chewbot_kernels.c"), "-lm"], check=True, capture_output=True)
+            lines = subprocess.run([str(exe), str(calls)], check=True, capture_output=True, text=True).stdout.splitlines()
+            for line in lines:
+                if line.startswith("time "):
+                    _, name, ns, _ = line.split()
+                    c_times[name] = float(ns)
+    out = []
+    for k in ks:
+        fn = native(k.function)
+        args = [k.example[k.function.name_in(i)] for i in range(k.function.n_in())]
+        for _ in range(200):
+            fn(*args)
+        ts = []
+        for _ in range(calls // 4):
+            t0 = time.perf_counter()
+            fn(*args)
+            ts.append(time.perf_counter() - t0)
+        out.append(KernelTiming(k.name, 1e6 * statistics.median(ts), c_times.get(k.name), calls))
+    return out
+
+
+def machine() -> str:
+    """The CPU model and the cores this process may use."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{model}, {cores} core(s) available, Python {platform.python_version()}"

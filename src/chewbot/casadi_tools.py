@@ -37,9 +37,28 @@ def c_compiler() -> str | None:
     return None
 
 
-def compile_library(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> Path:
+def _batch_wrapper(fn: ca.Function) -> str:
+    """C source of ``NAME_batch``: the kernel called on n samples stored one after the other (stride 0: the
+    same input for every sample), so a whole trajectory is one call with no copies."""
+    name = fn.name()
+    lines = [
+        "",
+        f"CASADI_SYMBOL_EXPORT int {name}_batch(long long n, const casadi_real** in, const long long* stride,",
+        "                                      casadi_real** out, casadi_int* iw, casadi_real* w) {",
+        f"  const casadi_real* arg[{max(fn.sz_arg(), 1)}] = {{0}};",
+        f"  casadi_real* res[{max(fn.sz_res(), 1)}] = {{0}};",
+        "  for (long long s = 0; s < n; ++s) {",
+    ]
+    lines += [f"    arg[{i}] = in[{i}] + s * stride[{i}];" for i in range(fn.n_in())]
+    lines += [f"    res[{j}] = out[{j}] + s * {fn.nnz_out(j)};" for j in range(fn.n_out())]
+    lines += [f"    if ({name}(arg, res, iw, w, 0)) return 1;", "  }", "  return 0;", "}", ""]
+    return "\n".join(lines)
+
+
+def compile_library(fn: ca.Function, flags: tuple[str, ...] = ("-O2",), batch: bool = False) -> Path:
     """Generate C for ``fn``, compile it to a shared library with the system C compiler and return its path.
 
+    ``batch`` adds ``NAME_batch`` (see :class:`NativeFunction`).
     The library is cached under :func:`cache_dir` by the SHA-256 of the generated C source and the flags, so a
     kernel is compiled once per machine. Raises RuntimeError where there is no C compiler.
     """
@@ -50,12 +69,10 @@ def compile_library(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> Path:
         cname = f"{fn.name()}.c"
         cg = ca.CodeGenerator(cname, {"with_header": False})
         cg.add(fn)
-        cwd = os.getcwd()
-        os.chdir(tmp)
-        try:
-            cg.generate()
-        finally:
-            os.chdir(cwd)
+        cg.generate(f"{tmp}{os.sep}")
+        if batch:
+            with open(Path(tmp, cname), "a") as f:
+                f.write(_batch_wrapper(fn))
         source = Path(tmp, cname).read_bytes()
         digest = hashlib.sha256(source + " ".join(flags).encode()).hexdigest()[:20]
         lib = cache_dir() / f"{fn.name()}_{digest}.so"
@@ -77,26 +94,42 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
     return ca.external(fn.name(), str(compile_library(fn, flags)))
 
 
-class NativeFunction:
-    """A compiled kernel called straight through ctypes, for one sample at a time with little overhead.
+def native(fn: ca.Function) -> "NativeFunction | ca.Function":
+    """``fn`` as a :class:`NativeFunction` (compiled, called through ctypes); ``fn`` itself where there is no C
+    compiler (or ``$CHEWBOT_NO_COMPILE`` is set): :func:`evaluate` takes either, with the same results."""
+    if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
+        return fn
+    return NativeFunction(fn)
 
-    CasADi's own Python call costs tens of microseconds; this one copies the inputs into preallocated buffers and
-    calls the C function, a few microseconds. ``fn(*inputs)`` returns the outputs as new NumPy arrays (column
-    vectors flattened, matrices with their shape).
+
+class NativeFunction:
+    """A compiled kernel called straight through ctypes: one sample with little overhead, or a whole trajectory
+    in one C loop with no conversion through CasADi's matrices.
+
+    ``fn(*inputs)`` evaluates one sample (a few microseconds of overhead, where CasADi's own Python call costs
+    tens) and returns the outputs as NumPy arrays (vectors flat, matrices with their shape).
+    ``fn.batch(*inputs)`` evaluates N samples: inputs (N, k) (or (k,) for the same value at every sample),
+    outputs (N, rows) or (N, rows, cols), as :func:`evaluate` returns them.
     """
 
     def __init__(self, fn: ca.Function, flags: tuple[str, ...] = ("-O3",)):
-        self._lib = ctypes.CDLL(str(compile_library(fn, flags)))
-        self._c = getattr(self._lib, fn.name())
-        self._c.restype = ctypes.c_int
-        dbl_p = ctypes.POINTER(ctypes.c_double)
-        self._c.argtypes = [ctypes.POINTER(dbl_p), ctypes.POINTER(dbl_p), ctypes.POINTER(ctypes.c_longlong), dbl_p, ctypes.c_int]
+        if any(fn.nnz_in(i) != fn.numel_in(i) for i in range(fn.n_in())) or any(fn.nnz_out(j) != fn.numel_out(j) for j in range(fn.n_out())):
+            raise ValueError(f"{fn.name()}: NativeFunction needs dense inputs and outputs")
+        self.function = fn
         self.name = fn.name()
+        self._lib = ctypes.CDLL(str(compile_library(fn, flags, batch=True)))
+        dbl_p = ctypes.POINTER(ctypes.c_double)
+        self._c = getattr(self._lib, self.name)
+        self._c.restype = ctypes.c_int
+        self._c.argtypes = [ctypes.POINTER(dbl_p), ctypes.POINTER(dbl_p), ctypes.POINTER(ctypes.c_longlong), dbl_p, ctypes.c_int]
+        self._cb = getattr(self._lib, f"{self.name}_batch")
+        self._cb.restype = ctypes.c_int
+        self._cb.argtypes = [ctypes.c_longlong, ctypes.POINTER(dbl_p), ctypes.POINTER(ctypes.c_longlong),
+                             ctypes.POINTER(dbl_p), ctypes.POINTER(ctypes.c_longlong), dbl_p]
+        self._dbl_p = dbl_p
         self._in = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
         self._out = [np.zeros(fn.nnz_out(j)) for j in range(fn.n_out())]
         self._shapes = [(fn.size1_out(j), fn.size2_out(j)) for j in range(fn.n_out())]
-        if any(fn.nnz_in(i) != fn.numel_in(i) for i in range(fn.n_in())) or any(fn.nnz_out(j) != fn.numel_out(j) for j in range(fn.n_out())):
-            raise ValueError(f"{fn.name()}: NativeFunction needs dense inputs and outputs")
         self._arg = (dbl_p * max(fn.sz_arg(), 1))(*[a.ctypes.data_as(dbl_p) for a in self._in])
         self._res = (dbl_p * max(fn.sz_res(), 1))(*[a.ctypes.data_as(dbl_p) for a in self._out])
         self._iw = (ctypes.c_longlong * max(fn.sz_iw(), 1))()
@@ -109,13 +142,41 @@ class NativeFunction:
             raise RuntimeError(f"kernel {self.name} failed")
         return [o.reshape(shape, order="F") if shape[1] > 1 else o.copy() for o, shape in zip(self._out, self._shapes)]
 
+    def batch(self, *inputs) -> list[np.ndarray]:
+        fn = self.function
+        n = next((np.shape(x)[0] for x in inputs if np.ndim(x) == 2), None)
+        if n is None:
+            raise ValueError("batch needs at least one (N, k) input to know the number of samples")
+        arrays, strides = [], []
+        for i, x in enumerate(inputs):
+            a = np.ascontiguousarray(x, dtype=float)
+            if a.ndim == 2:
+                if a.shape != (n, fn.nnz_in(i)):
+                    raise ValueError(f"{self.name}: input {fn.name_in(i)} has shape {a.shape}, expected {(n, fn.nnz_in(i))}")
+                strides.append(fn.nnz_in(i))
+            else:
+                a = np.ascontiguousarray(np.ravel(a, order="F"))
+                if a.size != fn.nnz_in(i):
+                    raise ValueError(f"{self.name}: input {fn.name_in(i)} has {a.size} entries, expected {fn.nnz_in(i)}")
+                strides.append(0)
+            arrays.append(a)
+        outs = [np.empty((n, fn.nnz_out(j))) for j in range(fn.n_out())]
+        dbl_p = self._dbl_p
+        ins = (dbl_p * len(arrays))(*[a.ctypes.data_as(dbl_p) for a in arrays])
+        res = (dbl_p * len(outs))(*[o.ctypes.data_as(dbl_p) for o in outs])
+        if self._cb(n, ins, (ctypes.c_longlong * len(strides))(*strides), res, self._iw, self._w):
+            raise RuntimeError(f"kernel {self.name} failed")
+        return [o if c == 1 else o.reshape(n, c, r).transpose(0, 2, 1) for o, (r, c) in zip(outs, self._shapes)]
 
-def evaluate(fn: ca.Function, *inputs: np.ndarray) -> list[np.ndarray]:
-    """Evaluate a per-sample function over N samples at once.
+
+def evaluate(fn: ca.Function | NativeFunction, *inputs: np.ndarray) -> list[np.ndarray]:
+    """Evaluate a per-sample function over N samples at once (a :class:`NativeFunction` in one C loop).
 
     Each input is (N, k) (or (N,) for a scalar, or (k,) to use the same value for every sample); each output
     comes back as (N, rows) for a column output and (N, rows, cols) for a matrix output.
     """
+    if isinstance(fn, NativeFunction):
+        return fn.batch(*inputs)
     matrices = [np.shape(x)[0] for x in inputs if np.ndim(x) == 2]
     if not matrices:
         raise ValueError("evaluate needs at least one (N, k) input to know the number of samples")

@@ -34,7 +34,7 @@ EXIT_OUTPUT = 5  # the results folder exists (no --force) or cannot be written
 def exit_code(exc: BaseException) -> int:
     """The exit code for an error chewbot raised on purpose (the table in docs/cli.md)."""
     from chewbot.errors import InfeasibleError, KinematicsError
-    from chewbot.pipeline import OutputError
+    from chewbot.outputs import OutputError
 
     for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (InfeasibleError, EXIT_INFEASIBLE), (OutputError, EXIT_OUTPUT)):
         if isinstance(exc, kind):
@@ -116,7 +116,8 @@ def run(
 
       chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
     """
-    from chewbot.pipeline import RunOptions, check_output, compute, write
+    from chewbot.outputs import check_output
+    from chewbot.pipeline import RunOptions, compute, write
 
     options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
                          goal=goal.value, friction=friction.value)
@@ -162,31 +163,81 @@ def _print_run_summary(result, out: Path) -> None:
 @app.command()
 def bench(
     repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
+    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per kernel for the one-sample timings."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file."),
 ) -> None:
-    """Time each inverse-dynamics formulation on the default task (5001 samples), both mechanisms, in one run.
+    """Time every formulation on the default task (5001 samples), both mechanisms, and the real-time kernels.
 
-    Prints the first call (graph build + kernel load or compile), the median and the minimum of the further runs,
-    and the ratios of the medians (Hessian vs Liang, target vs 6RSS). Pin to one core for single-core figures:
-    taskset -c 0 chewbot bench
+    In one run: each formulation's first call (graph build + kernel load or compile), the median and minimum of
+    the further runs, per sample; the kernels for one sample from Python and from C; and the ratios of the
+    medians (Hessian vs Liang, target vs 6RSS, Euler parameters vs angles, each against the plain NumPy and
+    SciPy SLSQP references). Timings are not tests: pin to one core for single-core figures.
+
+    Example:
+
+      taskset -c 0 chewbot bench --out docs/benchmark.md
     """
-    import platform
+    from chewbot.bench import bench_kernels, bench_task, machine, ratios
 
-    from rich.table import Table as RichTable
+    with _progress(False, "timing") as step:
+        timings = bench_task(repeats=repeats, progress=step)
+        step("kernels, one sample")
+        kernel_timings = bench_kernels(calls)
+    text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
+    Console().print(text, markup=False, highlight=False)
+    if out is not None:
+        out.write_text(text)
 
-    from chewbot.bench import bench as run_bench
-    from chewbot.bench import ratios
 
-    with console.status("timing", spinner="dots"):
-        timings = run_bench(repeats=repeats)
-    out = Console()
-    table = RichTable(title=f"inverse dynamics, default task ({timings[0].samples} samples), {platform.processor() or platform.machine()}")
-    for col in ("mechanism", "case", "first call (s)", "median (ms)", "min (ms)"):
-        table.add_column(col, justify="right" if "(" in col else "left")
-    for t in timings:
-        table.add_row(t.mechanism, t.case, f"{t.first_s:.3f}", f"{t.median_s * 1e3:.2f}", f"{t.min_s * 1e3:.2f}")
-    out.print(table)
-    for name, value in ratios(timings).items():
-        out.print(f"{name}: {value:.3f}")
+def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) -> str:
+    lines = [f"Machine: {machine_line}", "", f"Whole default task ({timings[0].samples} samples):", "",
+             "| mechanism | case | first call (s) | median (ms) | min (ms) | per sample (us) |", "|---|---|---|---|---|---|"]
+    lines += [f"| {t.mechanism} | {t.case} | {t.first_s:.3f} | {t.median_s * 1e3:.2f} | {t.min_s * 1e3:.2f} | {t.per_sample_us:.2f} |"
+              for t in timings]
+    lines += ["", "One sample, exported kernels:", "", "| kernel | call from Python (us, median) | call from C (ns, mean) |", "|---|---|---|"]
+    lines += [f"| {k.name} | {k.python_us:.2f} | {'-' if k.c_ns is None else f'{k.c_ns:.0f}'} |" for k in kernel_timings]
+    lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3f}" for name, value in ratio_values.items()]
+    return "\n".join(lines) + "\n"
+
+
+@app.command("export-c")
+def export_c(
+    out: Path = typer.Option(..., "--out", help="Folder to write the C kernels to."),
+    target: str = typer.Option("target", "--target-model", help="The target robot's model (built-in name or TOML file)."),
+    sixrss: str = typer.Option("6rss", "--6rss-model", help="The 6RSS counterpart's model (built-in name or TOML file)."),
+    force: bool = typer.Option(False, "--force", help="Replace the folder if it exists."),
+) -> None:
+    """Write the real-time kernels as dependency-free C for the robot's controller.
+
+    The folder holds chewbot_kernels.c and .h (plain C99, <math.h> only), a README with each kernel's inputs and
+    outputs and their units and the expected outputs on an example sample, example.c (evaluates each kernel on
+    that sample; `./example 100000` also times them) and a Makefile. Kernels: minimum-norm torques of the target
+    and torques of the 6RSS (lean, and with M_f, C_f, G_f), M_A with MCI, and the friction-aware G1 distribution.
+
+    Example:
+
+      chewbot export-c --out controller/chewbot && make -C controller/chewbot
+    """
+    from chewbot.export import export_c as write_c
+    from chewbot.params import load_model
+    from chewbot.outputs import OutputError
+    from chewbot.realtime import kernels
+
+    try:
+        t, s = load_model(target), load_model(sixrss)
+        for m, want in ((t, "target"), (s, "6rss")):
+            if m.mechanism != want:
+                raise ChewbotError(f"{m.source}: mechanism is {m.mechanism!r}, expected {want!r} here")
+        if out.exists() and not force:
+            raise OutputError(f"{out}: exists; choose another --out or pass --force to replace it")
+        with _progress(False, "generating C") as step:
+            step("building kernels")
+            ks = kernels(t, s)
+            step("writing C")
+            write_c(ks, out, model_name=f"{t.name} + {s.name}", force=force)
+    except ChewbotError as exc:
+        _fail(exc)
+    console.print(f"wrote {out} ({len(ks)} kernels)")
 
 
 @app.command()
@@ -199,7 +250,7 @@ def study(
 
     Example: chewbot study seed000 --out runs/seed000
     """
-    from chewbot.pipeline import check_output
+    from chewbot.outputs import check_output
     from chewbot.study import STUDIES
 
     if name not in STUDIES:

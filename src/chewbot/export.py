@@ -10,15 +10,13 @@ listed in the README, so the export can be checked on the target machine.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from chewbot.errors import ChewbotError
+from chewbot.outputs import atomic_folder
 
 
 @dataclass(frozen=True)
@@ -42,12 +40,23 @@ def _c_array(values: np.ndarray) -> str:
 
 def _example_program(prefix: str, kernels: list[Kernel]) -> str:
     lines = [
-        "/* Evaluates each exported kernel once on the sample listed in README.md and prints its outputs. */",
+        "/* Evaluates each exported kernel once on the sample listed in README.md and prints its outputs.",
+        "   With an argument R, also calls each kernel R times and prints the mean time per call. */",
+        "#define _POSIX_C_SOURCE 199309L",
         "#include <stdio.h>",
+        "#include <stdlib.h>",
+        "#include <time.h>",
         f'#include "{prefix}.h"',
         "",
-        "int main(void) {",
+        "static double now(void) {",
+        "  struct timespec ts;",
+        "  clock_gettime(CLOCK_MONOTONIC, &ts);",
+        "  return ts.tv_sec + 1e-9 * ts.tv_nsec;",
+        "}",
+        "",
+        "int main(int argc, char** argv) {",
         "  int failed = 0;",
+        "  long repeats = argc > 1 ? atol(argv[1]) : 0;",
     ]
     for k in kernels:
         f = k.function
@@ -72,7 +81,14 @@ def _example_program(prefix: str, kernels: list[Kernel]) -> str:
                 f"    for (int k = 0; k < {f.nnz_out(j)}; ++k) printf(\" %.17g\", out{j}[k]);",
                 '    printf("\\n");',
             ]
-        lines.append("  }")
+        lines += [
+            "    if (repeats > 0) {",
+            "      double t0 = now();",
+            f"      for (long r = 0; r < repeats; ++r) {n}(arg, res, iw, w, 0);",
+            f'      printf("time {n} %.1f ns/call\\n", 1e9 * (now() - t0) / repeats);',
+            "    }",
+            "  }",
+        ]
     lines += ["  return failed;", "}", ""]
     return "\n".join(lines)
 
@@ -118,33 +134,17 @@ def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", 
     """Write C source, header, README, example program and Makefile for ``kernels`` into the folder ``out``.
 
     The folder is written in a temporary sibling and moved into place; an existing folder is replaced only
-    with ``force``.
+    with ``force`` (:func:`chewbot.outputs.atomic_folder`).
     """
-    out = Path(out)
-    if out.exists() and not force:
-        raise ChewbotError(f"{out}: exists; choose another --out or pass --force to replace it")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    try:
+    with atomic_folder(Path(out), force) as tmp:
         cg = ca.CodeGenerator(f"{prefix}.c", {"with_header": True})
         for k in kernels:
             cg.add(k.function)
-        cwd = os.getcwd()
-        os.chdir(tmp)
-        try:
-            cg.generate()
-        finally:
-            os.chdir(cwd)
+        cg.generate(f"{tmp}{os.sep}")
         (tmp / "example.c").write_text(_example_program(prefix, kernels))
         (tmp / "README.md").write_text(_readme(prefix, kernels, model_name))
         (tmp / "Makefile").write_text(
             "CC ?= cc\nCFLAGS ?= -O2 -std=c99\n\n"
             f"example: example.c {prefix}.c {prefix}.h\n\t$(CC) $(CFLAGS) -o $@ example.c {prefix}.c -lm\n\t./example\n"
         )
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out

@@ -28,7 +28,7 @@ import numpy as np
 
 import casadi as ca
 
-from chewbot.casadi_tools import compiled, evaluate
+from chewbot.casadi_tools import evaluate, native
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -85,7 +85,7 @@ def coupling_kernel(model: Model) -> ca.Function:
 def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:
     """M_A = J_theta5' M J_theta5 along the task (Eqs. 58-59), (N, 6, 6), kg m^2."""
     q, _, _ = generalised_state(kin)
-    fn = model.cached(("fn", "coupling_kernel", "compiled"), lambda: compiled(coupling_kernel(model)))
+    fn = model.cached(("fn", "coupling_kernel", "native"), lambda: native(coupling_kernel(model)))
     return evaluate(fn, q[:, :6], q[:, 6:])[0]
 
 

@@ -36,7 +36,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, evaluate
+from chewbot.casadi_tools import evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.energy import require_euler_angles
 from chewbot.kinematics.ik import branches
@@ -45,23 +45,22 @@ from chewbot.kinematics.symbolic import Z_parasitic_sx, gamma_parasitic_sx
 from chewbot.model import Model
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
-KERNEL_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "Q_B")
-
-
 def _skew(v):
     return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]), ca.horzcat(-v[1], v[0], 0))
 
 
-CORE_OUTPUTS = ("theta", "J6", "M6", "C6", "G6", "Q6")
+CORE_OUTPUTS = ("theta", "J6", "M6", "C6", "G6", "Q6", "f6")
 
 
 def core_function(model: Model) -> ca.Function:
-    """The 6RSS core per sample: (x, x_dot, B, F_B) -> theta, J_6, M_6, C_6, G_6, Q_6 (module docstring)."""
+    """The 6RSS core per sample: (x, x_dot, x_ddot, B, F_B) -> theta, J_6, M_6, C_6, G_6, Q_6 and
+    f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6 (module docstring)."""
     return model.cached(("fn", "core6rss", "core"), lambda: _core(model))
 
 
 def _core(model: Model) -> ca.Function:
-    x, dx, B, F = ca.SX.sym("x", 6), ca.SX.sym("dx", 6), ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+    x, dx, ddx = ca.SX.sym("x", 6), ca.SX.sym("dx", 6), ca.SX.sym("ddx", 6)
+    B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
     p, R = x[0:3], matrix_from_euler_angles_sx(x[3], x[4], x[5])
     W_omega = ca.horzcat(ca.SX(3, 3), R_omega_sx(x[3], x[4]))  # omega = W_omega x_dot
     M_0a = ca.diagcat(ca.SX.eye(3), R_omega_sx(x[3], x[4]))
@@ -102,8 +101,16 @@ def _core(model: Model) -> ca.Function:
     C6 = ca.mtimes([W.T, K, W_dot]) + ca.mtimes(W_omega.T, ca.mtimes(I_S, W_omega_dot) + ca.mtimes(_skew(omega), ca.mtimes(I_S, W_omega)))
     J6 = ca.vertcat(*blocks[0::3])
     Q6 = ca.mtimes(ca.jacobian(p + ca.mtimes(R, B), x).T, F)
-    return ca.Function("core6rss", [x, dx, B, F], [ca.vertcat(*theta), J6, M6, C6, ca.gradient(V, x), Q6],
-                       ["x", "dx", "B", "F_B"], list(CORE_OUTPUTS))
+    G6 = ca.gradient(V, x)
+    # The same left-hand side without forming M_6 and C_6 (what a torque-only kernel needs): every W is the
+    # Jacobian of a position or angle, so the bodies' accelerations are W x_ddot + W_dot x_dot and the
+    # generalised inertia forces W' K (W x_ddot + W_dot x_dot), plus the mandible's Newton-Euler terms.
+    acc = ca.mtimes(W, ddx) + ca.mtimes(W_dot, dx)
+    domega = ca.mtimes(W_omega, ddx) + ca.mtimes(W_omega_dot, dx)
+    f6 = (ca.mtimes(W.T, ca.mtimes(K, acc)) + ca.vertcat(mm * ddx[0:3], ca.SX(3, 1))
+          + ca.mtimes(W_omega.T, ca.mtimes(I_S, domega) + ca.cross(omega, ca.mtimes(I_S, omega))) + G6 - Q6)
+    return ca.Function("core6rss", [x, dx, ddx, B, F], [ca.vertcat(*theta), J6, M6, C6, G6, Q6, f6],
+                       ["x", "dx", "ddx", "B", "F_B"], list(CORE_OUTPUTS))
 
 
 def _lift(model: Model, q: ca.SX) -> ca.SX:
@@ -113,41 +120,56 @@ def _lift(model: Model, q: ca.SX) -> ca.SX:
     return ca.vertcat(q[0], q[1], Z, q[2], q[3], gamma)
 
 
+DYNAMICS_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "Q_B")
+TORQUE_OUTPUTS = ("tau", "theta", "dtheta")
+
+
+def _kernel_terms(model: Model):
+    n = model.dof
+    q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+    B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+    x = _lift(model, q) if model.has_hkp else q
+    M_J = ca.jacobian(x, q)
+    dx = ca.mtimes(M_J, dq)
+    dM_J = ca.jtimes(M_J, q, dq)
+    ddx = ca.mtimes(M_J, ddq) + ca.mtimes(dM_J, dq)
+    core = dict(zip(CORE_OUTPUTS, core_function(model)(x, dx, ddx, B, F)))
+    J1 = ca.mtimes(core["J6"], M_J)
+    rhs = ca.mtimes(M_J.T, core["f6"])
+    tau = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
+    terms = {
+        "tau": tau, "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
+        "M_f": ca.mtimes([M_J.T, core["M6"], M_J]),
+        "C_f": ca.mtimes(M_J.T, ca.mtimes(core["M6"], dM_J) + ca.mtimes(core["C6"], M_J)),
+        "G_f": ca.mtimes(M_J.T, core["G6"]), "Q_B": ca.mtimes(M_J.T, core["Q6"]),
+    }
+    return [q, dq, ddq, B, F], terms
+
+
+def _kernel(model: Model, prefix: str, outputs: tuple[str, ...]) -> ca.Function:
+    def build():
+        inputs, terms = _kernel_terms(model)
+        return ca.Function(f"{prefix}_{model.mechanism.replace('6rss', 'sixrss')}", inputs, [terms[k] for k in outputs],
+                           ["q", "dq", "ddq", "B", "F_B"], list(outputs), {"cse": True})
+
+    return model.cached(("fn", "core6rss", prefix), build)
+
+
 def torque_kernel(model: Model) -> ca.Function:
-    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B) -> tau, theta, theta_dot, J_theta1, M_f, C_f, G_f, Q_B.
+    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B) -> tau, theta, theta_dot.
 
     q_EE in Euler angles ([X, Y, alpha, beta] for the target, X_EE for the 6RSS; m, rad), B the bite point in
     {M} (m), F_B the bite force on the mandible in {S} (N). tau (N m) is the minimum-norm solution of Eq. (53)
-    (unique for the 6RSS). Uncompiled: see :func:`compiled_torque_kernel`.
+    (unique for the 6RSS), its right-hand side built without the matrices (the lean kernel for a controller's
+    feedforward).
     """
-
-    def build():
-        n = model.dof
-        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
-        B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
-        x = _lift(model, q) if model.has_hkp else q
-        M_J = ca.jacobian(x, q)
-        dx = ca.mtimes(M_J, dq)
-        core = dict(zip(CORE_OUTPUTS, core_function(model)(x, dx, B, F)))
-        dM_J = ca.jtimes(M_J, q, dq)
-        J1 = ca.mtimes(core["J6"], M_J)
-        M_f = ca.mtimes([M_J.T, core["M6"], M_J])
-        C_f = ca.mtimes(M_J.T, ca.mtimes(core["M6"], dM_J) + ca.mtimes(core["C6"], M_J))
-        G_f = ca.mtimes(M_J.T, core["G6"])
-        Q_B = ca.mtimes(M_J.T, core["Q6"])
-        rhs = ca.mtimes(M_f, ddq) + ca.mtimes(C_f, dq) + G_f - Q_B
-        tau = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
-        return ca.Function(
-            f"tau_{model.mechanism.replace('6rss', 'sixrss')}", [q, dq, ddq, B, F],
-            [tau, core["theta"], ca.mtimes(J1, dq), J1, M_f, C_f, G_f, Q_B],
-            ["q", "dq", "ddq", "B", "F_B"], list(KERNEL_OUTPUTS), {"cse": True})
-
-    return model.cached(("fn", "core6rss"), build)
+    return _kernel(model, "tau", TORQUE_OUTPUTS)
 
 
-def compiled_torque_kernel(model: Model) -> ca.Function:
-    """:func:`torque_kernel` compiled to C (cached on disk)."""
-    return model.cached(("fn", "core6rss", "compiled"), lambda: compiled(torque_kernel(model), flags=("-O3",)))
+def dynamics_kernel(model: Model) -> ca.Function:
+    """Per-sample kernel with the same inputs as :func:`torque_kernel` and the terms of Eq. (53) as well:
+    tau, theta, theta_dot, J_theta1, M_f, C_f, G_f, Q_B (for model-based control that needs the matrices)."""
+    return _kernel(model, "dynamics", DYNAMICS_OUTPUTS)
 
 
 def _coordinates(model: Model, kin: Kinematics):
@@ -155,11 +177,14 @@ def _coordinates(model: Model, kin: Kinematics):
     return kin.X[:, cols], kin.dX[:, cols], kin.ddX[:, cols]
 
 
-def core_terms(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
-    """All kernel outputs along the task (arrays samples first)."""
+def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices: bool = True) -> dict[str, np.ndarray]:
+    """The kernel outputs along the task (arrays samples first): those of :func:`dynamics_kernel`, or of
+    :func:`torque_kernel` with ``matrices=False``."""
     q, dq, ddq = _coordinates(model, kin)
-    out = evaluate(compiled_torque_kernel(model), q, dq, ddq, model.molar(side or kin.side), kin.force)
-    return dict(zip(KERNEL_OUTPUTS, out))
+    kernel = dynamics_kernel(model) if matrices else torque_kernel(model)
+    fn = model.cached(("fn", "core6rss", kernel.name(), "native"), lambda: native(kernel))
+    out = evaluate(fn, q, dq, ddq, model.molar(side or kin.side), kin.force)
+    return dict(zip(kernel.name_out(), out))
 
 
 @register("6rss-core")
@@ -167,5 +192,5 @@ def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, **ignore
     """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring).
     ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""
     require_euler_angles(kin, "6rss-core")
-    tau = core_terms(model, kin, side)["tau"]
+    tau = core_terms(model, kin, side, matrices=False)["tau"]
     return Dynamics("6rss-core", tau, info={"equations": "6RSS core in X_EE, HKPs projected out (Eq. 53)", "friction": False})

@@ -60,7 +60,7 @@ def reduced_function(model: Model, name: str, derive: Derivation) -> ca.Function
         e = energy(model)
         s = e.kin
         rates = derive(e)
-        J_theta, J_qEE, J1 = ca.diag(s.J_theta()), s.J_qEE(), s.J_theta1()
+        J_theta, J1 = ca.diag(s.J_theta()), s.J_theta1()
         ne = s.n
         dq_full = ca.vertcat(ca.mtimes(J1, s.dq), s.dq)
         J_theta_dot, J_qEE_dot, C = (ca.substitute(x, e.dq, dq_full) for x in (rates.J_theta_dot, rates.J_qEE_dot, rates.C))

@@ -90,7 +90,7 @@ def _fig14(rows: list[dict], path: Path) -> Path:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.pipeline import atomic_folder, check_output
+    from chewbot.outputs import atomic_folder, check_output
 
     step = progress or (lambda msg: None)
     out = Path(out)

@@ -1,0 +1,139 @@
+"""Per-sample kernels for model-based control at 1 kHz: built once, compiled to C, callable from Python or C.
+
+| kernel | inputs | outputs |
+|---|---|---|
+| ``tau_target``, ``tau_sixrss`` | q_EE, q_EE_dot, q_EE_ddot (Euler angles), B, F_B | minimum-norm (target) or unique (6RSS) tau, theta, theta_dot |
+| ``dynamics_target``, ``dynamics_sixrss`` | the same | the same and J_theta1, M_f, C_f, G_f, Q_B of Eq. 53 |
+| ``coupling_target``, ``coupling_sixrss`` | theta, q_EE | M_A, MCI |
+| ``g1_target`` | theta, q_EE, rates, F_B, B | friction-aware minimum torques (goal G1), N_L/N_R, the limit values, the optimality residual |
+
+The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
+:func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction
+(:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel by Newton's method on its two
+unknowns, started from the friction-free optimum (exact in one step: friction-free torques are affine in N) and
+iterated a fixed number of times (:data:`G1_ITERATIONS`): a fixed cost, as a real-time loop needs. The kernel
+returns the gradient of |tau|^2 at its answer (zero at the optimum) and the actuator-limit values, so the caller
+can verify both; it does not handle active limits (the Python solver falls back to SQP there).
+
+:func:`chewbot.casadi_tools.native` wraps a kernel for calls from Python through ctypes (one sample in a few
+microseconds, or a whole trajectory in one C loop);
+:func:`chewbot.export.export_c` writes them as C for the controller.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from chewbot.analysis.coupling import coupling_kernel
+from chewbot.casadi_tools import evaluate, native
+from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
+from chewbot.dynamics.newton_euler import coefficients_sx_function, forces_sx, n_unknowns
+from chewbot.export import Kernel
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+
+# Newton iterations of the G1 kernel. From the friction-free optimum the friction-aware one is a few newtons
+# away and Newton converges quadratically: 4 iterations reach rounding level on the default task (tested).
+G1_ITERATIONS = 4
+G1_ORIENTATION = "euler-parameters"
+# The example sample of the exported README: the peak of the second bite-force burst of the default task.
+EXAMPLE_T = 2.44
+
+
+def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int = G1_ITERATIONS) -> ca.Function:
+    """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B) ->
+    tau (N m), N (N_L, N_R in N), gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), limits (24: tau, power,
+    axial, radial load per actuator, in N m, W, N, N). q_EE in ``orientation``."""
+    if not model.has_hkp:
+        raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
+
+    def build():
+        coeff = coefficients_sx_function(model, orientation)
+        theta, q, dq, ddq = (ca.SX.sym(name, coeff.size1_in(i)) for i, name in enumerate(("theta", "q", "dq", "ddq")))
+        F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
+        D = coeff(theta, q, dq, ddq, F, B)[0]
+        Dsym, N = ca.SX.sym("D", D.numel()), ca.SX.sym("N", n_unknowns(model))
+        free = forces_sx(model, Dsym, N, 0.0)["tau"]  # affine in N
+        out = forces_sx(model, Dsym, N, 1.0)
+        J = ca.sumsqr(out["tau"])
+        H, g = ca.hessian(J, N)
+        dth = Dsym[-6:]
+        lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
+        step = ca.Function("g1_step", [Dsym, N], [N - ca.solve(H, g)])
+        a = ca.substitute(free, N, ca.DM.zeros(N.numel()))
+        A = ca.jacobian(free, N)
+        start = ca.Function("g1_start", [Dsym], [-ca.solve(ca.mtimes(A.T, A), ca.mtimes(A.T, a))])
+        final = ca.Function("g1_final", [Dsym, N], [out["tau"], g, lim])
+        Nk = start(D)
+        for _ in range(iterations):
+            Nk = step(D, Nk)
+        tau, grad, limits = final(D, Nk)
+        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, limits],
+                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["tau", "N", "grad", "limits"], {"cse": True})
+
+    return model.cached(("fn", "g1_kernel", orientation, iterations), build)
+
+
+def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
+    """Friction-aware goal-G1 distribution along a whole task with the compiled :func:`g1_kernel` (one C loop):
+    tau (N, 6), N (N, 2), grad (N, 2), limits (N, 24), in ``kin.orientation``."""
+    fn = model.cached(("fn", "g1_kernel", kin.orientation, "native"), lambda: native(g1_kernel(model, kin.orientation)))
+    out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side))
+    return dict(zip(("tau", "N", "grad", "limits"), out))
+
+
+def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray]] | None = None) -> list[Kernel]:
+    """The exported kernels of a target model and its 6RSS counterpart, with their units.
+
+    ``sample``: per kernel name, an example input (used by the example program and the README); by default a
+    sample of the default task.
+    """
+    sample = sample or example_inputs(target, sixrss)
+    torque_in = {"q": "m, rad (X, Y, alpha, beta) / (X, Y, Z, alpha, beta, gamma)", "dq": "m/s, rad/s", "ddq": "m/s^2, rad/s^2",
+                 "B": "m, in {M}", "F_B": "N, in {S}, on the mandible"}
+    torque_out = {"tau": "N m", "theta": "rad", "dtheta": "rad/s", "J_theta1": "rad/m, 1", "M_f": "kg, kg m, kg m^2",
+                  "C_f": "kg/s, kg m/s, kg m^2/s", "G_f": "N, N m", "Q_B": "N, N m"}
+    coupling_in = {"theta": "rad", "q": "m, rad (Euler angles)"}
+    coupling_out = {"M_A": "kg m^2", "MCI": "1"}
+    out = []
+    for m in (target, sixrss):
+        which = "minimum-norm actuator torques of the target (seed 000, Eq. 54)" if m.has_hkp else "actuator torques of the 6RSS (unique)"
+        tag = m.mechanism.replace("6rss", "sixrss")
+        out += [
+            Kernel(torque_kernel(m), f"The {which}, from the 6RSS core with the HKPs projected out; the lean kernel "
+                   "for a feedforward (no matrices formed).", torque_in, torque_out, sample[f"tau_{tag}"]),
+            Kernel(dynamics_kernel(m), f"The {which} with the terms of Eq. 53: J_theta1, M_f, C_f, G_f, Q_B "
+                   "(J_theta1' tau = M_f q_ddot + C_f q_dot + G_f - Q_B).", torque_in, torque_out, sample[f"tau_{tag}"]),
+            Kernel(coupling_kernel(m), f"Joint-space inertia M_A and MCI (seed 000, Eqs. 58-60) of the {m.mechanism}.",
+                   coupling_in, coupling_out, sample[f"coupling_{tag}"]),
+        ]
+    out.append(
+        Kernel(g1_kernel(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
+               f"{G1_ITERATIONS} Newton iterations from the friction-free optimum; q in Euler parameters "
+               "(X, Y, e0, e1, e2). Check grad (0 at the optimum) and the limits.",
+               {"theta": "rad", "q": "m, 1 (X, Y, e0, e1, e2)", "dq": "m/s, 1/s", "ddq": "m/s^2, 1/s^2",
+                "F_B": "N, in {S}, on the mandible", "B": "m, in {M}"},
+               {"tau": "N m", "N": "N (N_L, N_R along the planes' normal)", "grad": "N m^2 / N",
+                "limits": "N m (tau 1-6), W (power 1-6), N (axial 1-6), N (radial 1-6)"}, sample["g1_target"]))
+    return out
+
+
+def example_inputs(target: Model, sixrss: Model, t: float = EXAMPLE_T) -> dict[str, dict[str, np.ndarray]]:
+    """One sample of the default left-side task (at ``t`` s, inside a bite-force burst) as kernel inputs."""
+    from chewbot.kinematics.motion import solve_kinematics
+    from chewbot.task.default import default_task
+
+    out = {}
+    for m, tag in ((target, "target"), (sixrss, "sixrss")):
+        task = default_task(m, "left")
+        k = int(np.argmin(np.abs(task.t - t)))
+        kin = solve_kinematics(m, task, "euler-angles")
+        cols = [0, 1, 3, 4] if m.has_hkp else list(range(6))
+        B = m.molar("left")
+        out[f"tau_{tag}"] = {"q": kin.X[k, cols], "dq": kin.dX[k, cols], "ddq": kin.ddX[k, cols], "B": B, "F_B": kin.force[k]}
+        out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": kin.X[k, cols]}
+        if m.has_hkp:
+            kp = solve_kinematics(m, task, G1_ORIENTATION)
+            out["g1_target"] = {"theta": kp.theta[k], "q": kp.q[k], "dq": kp.dq[k], "ddq": kp.ddq[k], "F_B": kp.force[k], "B": B}
+    return out

@@ -1,0 +1,158 @@
+"""A plain reference: Newton–Euler torques in NumPy and the friction-aware distribution by SciPy's SLSQP.
+
+Written the straightforward way, independently of the CasADi graphs: every body's Newton–Euler equations with
+vectors and matrices (batched over the samples for the frictionless torques), and the optimal distribution
+solved sample by sample with ``scipy.optimize.minimize(method="SLSQP")`` and finite-difference gradients.
+It serves two purposes: an independent route for the tests, and the baseline of ``chewbot bench``.
+
+The equations (seed 001, Sects. 4.1–4.4; :mod:`chewbot.dynamics.newton_euler` has the derivation):
+coupler i (thin rod, mass m, length L, axis u from S to M) carries an axial force k_i and a transverse force fixed
+by its two transverse Euler equations, u x g = u x c, c = -(m/2)(a_E - g_vec) - (m L/12) u_ddot, where g is its
+force on the mandible; the crank pushes it at S with F_S = g + m (a_E - g_vec); the mandible's six equations
+give k; tau_i = I_i theta_ddot_i + z_i . ((S_i - G_i) x F_S,i) (+ the actuator's friction).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+from chewbot.rotation import matrix_from_euler_angles
+
+
+def _cross(a, b):
+    return np.cross(a, b)
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """Everything of the Newton–Euler equations that does not depend on the HKP forces, samples first."""
+
+    A: np.ndarray  # (N, 6, 6) columns [u_i; r_i x u_i]
+    w: np.ndarray  # (N, 6) mandible wrench balance without the coupler axial forces and the HKPs
+    u: np.ndarray  # (N, 6, 3) coupler axes
+    F_rest: np.ndarray  # (N, 6, 3) F_S,i without its axial part k_i u_i
+    lever: np.ndarray  # (N, 6, 3) z_i x (S_i - G_i): tau_i = I theta_ddot + lever . F_S
+    inertial: np.ndarray  # (N, 6) I_i theta_ddot_i
+    P: np.ndarray  # (N, 6, nN) wrench of a unit normal force at T_j
+    v_T: np.ndarray  # (N, nN, 3) velocities of the ball centres
+    r_T: np.ndarray  # (N, nN, 3) ball centres from O_M
+
+
+def _equations(model: Model, kin: Kinematics, side: str | None) -> _Sample:
+    R = matrix_from_euler_angles(kin.X[:, 3:6])
+    v, w_, a, dw = kin.twist[:, :3], kin.twist[:, 3:], kin.twist_rate[:, :3], kin.twist_rate[:, 3:]
+    grav = np.array([0.0, 0.0, -model.g])
+    I_S = R @ model.mandible_inertia @ np.swapaxes(R, 1, 2)
+    r_B = R @ model.molar(side or kin.side)
+    F_B = kin.force
+    n = kin.n
+    A = np.zeros((n, 6, 6))
+    u_all, F_rest, lever = np.zeros((n, 6, 3)), np.zeros((n, 6, 3)), np.zeros((n, 6, 3))
+    g_perp_sum, m_perp_sum = np.zeros((n, 3)), np.zeros((n, 3))
+    for i in range(6):
+        ux, uy, z = model.R_C0[i][:, 0], model.R_C0[i][:, 1], model.R_C0[i][:, 2]
+        th, dth, ddth = kin.theta[:, i], kin.dtheta[:, i], kin.ddtheta[:, i]
+        rGS = model.crank_length[i] * (np.cos(th)[:, None] * ux + np.sin(th)[:, None] * uy)
+        a_S = ddth[:, None] * _cross(z, rGS) - (dth**2)[:, None] * rGS
+        r = R @ model.M[i]
+        a_M = a + _cross(dw, r) + _cross(w_, _cross(w_, r))
+        L, m = model.coupler_length[i], model.coupler_mass[i]
+        u = (kin.X[:, :3] + r - model.G[i] - rGS) / L
+        a_E = (a_S + a_M) / 2
+        c = -(m / 2) * (a_E - grav) - (m * L / 12) * (a_M - a_S) / L
+        g_perp = c - np.sum(u * c, axis=1, keepdims=True) * u
+        A[:, :3, i] = u
+        A[:, 3:, i] = _cross(r, u)
+        g_perp_sum += g_perp
+        m_perp_sum += _cross(r, g_perp)
+        u_all[:, i] = u
+        F_rest[:, i] = g_perp + m * (a_E - grav)
+        lever[:, i] = _cross(z, rGS)
+    wrench = np.concatenate([
+        model.mandible_mass * (a - grav) - F_B - g_perp_sum,
+        np.einsum("nij,nj->ni", I_S, dw) + _cross(w_, np.einsum("nij,nj->ni", I_S, w_)) - _cross(r_B, F_B) - m_perp_sum,
+    ], axis=1)
+    if model.has_hkp:
+        nvec = model.hkp.normal
+        r_T = np.stack([R @ model.hkp.T_L, R @ model.hkp.T_R], axis=1)
+        P = np.stack([np.concatenate([np.broadcast_to(nvec, (n, 3)), _cross(r_T[:, j], nvec)], axis=1) for j in range(2)], axis=2)
+        v_T = v[:, None, :] + _cross(w_[:, None, :], r_T)
+    else:
+        r_T, P, v_T = np.zeros((n, 0, 3)), np.zeros((n, 6, 0)), np.zeros((n, 0, 3))
+    inertial = model.crank_inertia * kin.ddtheta
+    return _Sample(A, wrench, u_all, F_rest, lever, inertial, P, v_T, r_T)
+
+
+def frictionless_torques(model: Model, kin: Kinematics, side: str | None = None) -> np.ndarray:
+    """Minimum-norm (target) or unique (6RSS) torques (N, 6) without friction, NumPy, all samples at once."""
+    e = _equations(model, kin, side)
+    rhs = np.concatenate([e.w[..., None], -e.P], axis=2)  # A k = w - P N
+    K = np.linalg.solve(e.A, rhs)  # (N, 6, 1 + nN)
+    # tau_i = inertial_i + lever_i . (F_rest_i + k_i u_i): affine in N
+    lu = np.sum(e.lever * e.u, axis=2)  # (N, 6)
+    tau0 = e.inertial + np.sum(e.lever * e.F_rest, axis=2) + lu * K[:, :, 0]
+    if not model.has_hkp:
+        return tau0
+    T = lu[:, :, None] * K[:, :, 1:]  # (N, 6, 2)
+    N = -np.linalg.solve(np.swapaxes(T, 1, 2) @ T, np.einsum("nji,nj->ni", T, tau0)[..., None])[..., 0]
+    return tau0 + np.einsum("nij,nj->ni", T, N)
+
+
+def _sample_torques(model: Model, e: _Sample, k: int, N: np.ndarray, dtheta: np.ndarray,
+                    eps_theta_dot: float, eps_v: float, delta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Torques and the bearing forces F_G (6, 3) of sample k with friction, for the normal forces N (2,)."""
+    fr = model.friction
+    wrench = e.w[k] - e.P[k] @ N
+    for j in range(N.size):
+        v = e.v_T[k, j]
+        vhat = v / np.sqrt(v @ v + eps_v**2)
+        f_T = -(fr.hkp_coulomb * np.sqrt(N[j] ** 2 + delta**2) * vhat + fr.hkp_viscous * v)
+        wrench = wrench - np.concatenate([f_T, np.cross(e.r_T[k, j], f_T)])
+    kax = np.linalg.solve(e.A[k], wrench)
+    F_S = e.F_rest[k] + kax[:, None] * e.u[k]
+    F_G = F_S + np.outer(model.crank_mass * model.g, [0.0, 0.0, 1.0])
+    sgn = dtheta / np.sqrt(dtheta**2 + eps_theta_dot**2)
+    tau_f = fr.actuator_arm * fr.actuator_coulomb * np.sqrt(np.sum(F_G**2, axis=1) + delta**2) * sgn + fr.actuator_viscous * dtheta
+    return e.inertial[k] + np.sum(e.lever[k] * F_S, axis=1) + tau_f, F_G
+
+
+def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None = None, side: str | None = None,
+                     eps_theta_dot: float = 1e-3, eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Goal G1 with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other, each
+    warm-started from the previous one, under the actuator limits (torque, power, axial and radial load).
+
+    ``samples``: indices to solve (default all). The friction regularisations are those of the Newton–Euler
+    model. Returns (tau (n, 6), N (n, 2)) for the samples solved.
+    """
+    if not model.has_hkp:
+        raise ValueError("the 6RSS has nothing to distribute")
+    e = _equations(model, kin, side)
+    idx = np.arange(kin.n) if samples is None else np.asarray(samples)
+    lim = model.limits
+    z = np.array([model.R_C0[i][:, 2] for i in range(6)])
+    taus, Ns = [], []
+    x0 = np.zeros(2)
+    for k in idx:
+        dth = kin.dtheta[k]
+
+        def torques(N, k=k, dth=dth):
+            return _sample_torques(model, e, k, N, dth, eps_theta_dot, eps_v, delta)
+
+        def limits(N, torques=torques, dth=dth):
+            tau, F_G = torques(N)
+            axial = np.sum(F_G * z, axis=1)
+            radial = np.linalg.norm(F_G - axial[:, None] * z, axis=1)
+            return np.concatenate([lim.torque - np.abs(tau), lim.power - np.abs(tau * dth),
+                                   lim.axial_load - np.abs(axial), lim.radial_load - radial])
+
+        res = minimize(lambda N, torques=torques: float(np.sum(torques(N)[0] ** 2)), x0, method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": limits}], options={"ftol": 1e-16, "maxiter": 200})
+        x0 = res.x
+        taus.append(torques(res.x)[0])
+        Ns.append(res.x)
+    return np.array(taus), np.array(Ns)
