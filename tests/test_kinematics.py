@@ -185,6 +185,30 @@ def test_rates_against_finite_differences_in_time(mechanism, orientation):
         assert np.abs(exact - fd).max() <= tol, name
 
 
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_J_theta2_to_4_against_finite_differences_in_time(mechanism, orientation):
+    """J_theta2 = -J_theta^-1 (J_theta_dot J_theta1 + J_qEE_dot) (Eq. 17) with the Jacobians' rates by central
+    differences in time along an analytic motion; J_theta3, J_theta4 stack them as Eq. (19); and
+    theta_ddot = J_theta2 q_dot + J_theta1 q_ddot (Eq. 16)."""
+    h = 1e-4  # s, as in the test above: truncation ~4e-7 relative
+    t0 = np.linspace(0.2, 2.8, 9)
+    kin = smooth_kinematics(mechanism, orientation, np.concatenate([t0 - h, t0, t0 + h]))
+    n = t0.size
+    lo, mid, hi = slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n)
+    jac = kin.jacobians()
+    Jt_dot = (jac["J_theta"][hi] - jac["J_theta"][lo]) / (2 * h)
+    JqEE_dot = (jac["J_qEE"][hi] - jac["J_qEE"][lo]) / (2 * h)
+    fd = -(Jt_dot[:, :, None] * jac["J_theta1"][mid] + JqEE_dot) / jac["J_theta"][mid][:, :, None]
+    J2 = jac["J_theta2"][mid]
+    assert np.abs(J2 - fd).max() <= 1e-6 * np.abs(fd).max()
+    ne = kin.q.shape[1]
+    assert np.array_equal(jac["J_theta3"][mid][:, :6], jac["J_theta1"][mid])
+    assert np.array_equal(jac["J_theta3"][mid][:, 6:], np.broadcast_to(np.eye(ne), (n, ne, ne)))
+    assert np.array_equal(jac["J_theta4"][mid][:, :6], J2) and not jac["J_theta4"][mid][:, 6:].any()
+    ddtheta = np.einsum("nij,nj->ni", J2, kin.dq[mid]) + np.einsum("nij,nj->ni", jac["J_theta1"][mid], kin.ddq[mid])
+    assert np.abs(ddtheta - kin.ddtheta[mid]).max() <= 1e-10 * np.abs(kin.ddtheta[mid]).max()
+
+
 # ------------------------------------------------------------------ orientation conversions
 
 

@@ -30,6 +30,8 @@ EXIT_UNREACHABLE = 3  # a pose of the task is out of reach, outside the sockets 
 EXIT_INFEASIBLE = 4  # no torque distribution within the actuator limits
 EXIT_OUTPUT = 5  # the results folder exists (no --force) or cannot be written
 
+RUN_STEPS = 7  # task, kinematics, inverse dynamics, coupling, results.csv, figures, report.html
+
 
 def exit_code(exc: BaseException) -> int:
     """The exit code for an error chewbot raised on purpose (the table in docs/cli.md)."""
@@ -79,11 +81,11 @@ def _fail(exc: Exception, code: int | None = None) -> None:
     raise typer.Exit(exit_code(exc) if code is None else code)
 
 
-def _check_method(name: str) -> str:
+def _check_method(name: str | None) -> str | None:
     """Accept the name of a registered inverse-dynamics formulation (the registry is the list of choices)."""
     from chewbot.dynamics import METHODS
 
-    if name not in METHODS:
+    if name is not None and name not in METHODS:
         raise typer.BadParameter(f"{name!r} is not a formulation; choose one of {', '.join(sorted(METHODS))}")
     return name
 
@@ -94,7 +96,7 @@ def run(
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts, and side of the default task."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation of the mandible's orientation."),
-    method: str = typer.Option("hessian", "--method", callback=_check_method, help="Inverse-dynamics formulation: one of `chewbot.dynamics.METHODS` (hessian, lagrange, liang, ...)."),
+    method: str | None = typer.Option(None, "--method", callback=_check_method, show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
     goal: Goal = typer.Option(Goal.min_torque, "--goal", help="newton-euler: what the redundant torques minimise (torques, forces at S_i, HKP normal forces)."),
     friction: Switch = typer.Option(Switch.on, "--friction", help="newton-euler: friction at the HKPs and the actuators."),
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
@@ -119,11 +121,13 @@ def run(
     from chewbot.outputs import check_output
     from chewbot.pipeline import RunOptions, compute, write
 
+    if method is None:
+        method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
     options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
                          goal=goal.value, friction=friction.value)
     try:
         check_output(out, force)  # before the work, not after it
-        with _progress(quiet, "run") as step:
+        with _progress(quiet, "run", total=RUN_STEPS) as step:
             result = compute(options, progress=step)
             write(result, out, force=force, progress=step)
     except ChewbotError as exc:
@@ -133,13 +137,27 @@ def run(
 
 
 @contextmanager
-def _progress(quiet: bool, label: str):
-    """A status line that shows the current step (or nothing with --quiet); yields the step callback."""
+def _progress(quiet: bool, label: str, total: int | None = None):
+    """A progress bar that advances one step per call of the yielded callback and names the current step
+    (nothing with --quiet). ``total``: the number of steps if known; otherwise the bar pulses."""
     if quiet:
         yield None
         return
-    with console.status(label, spinner="dots") as status:
-        yield lambda msg: status.update(f"{label}: {msg}")
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn()]
+    columns += [MofNCompleteColumn()] if total else []
+    with Progress(*columns, TimeElapsedColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(label, total=total)
+        started = False
+
+        def step(msg: str) -> None:
+            nonlocal started
+            bar.update(task, description=f"{label}: {msg}", advance=1 if started else 0)
+            started = True
+
+        yield step
+        bar.update(task, completed=total or 0)
 
 
 def _print_run_summary(result, out: Path) -> None:
@@ -196,7 +214,7 @@ def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) ->
               for t in timings]
     lines += ["", "One sample, exported kernels:", "", "| kernel | call from Python (us, median) | call from C (ns, mean) |", "|---|---|---|"]
     lines += [f"| {k.name} | {k.python_us:.2f} | {'-' if k.c_ns is None else f'{k.c_ns:.0f}'} |" for k in kernel_timings]
-    lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3f}" for name, value in ratio_values.items()]
+    lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3g}" for name, value in ratio_values.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -242,13 +260,18 @@ def export_c(
 
 @app.command()
 def study(
-    name: str = typer.Argument(..., help="The study to run: seed000 (inverse dynamics and inertia coupling, seed 000)."),
-    out: Path = typer.Option(Path("runs/seed000"), "--out", help="Folder to write the table and figures to."),
+    name: str = typer.Argument(..., help="The study to run: seed000 (inverse dynamics and inertia coupling, seed 000) "
+                               "or seed001 (Newton-Euler with friction, optimal distribution, Euler parameters, seed 001)."),
+    out: Path | None = typer.Option(None, "--out", help="Folder to write the table and figures to (default runs/NAME)."),
     force: bool = typer.Option(False, "--force", help="Replace the folder if it exists."),
 ) -> None:
     """Reproduce a paper's findings on the default models and write a table of claims and figures.
 
-    Example: chewbot study seed000 --out runs/seed000
+    Examples:
+
+      chewbot study seed000 --out runs/seed000
+
+      chewbot study seed001 --out runs/seed001
     """
     from chewbot.outputs import check_output
     from chewbot.study import STUDIES
@@ -256,9 +279,10 @@ def study(
     if name not in STUDIES:
         _fail(ValueError(f"unknown study {name!r}; available: {', '.join(sorted(STUDIES))}"), EXIT_BAD_INPUT)
     try:
+        out = out or Path("runs") / name
         check_output(out, force)
-        with console.status(f"study {name}", spinner="dots") as status:
-            written = STUDIES[name](out, force=force, progress=status.update)
+        with _progress(False, f"study {name}") as step:
+            written = STUDIES[name](out, force=force, progress=step)
     except ChewbotError as exc:
         _fail(exc)
     console.print(f"wrote [bold]{written}[/]")

@@ -58,6 +58,57 @@ def core_function(model: Model) -> ca.Function:
     return model.cached(("fn", "core6rss", "core"), lambda: _core(model))
 
 
+def _augmented_body(model: Model) -> tuple[float, np.ndarray, np.ndarray]:
+    """The mandible with a point mass m_i/3 at each M_i (the couplers' share of |v_M|^2): mass, first moment and
+    inertia about O_M, all in {M} and constant."""
+    m3 = model.coupler_mass / 3
+    first = m3 @ model.M
+    inertia = model.mandible_inertia + sum(mi * (Mi @ Mi * np.eye(3) - np.outer(Mi, Mi)) for mi, Mi in zip(m3, model.M))
+    return model.mandible_mass + m3.sum(), first, inertia
+
+
+def _structured_inertia(model: Model, x, R, M_0a, dx, chains):
+    """M_6 and C_6 from the structure of the kinetic energy, without the 42-row Jacobian products:
+
+    T = 1/2 t' Lambda t + sum_i [1/2 a_i theta_i_dot^2 + m_i/6 theta_i_dot (s_i . v_M,i)], t = M_0a x_dot, where
+    Lambda is the spatial inertia about O_M of the mandible with a point mass m_i/3 at each M_i and
+    a_i = I_i + m_i L_c,i^2/3 (the crank and the coupler's end S_i; abs(s_i) = L_c,i).
+
+    C_6 x_dot is exact and M_6_dot - 2 C_6 is skew-symmetric: for the chains C = W' K W_dot over the true
+    Jacobians of theta_i(x), S_i(x), M_i(x); for the rigid body C = A' (Lambda A_dot + (Lambda_dot / 2 + S) A),
+    A = M_0a, Lambda_dot = Om Lambda - Lambda Om (Om = diag([w]x, [w]x)) and the skew-symmetric
+    S = [[0, -[w]x[h]x / 2], [[h]x[w]x / 2, -[I w + v x h]x / 2]], which makes (Lambda_dot / 2 + S) t the rigid
+    body's bias [w x (w x h); w x I w] (h: first moment, I: inertia about O_M, both in {S}).
+    """
+    mass, first, inertia = _augmented_body(model)
+    h = ca.mtimes(R, ca.DM(first))
+    I_O = ca.mtimes([R, ca.DM(inertia), R.T])
+    Lam = ca.vertcat(ca.horzcat(mass * ca.SX.eye(3), -_skew(h)), ca.horzcat(_skew(h), I_O))
+    t = ca.mtimes(M_0a, dx)
+    v, w = t[0:3], t[3:6]
+    A_dot = ca.reshape(ca.jtimes(ca.vec(M_0a), x, dx), 6, 6)
+    Om = ca.diagcat(_skew(w), _skew(w))
+    Lam_dot = ca.mtimes(Om, Lam) - ca.mtimes(Lam, Om)
+    Sk = ca.vertcat(ca.horzcat(ca.SX(3, 3), -0.5 * ca.mtimes(_skew(w), _skew(h))),
+                    ca.horzcat(0.5 * ca.mtimes(_skew(h), _skew(w)), -0.5 * _skew(ca.mtimes(I_O, w) + ca.cross(v, h))))
+    M6 = ca.mtimes([M_0a.T, Lam, M_0a])
+    C6 = ca.mtimes(M_0a.T, ca.mtimes(Lam, A_dot) + ca.mtimes(0.5 * Lam_dot + Sk, M_0a))
+    for i, (J6_i, r, s, rGS) in enumerate(chains):
+        m = model.coupler_mass[i]
+        a = model.crank_inertia[i] + m * model.crank_length[i] ** 2 / 3
+        j = J6_i.T  # column
+        j_dot = ca.jtimes(j, x, dx)
+        wM = ca.mtimes(M_0a.T, ca.vertcat(s, ca.cross(r, s)))  # W_M' s: s . v_M = wM' x_dot
+        s_dot = -ca.mtimes(J6_i, dx) * rGS  # s turns with the crank
+        r_dot = ca.cross(w, r)
+        sWM_dot = (ca.mtimes(M_0a.T, ca.vertcat(ca.SX(3, 1), ca.cross(r_dot, s)))  # s' W_M_dot, as a column
+                   + ca.mtimes(A_dot.T, ca.vertcat(s, ca.cross(r, s))))
+        wM_sdot = ca.mtimes(M_0a.T, ca.vertcat(s_dot, ca.cross(r, s_dot)))  # W_M' s_dot
+        M6 += a * ca.mtimes(j, j.T) + m / 6 * (ca.mtimes(j, wM.T) + ca.mtimes(wM, j.T))
+        C6 += a * ca.mtimes(j, j_dot.T) + m / 6 * (ca.mtimes(j, sWM_dot.T) + ca.mtimes(wM_sdot, j.T) + ca.mtimes(wM, j_dot.T))
+    return M6, C6
+
+
 def _core(model: Model) -> ca.Function:
     x, dx, ddx = ca.SX.sym("x", 6), ca.SX.sym("dx", 6), ca.SX.sym("ddx", 6)
     B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
@@ -68,7 +119,7 @@ def _core(model: Model) -> ca.Function:
     sigma = branches(model)
     # Velocity Jacobians of every body (rows: theta_i_dot of each crank, v_S and v_M of each coupler) and the
     # constant weights of their kinetic energies: T = 1/2 x_dot' W' K W x_dot + mandible.
-    blocks, weights, theta = [], [], []
+    blocks, weights, theta, chains = [], [], [], []
     V = model.mandible_mass * model.g * p[2]
     for i in range(6):
         u, v = ca.DM(model.R_C0[i][:, 0]), ca.DM(model.R_C0[i][:, 1])
@@ -78,7 +129,8 @@ def _core(model: Model) -> ca.Function:
         d0 = Mi - ca.DM(model.G[i])
         A_, B_, C_ = 2 * Lc * ca.dot(u, d0), 2 * Lc * ca.dot(v, d0), Lc**2 + ca.dot(d0, d0) - Lr**2
         th = ca.atan2(B_, A_) + sigma[i] * ca.acos(C_ / ca.sqrt(A_**2 + B_**2))
-        S = ca.DM(model.G[i]) + Lc * (ca.cos(th) * u + ca.sin(th) * v)
+        rGS = Lc * (ca.cos(th) * u + ca.sin(th) * v)
+        S = ca.DM(model.G[i]) + rGS
         s = Lc * (-ca.sin(th) * u + ca.cos(th) * v)
         d = S - Mi
         J6_i = ca.mtimes(ca.vertcat(d, ca.cross(r, d)).T / ca.dot(d, s), M_0a)  # theta_i_dot = J6_i x_dot
@@ -86,19 +138,16 @@ def _core(model: Model) -> ca.Function:
         m = model.coupler_mass[i]
         blocks += [J6_i, ca.mtimes(s, J6_i), W_M]
         weights += [ca.DM(model.crank_inertia[i]), ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3)) * m)]
+        chains.append((J6_i, r, s, rGS))
         V += m * model.g * (S[2] + Mi[2]) / 2
         theta.append(th)
     W = ca.vertcat(*blocks)
     K = ca.diagcat(*weights)
-    # d/dt W along x_dot: one forward sweep. For a kinetic energy 1/2 (Wx')' K (Wx') the equations of motion carry
-    # W' K (W x'' + W' x'), and for the mandible's rotation also omega x I_S omega: C_6 below has C_6 x_dot exact
-    # and M_6_dot - 2 C_6 skew-symmetric.
     W_dot = ca.reshape(ca.jtimes(ca.vec(W), x, dx), W.size1(), W.size2())
     W_omega_dot = ca.reshape(ca.jtimes(ca.vec(W_omega), x, dx), 3, 6)
     omega = ca.mtimes(W_omega, dx)
     mm = model.mandible_mass
-    M6 = mm * ca.diagcat(ca.SX.eye(3), ca.SX(3, 3)) + ca.mtimes([W_omega.T, I_S, W_omega]) + ca.mtimes([W.T, K, W])
-    C6 = ca.mtimes([W.T, K, W_dot]) + ca.mtimes(W_omega.T, ca.mtimes(I_S, W_omega_dot) + ca.mtimes(_skew(omega), ca.mtimes(I_S, W_omega)))
+    M6, C6 = _structured_inertia(model, x, R, M_0a, dx, chains)
     J6 = ca.vertcat(*blocks[0::3])
     Q6 = ca.mtimes(ca.jacobian(p + ca.mtimes(R, B), x).T, F)
     G6 = ca.gradient(V, x)
@@ -124,7 +173,7 @@ DYNAMICS_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "
 TORQUE_OUTPUTS = ("tau", "theta", "dtheta")
 
 
-def _kernel_terms(model: Model):
+def _kernel_terms(model: Model, matrices: bool):
     n = model.dof
     q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
     B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
@@ -135,20 +184,23 @@ def _kernel_terms(model: Model):
     ddx = ca.mtimes(M_J, ddq) + ca.mtimes(dM_J, dq)
     core = dict(zip(CORE_OUTPUTS, core_function(model)(x, dx, ddx, B, F)))
     J1 = ca.mtimes(core["J6"], M_J)
-    rhs = ca.mtimes(M_J.T, core["f6"])
-    tau = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
     terms = {
-        "tau": tau, "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
+        "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
         "M_f": ca.mtimes([M_J.T, core["M6"], M_J]),
         "C_f": ca.mtimes(M_J.T, ca.mtimes(core["M6"], dM_J) + ca.mtimes(core["C6"], M_J)),
         "G_f": ca.mtimes(M_J.T, core["G6"]), "Q_B": ca.mtimes(M_J.T, core["Q6"]),
     }
+    if matrices:  # the right-hand side of Eq. (53) from its terms, which this kernel forms anyway
+        rhs = ca.mtimes(terms["M_f"], ddq) + ca.mtimes(terms["C_f"], dq) + terms["G_f"] - terms["Q_B"]
+    else:  # without forming them
+        rhs = ca.mtimes(M_J.T, core["f6"])
+    terms["tau"] = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
     return [q, dq, ddq, B, F], terms
 
 
 def _kernel(model: Model, prefix: str, outputs: tuple[str, ...]) -> ca.Function:
     def build():
-        inputs, terms = _kernel_terms(model)
+        inputs, terms = _kernel_terms(model, matrices=len(outputs) > len(TORQUE_OUTPUTS))
         return ca.Function(f"{prefix}_{model.mechanism.replace('6rss', 'sixrss')}", inputs, [terms[k] for k in outputs],
                            ["q", "dq", "ddq", "B", "F_B"], list(outputs), {"cse": True})
 

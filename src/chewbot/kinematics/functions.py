@@ -58,6 +58,16 @@ def jacobians_function(model: Model, orientation: str) -> ca.Function:
     return _fn(model, orientation, "jacobians", build)
 
 
+def jacobian_rates_function(model: Model, orientation: str) -> ca.Function:
+    """(theta, q, dq) -> J_theta2, J_theta3, J_theta4 (seed 000, Eqs. 17-19)."""
+
+    def build(s: Symbolic):
+        return ca.Function("jacobian_rates", [s.theta, s.q, s.dq], [s.J_theta2(), s.J_theta3(), s.J_theta4()],
+                           ["theta", "q", "dq"], ["J_theta2", "J_theta3", "J_theta4"])
+
+    return _fn(model, orientation, "jacobian_rates", build)
+
+
 def rates_function(model: Model, orientation: str) -> ca.Function:
     """(theta, q, dq, ddq) -> theta_dot, theta_ddot, twist, twist rate, pose rate, pose acceleration."""
 

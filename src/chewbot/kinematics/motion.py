@@ -12,7 +12,7 @@ import numpy as np
 
 from chewbot.casadi_tools import evaluate
 from chewbot.errors import KinematicsError
-from chewbot.kinematics.functions import jacobians_function, parasitic_function, points_function, pose_function, rates_function
+from chewbot.kinematics.functions import jacobian_rates_function, jacobians_function, parasitic_function, points_function, pose_function, rates_function
 from chewbot.kinematics.ik import inverse_kinematics, transmission
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation
 from chewbot.model import Model
@@ -69,10 +69,13 @@ class Kinematics:
         return self.t.shape[0]
 
     def jacobians(self) -> dict[str, np.ndarray]:
-        """J_theta (diagonal, (N, 6)), J_qEE, J_theta1, M_J, M_0a, M_0b along the task (seed 000, Sect. 4)."""
+        """J_theta (diagonal, (N, 6)), J_qEE, J_theta1 .. J_theta4, M_J, M_0a, M_0b along the task (seed 000,
+        Sect. 4; seed 001 for Euler parameters)."""
         fn = jacobians_function(self.model, self.orientation)
-        names = ["J_theta", "J_qEE", "J_theta1", "M_J", "M_0a", "M_0b"]
-        return dict(zip(names, evaluate(fn, self.theta, self.q)))
+        out = dict(zip(fn.name_out(), evaluate(fn, self.theta, self.q)))
+        fn = jacobian_rates_function(self.model, self.orientation)
+        out.update(zip(fn.name_out(), evaluate(fn, self.theta, self.q, self.dq)))
+        return out
 
 
 def full_motion(model: Model, task: Task) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -121,6 +121,25 @@ class Symbolic:
         Jt = ca.diag(self.J_theta())
         return -self.J_qEE() / ca.repmat(Jt, 1, self.n)
 
+    def J_theta2(self) -> ca.SX:
+        """J_theta2 = -J_theta^-1 (J_theta_dot J_theta1 + J_qEE_dot) (seed 000, Eq. 17), with the rates of the
+        Jacobians along (theta_dot, q_dot) = (J_theta1 q_dot, q_dot); theta_ddot = J_theta2 q_dot + J_theta1 q_ddot."""
+        x = ca.vertcat(self.theta, self.q)
+        J1 = self.J_theta1()
+        dx = ca.vertcat(ca.mtimes(J1, self.dq), self.dq)
+        Jt = ca.diag(self.J_theta())
+        Jt_dot = ca.jtimes(Jt, x, dx)
+        JqEE_dot = ca.reshape(ca.jtimes(ca.vec(self.J_qEE()), x, dx), 6, self.n)
+        return -(ca.mtimes(ca.diag(Jt_dot), J1) + JqEE_dot) / ca.repmat(Jt, 1, self.n)
+
+    def J_theta3(self) -> ca.SX:
+        """q_dot = J_theta3 q_EE_dot with q = [theta; q_EE]: J_theta3 = [J_theta1; I] (seed 000, Eqs. 18-19)."""
+        return ca.vertcat(self.J_theta1(), ca.SX.eye(self.n))
+
+    def J_theta4(self) -> ca.SX:
+        """q_ddot = J_theta3 q_EE_ddot + J_theta4 q_EE_dot: J_theta4 = [J_theta2; 0] (seed 000, Eqs. 18-19)."""
+        return ca.vertcat(self.J_theta2(), ca.SX(self.n, self.n))
+
     def M_J(self) -> ca.SX:
         """d(pose)/dq_EE: the Jacobian of X_EE with respect to q_EE (seed 000, Eq. 32)."""
         return ca.jacobian(self.pose, self.q)
