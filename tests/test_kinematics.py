@@ -320,3 +320,18 @@ def test_singular_configuration_is_reported():
     with pytest.raises(KinematicsError, match=r"sample 0.*chain \d is singular") as err:
         solve_kinematics(m, _constant_task([0, 0, lo, 0, 0, 0], "6rss"))
     assert err.value.chain in range(1, 7)
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_parallel_singularity_is_reported(orientation):
+    """Six couplers meeting at one point of the mandible leave its rotations about that point to no actuator:
+    J_theta1 has rank 3 (type II singularity). The default geometry at the same pose is far from it."""
+    import dataclasses
+
+    m = model("6rss")
+    common = np.array([0.02, 0.0, -0.02])  # m, in {M}; at home {M} = {S}
+    singular = dataclasses.replace(m, M=np.tile(common, (6, 1)), coupler_length=np.linalg.norm(m.S0 - common, axis=1), _cache={})
+    task = _constant_task([0, 0, 0, 0, 0, 0], "6rss")
+    with pytest.raises(KinematicsError, match=r"sample 0.*parallel \(type II\) singularity"):
+        solve_kinematics(singular, task, orientation)
+    solve_kinematics(m, task, orientation)  # the real robot at home: no error

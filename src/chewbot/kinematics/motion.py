@@ -25,6 +25,9 @@ PARASITIC_TOLERANCE = 1e-6
 # Target with Euler parameters: e3 = e1 (e0 + p1 e2) / (p1 e0 - e2) is undefined where the denominator
 # vanishes (seed 001, Sect. 5.1); closer than this is reported.
 E3_DENOMINATOR_TOLERANCE = 1e-6
+# Parallel (type II) singularity: J_theta1, its columns normalised, closer to rank deficiency than this (its
+# smallest singular value over its largest): the actuators no longer determine the mandible's motion.
+PARALLEL_SINGULAR_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +131,36 @@ def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarra
                 sample=i, time=float(t[i]))
 
 
+def check_parallel_singularity(model: Model, orientation: str, theta: np.ndarray, q: np.ndarray, t: np.ndarray) -> None:
+    """Raise :class:`KinematicsError` at the first sample where J_theta1 loses rank (type II singularity).
+
+    The columns are normalised first, so the test does not depend on the units of q_EE; for Euler parameters
+    the direction that changes abs(e) is not a motion and is left out (J_theta1 restricted to abs(e) = 1).
+    """
+    J1 = evaluate(jacobians_function(model, orientation), theta, q)[2]
+    if orientation == "euler-parameters":
+        J1 = J1 @ _unit_norm_tangent(model, q)
+    J1 = J1 / np.linalg.norm(J1, axis=1, keepdims=True)
+    sv = np.linalg.svd(J1, compute_uv=False)
+    ratio = sv[:, -1] / sv[:, 0]
+    bad = np.flatnonzero(ratio < PARALLEL_SINGULAR_TOLERANCE)
+    if bad.size:
+        i = int(bad[0])
+        raise KinematicsError(f"parallel (type II) singularity: J_theta1 loses rank (singular-value ratio "
+                              f"{ratio[i]:.2e} < {PARALLEL_SINGULAR_TOLERANCE:g}), the actuators do not fix the "
+                              f"mandible's motion; {bad.size} sample(s) affected", sample=i, time=float(t[i]))
+
+
+def _unit_norm_tangent(model: Model, q: np.ndarray) -> np.ndarray:
+    """Orthonormal bases (N, n, n - 1) of the q_EE directions that keep abs(e) = 1."""
+    from chewbot.kinematics.functions import closure_function
+
+    theta0 = np.zeros((q.shape[0], 6))
+    grad = evaluate(closure_function(model, "euler-parameters"), theta0, q)[3].reshape(q.shape[0], -1)
+    _, _, vt = np.linalg.svd(grad[:, None, :])
+    return np.swapaxes(vt[:, 1:, :], 1, 2)
+
+
 def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles") -> Kinematics:
     """Inverse kinematics of a whole task: parasitic motions, workspace check, theta and all rates."""
     check_orientation(orientation)
@@ -146,6 +179,7 @@ def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles"
     if model.has_hkp:
         check_workspace(model, T_L, T_R, task.t)
     theta = inverse_kinematics(model, p, R, task.t)
+    check_parallel_singularity(model, orientation, theta, q, task.t)
     dtheta, ddtheta, twist, twist_rate, _, _ = evaluate(rates_function(model, orientation), theta, q, dq, ddq)
     return Kinematics(
         model=model,
