@@ -74,7 +74,7 @@ ROWS = [f"{0.001 * i!r},0,0,0,{0.001 * i!r}" for i in range(10)]
     [
         ("", r"empty task file"),
         ("\n# only a comment\n", r"empty task file"),
-        (GOOD + "\n" + "\n".join(ROWS[:3]), r"3 data row\(s\); a task needs at least 7"),
+        (GOOD + "\n" + "\n".join(ROWS[:3]), r"3 data row\(s\); a target task needs at least 7"),
         ("t,X,Y,alpha\n" + "\n".join(r.rsplit(",", 1)[0] for r in ROWS), r"missing column\(s\) beta"),
         (GOOD + ",foo\n" + "\n".join(r + ",0" for r in ROWS), r"line 1: unknown column 'foo'"),
         (GOOD + ",X\n" + "\n".join(r + ",0" for r in ROWS), r"line 1: column 'X' appears twice"),
@@ -200,3 +200,38 @@ def test_unreachable_incisor_path_is_reported():
         track_incisor(m, kin.t[r], p, v, a)
     with pytest.raises(TaskError, match="incisor tracking resolves the motion through the target's sockets"):
         track_incisor(model("6rss"), kin.t[r], p, v, a)
+
+
+def test_track_incisor_command_recovers_a_motion_and_writes_a_runnable_task(tmp_path):
+    """An incisor path (in mm, rates in the file) generated from a known motion with no roll; the command with
+    alpha pinned at 0 writes a task that reproduces the motion (the problem is square and well-posed) and a
+    residuals file, and `chewbot run` accepts the task."""
+    from typer.testing import CliRunner
+
+    from chewbot.cli import app
+    from chewbot.task.default import ChewingParameters
+
+    m = model("target")
+    known = default_task(m, "left", ChewingParameters(cycles=1, rest_s=0.1, rate_hz=200.0, alpha_deg=0.0))
+    p, v, a = incisor_path(m, known.q, known.dq, known.ddq)
+    rows = ["t,Ix[mm],Iy[mm],Iz[mm],dIx[mm/s],dIy[mm/s],dIz[mm/s],ddIx[mm/s^2],ddIy[mm/s^2],ddIz[mm/s^2],Fz"]
+    rows += [",".join(repr(float(x)) for x in (t, *(1e3 * p[k]), *(1e3 * v[k]), *(1e3 * a[k]), known.force[k, 2]))
+             for k, t in enumerate(known.t)]
+    src = tmp_path / "incisor.csv"
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "tracked.csv"
+    runner = CliRunner()
+    result = runner.invoke(app, ["track-incisor", str(src), "--out", str(out), "--pin", "alpha"])
+    assert result.exit_code == 0, result.output
+    task = read_task_csv(out)
+    assert task.meta["derivatives_estimated"] == []  # all rates written, none re-estimated
+    # mm -> m round trip and the SQP tolerances: 1e-9 m, 1e-9 rad and their rates relative to their peaks
+    for got, want in ((task.q, known.q), (task.dq, known.dq), (task.ddq, known.ddq)):
+        assert np.abs(got - want).max() <= 1e-9 * max(1.0, np.abs(want).max())
+    assert np.array_equal(task.force[:, 2], known.force[:, 2])
+    residuals = np.loadtxt(tmp_path / "tracked.residuals.csv", delimiter=",", skiprows=1)
+    assert np.abs(residuals[:, 1:4]).max() <= 1e-9  # f_D, m
+    again = runner.invoke(app, ["track-incisor", str(src), "--out", str(out)])
+    assert again.exit_code == 5 and "exists" in again.output
+    run = runner.invoke(app, ["run", "--task", str(out), "--out", str(tmp_path / "run"), "--quiet"])
+    assert run.exit_code == 0, run.output

@@ -288,6 +288,60 @@ def study(
     console.print(f"wrote [bold]{written}[/]")
 
 
+@app.command("track-incisor")
+def track_incisor(
+    path: Path = typer.Argument(..., help="CSV of the incisor path: t, Ix, Iy, Iz (point I in {S}), optional rates dIx..ddIz and bite force Fx, Fy, Fz; units in brackets."),
+    out: Path = typer.Option(..., "--out", help="Task CSV to write (read it back with chewbot run --task); the residuals go beside it, *.residuals.csv."),
+    model: str = typer.Option("target", "--model", help="The target robot's model (built-in name or TOML file)."),
+    pin: str = typer.Option("alpha", "--pin", help="The coordinate held at zero to resolve the redundancy (the incisor gives 3 equations for 4 DOF): X, Y, alpha or beta."),
+    orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation the optimisation works in."),
+    side: Side = typer.Option(Side.left, "--side", help="Molar where the file's bite force acts."),
+    force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
+) -> None:
+    """Find the mandible's motion that makes the incisor follow a path (seed 001, Sect. 5.1).
+
+    Solves, sample after sample, the displacement, velocity and acceleration problems by SQP under the HKP
+    constraints and the sockets' bounds; writes the task and the residuals f_D, f_V, f_A, and prints their maxima.
+
+    Example:
+
+      chewbot track-incisor incisor.csv --out task.csv --pin alpha && chewbot run --task task.csv --out runs/tracked
+    """
+    import os
+
+    from chewbot.outputs import OutputExistsError
+    from chewbot.params import load_model
+    from chewbot.task.csvio import read_incisor_csv
+    from chewbot.task.incisor import track_incisor as track
+
+    residuals = out.with_name(out.stem + ".residuals.csv")
+    try:
+        for target in (out, residuals):
+            if target.exists() and not force:
+                raise OutputExistsError(f"{target}: exists; choose another --out or pass --force to replace it")
+        m = load_model(model)
+        path_data = read_incisor_csv(path)
+        with _progress(False, "incisor tracking") as step:
+            step("solving")
+            result = track(m, path_data["t"], path_data["p"], path_data["v"], path_data["a"], orientation=orientation.value,
+                           pin=pin, force=path_data["force"], side=side.value, name=out.stem)
+        tables = result.tables()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        partial = [target.with_name(f".{target.name}.partial-{os.getpid()}") for target in (out, residuals)]
+        try:
+            for table, tmp in zip(tables, partial):
+                table.to_csv(tmp)
+            for tmp, target in zip(partial, (out, residuals)):
+                os.replace(tmp, target)
+        finally:
+            for tmp in partial:
+                tmp.unlink(missing_ok=True)
+    except ChewbotError as exc:
+        _fail(exc)
+    console.print(f"wrote {out} and {residuals}; max |f_D| = {abs(result.f_D).max():.3g} m, "
+                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
+
+
 @app.command()
 def models() -> None:
     """List the built-in models: name, mechanism, description and parameter file.

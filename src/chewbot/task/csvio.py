@@ -43,16 +43,18 @@ _HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s
 _RATE_UNIT = re.compile(r"^(.+?)\s*/\s*(\w+)\s*(\^\s*2|2|²)?$")
 
 
-def _columns() -> dict[str, tuple[str, int]]:
-    """Every known column name -> (kind, order of the time derivative)."""
+def _columns(kinds: dict[str, str]) -> dict[str, tuple[str, int]]:
+    """Every known column name -> (kind, order of the time derivative), for signals of ``kinds``."""
     known = {"t": ("time", 0), **{f: ("force", 0) for f in FORCES}}
-    for name, kind in KIND.items():
+    for name, kind in kinds.items():
         for order, prefix in enumerate(("", "d", "dd")):
             known[prefix + name] = (kind, order)
     return known
 
 
-COLUMNS = _columns()
+COLUMNS = _columns(KIND)
+INCISOR = ("Ix", "Iy", "Iz")  # the incisor point I in {S}
+INCISOR_COLUMNS = _columns({c: "length" for c in INCISOR})
 
 
 def _unit_factor(unit: str, kind: str, order: int) -> float:
@@ -75,18 +77,18 @@ def _unit_factor(unit: str, kind: str, order: int) -> float:
     raise ValueError(f"unknown unit {unit!r} (known {kind} units: {', '.join(UNITS[kind])})")
 
 
-def _parse_header(path: Path, line: int, cells: list[str]) -> tuple[list[str], np.ndarray]:
+def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUMNS) -> tuple[list[str], np.ndarray]:
     names, factors = [], []
     for j, cell in enumerate(cells):
         m = _HEADER.match(cell)
         if m is None:
             raise TaskError(f"{path}: line {line}, column {j + 1}: cannot read the column name {cell!r} (expected NAME or NAME[unit])")
         name, unit = m.group(1), m.group(2)
-        if name not in COLUMNS:
-            raise TaskError(f"{path}: line {line}: unknown column {name!r} (known: {', '.join(COLUMNS)})")
+        if name not in columns:
+            raise TaskError(f"{path}: line {line}: unknown column {name!r} (known: {', '.join(columns)})")
         if name in names:
             raise TaskError(f"{path}: line {line}: column {name!r} appears twice")
-        kind, order = COLUMNS[name]
+        kind, order = columns[name]
         try:
             factors.append(1.0 if unit is None else _unit_factor(unit, kind, order))
         except ValueError as exc:
@@ -124,30 +126,20 @@ def _to_float(path: Path, names: list[str], lines: np.ndarray, cells: np.ndarray
         raise
 
 
-def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target", name: str | None = None) -> Task:
-    """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at ``side``."""
-    path = Path(path)
-    if mechanism not in ("target", "6rss"):
-        raise TaskError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
+def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str):
+    """Parse, check and convert to SI a file of signals over time: (names, header, lines, col) with col the
+    columns by name (SI, (N,) each). Every defect is a TaskError naming the file and the line or column."""
     header_line, header, body = _read_rows(path)
-    names, factors = _parse_header(path, header_line, header)
-
-    required = ("t",) + (TARGET_COORDS if mechanism == "target" else FULL_COORDS)
+    names, factors = _parse_header(path, header_line, header, columns)
     missing = [c for c in required if c not in names]
     if missing:
-        raise TaskError(f"{path}: missing column(s) {', '.join(missing)} (a {mechanism} task needs {', '.join(required)})")
-    has_full = "Z" in names or "gamma" in names
-    if has_full and not ("Z" in names and "gamma" in names):
-        raise TaskError(f"{path}: columns Z and gamma come together (the target computes both from its sockets when neither is given)")
-    coords = FULL_COORDS if has_full else TARGET_COORDS
+        raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
     for n in names:
-        kind, order = COLUMNS[n]
-        base = n[order:]
-        if order and base not in coords:
-            raise TaskError(f"{path}: column {n!r} is a rate of {base!r}, which the file does not give")
-
+        kind, order = columns[n]
+        if order and n[order:] not in names:
+            raise TaskError(f"{path}: column {n!r} is a rate of {n[order:]!r}, which the file does not give")
     if len(body) < MIN_ROWS:
-        raise TaskError(f"{path}: {len(body)} data row(s); a task needs at least {MIN_ROWS}")
+        raise TaskError(f"{path}: {len(body)} data row(s); {what} needs at least {MIN_ROWS}")
     lines = np.array([line for line, _ in body])
     for line, cells in body:
         if len(cells) != len(names):
@@ -159,17 +151,20 @@ def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target
         raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {data[i, j]} is not a finite number")
     data = data * factors
     col = {n: data[:, j] for j, n in enumerate(names)}
-
     t = col["t"]
-    steps = np.diff(t)
-    bad = np.flatnonzero(steps <= 0)
+    bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         i = int(bad[0]) + 1
         raise TaskError(f"{path}: line {lines[i]}, column 't': time {t[i]:.9g} s does not increase (previous row {t[i - 1]:.9g} s)")
+    return names, header, lines, col
 
-    q = np.column_stack([col[c] for c in coords])
-    rates = []
-    estimated = [prefix + c for prefix in ("d", "dd") for c in coords if prefix + c not in col]
+
+def _with_rates(path: Path, lines, col: dict, signals: tuple[str, ...]):
+    """The signals (N, k) and their first and second rates: from the file where given, else estimated
+    (:mod:`chewbot.task.smoothing`); and the list of the estimated columns."""
+    t = col["t"]
+    q = np.column_stack([col[c] for c in signals])
+    estimated = [prefix + c for prefix in ("d", "dd") for c in signals if prefix + c not in col]
     if estimated:
         try:
             smooth = smoothing.derivatives(t, q)
@@ -177,15 +172,39 @@ def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target
             raise TaskError(f"{path}: line {lines[exc.sample]}: {exc} (missing: {', '.join(estimated)})") from None
         except TaskError as exc:
             raise TaskError(f"{path}: {exc}") from None
-    for order, prefix in ((1, "d"), (2, "dd")):
-        rates.append(np.column_stack([col[prefix + c] if prefix + c in col else smooth[order - 1][:, j] for j, c in enumerate(coords)]))
-    force = np.column_stack([col.get(f, np.zeros_like(t)) for f in FORCES])
+    rates = [np.column_stack([col[prefix + c] if prefix + c in col else smooth[order - 1][:, j] for j, c in enumerate(signals)])
+             for order, prefix in ((1, "d"), (2, "dd"))]
+    return q, rates[0], rates[1], estimated
+
+
+def _meta(path: Path, names, header, estimated) -> dict:
     units = {n: (h.split("[", 1)[1].rstrip("] ") if "[" in h else "SI") for n, h in zip(names, header)}
-    meta = {
-        "file": str(path),
-        "units": units,
-        "derivatives_estimated": estimated,
-        **({"smoothing": {"method": "savgol", "polyorder": smoothing.POLYORDER, "window_s": smoothing.WINDOW_S}} if estimated else {}),
-    }
-    return Task(name=name or path.stem, t=t, coords=coords, q=q, dq=rates[0], ddq=rates[1], force=force,
-                side=side, source=str(path), meta=meta)
+    return {"file": str(path), "units": units, "derivatives_estimated": estimated,
+            **({"smoothing": {"method": "savgol", "polyorder": smoothing.POLYORDER, "window_s": smoothing.WINDOW_S}} if estimated else {})}
+
+
+def read_incisor_csv(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a path of the incisor point I in {S}: columns ``t, Ix, Iy, Iz``, optional rates ``dIx ... ddIz`` and
+    bite force ``Fx, Fy, Fz``, units in brackets as for tasks. Returns t (N,), p, v, a, force (N, 3), SI."""
+    path = Path(path)
+    names, header, lines, col = _read_signals(path, INCISOR_COLUMNS, ("t",) + INCISOR, "an incisor path")
+    p, v, a, _ = _with_rates(path, lines, col, INCISOR)
+    force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
+    return {"t": col["t"], "p": p, "v": v, "a": a, "force": force}
+
+
+def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target", name: str | None = None) -> Task:
+    """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at ``side``."""
+    path = Path(path)
+    if mechanism not in ("target", "6rss"):
+        raise TaskError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
+    required = ("t",) + (TARGET_COORDS if mechanism == "target" else FULL_COORDS)
+    names, header, lines, col = _read_signals(path, COLUMNS, required, f"a {mechanism} task")
+    has_full = "Z" in names or "gamma" in names
+    if has_full and not ("Z" in names and "gamma" in names):
+        raise TaskError(f"{path}: columns Z and gamma come together (the target computes both from its sockets when neither is given)")
+    coords = FULL_COORDS if has_full else TARGET_COORDS
+    q, dq, ddq, estimated = _with_rates(path, lines, col, coords)
+    force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
+    return Task(name=name or path.stem, t=col["t"], coords=coords, q=q, dq=dq, ddq=ddq, force=force,
+                side=side, source=str(path), meta=_meta(path, names, header, estimated))

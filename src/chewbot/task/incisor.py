@@ -33,6 +33,7 @@ from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation, symbolic
 from chewbot.model import Model
 from chewbot.rotation import euler_parameters_to_angles
+from chewbot.results import Table
 from chewbot.task.base import TARGET_COORDS, Task
 
 PINNABLE = ("X", "Y", "alpha", "beta")
@@ -70,6 +71,21 @@ class IncisorTracking:
     f_V: np.ndarray
     f_A: np.ndarray
     pin: str
+
+    def tables(self) -> tuple[Table, Table]:
+        """The task (t, X, Y, alpha, beta, their rates, Fx, Fy, Fz; SI, as ``chewbot run --task`` reads it) and
+        the residuals (t, f_D, f_V, f_A per axis) as tables."""
+        task, res = Table(), Table()
+        for table in (task, res):
+            table.add("t", self.task.t, "s")
+        units = {"X": "m", "Y": "m", "alpha": "rad", "beta": "rad"}
+        for prefix, arr, per in (("", self.task.q, ""), ("d", self.task.dq, "/s"), ("dd", self.task.ddq, "/s^2")):
+            for j, c in enumerate(self.task.coords):
+                task.add(prefix + c, arr[:, j], units[c] + per)
+        task.add_block(["Fx", "Fy", "Fz"], self.task.force, "N")
+        for label, arr, unit in (("f_D", self.f_D, "m"), ("f_V", self.f_V, "m/s"), ("f_A", self.f_A, "m/s^2")):
+            res.add_block([f"{label}_{c}" for c in "xyz"], arr, unit)
+        return task, res
 
 
 def _levels(expr: ca.SX, q: ca.SX, dq: ca.SX, ddq: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
