@@ -14,7 +14,12 @@ from chewbot.errors import ChewbotError
 
 app = typer.Typer(
     name="chewbot",
-    help="Kinematics, inverse dynamics and inertia coupling of the bio-inspired chewing robot and its 6RSS counterpart.",
+    help="Kinematics, inverse dynamics and inertia coupling of the bio-inspired chewing robot and its 6RSS counterpart.\n\n"
+         "Examples:\n\n"
+         "  chewbot run --out runs/default\n\n"
+         "  chewbot run --method newton-euler --goal min-hkp-force --out runs/g3\n\n"
+         "  chewbot study seed000 --out runs/seed000\n\n"
+         "  chewbot export-c --out kernels",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
