@@ -261,10 +261,16 @@ def test_cli_runs_newton_euler_with_goal_and_friction(tmp_path):
     from chewbot.cli import app
 
     out = tmp_path / "ne"
-    result = CliRunner().invoke(app, ["run", "--model", "6rss", "--method", "newton-euler", "--goal", "min-hkp-force",
+    result = CliRunner().invoke(app, ["run", "--method", "newton-euler", "--goal", "min-hkp-force",
                                       "--friction", "off", "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
     run = json.loads((out / "run.json").read_text())
     assert run["options"]["goal"] == "min-hkp-force" and run["options"]["friction"] == "off"
     assert run["columns"]["FS1_x"]["unit"] == "N" and run["dynamics"]["friction"] is False
     assert (out / "ne_friction_share.png").exists()
+    # options that do not apply are refused, not recorded as if they had been used
+    for args, reason in ((["--model", "6rss", "--method", "newton-euler", "--goal", "min-hkp-force"], "no redundant actuation"),
+                         (["--method", "liang", "--friction", "off"], "apply to --method newton-euler")):
+        refused = CliRunner().invoke(app, ["run", *args, "--out", str(tmp_path / "no"), "--quiet"])
+        assert refused.exit_code == 2 and reason in refused.output, refused.output
+        assert not (tmp_path / "no").exists()

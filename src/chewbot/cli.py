@@ -102,8 +102,8 @@ def run(
     side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts, and side of the default task."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation of the mandible's orientation."),
     method: str | None = typer.Option(None, "--method", callback=_check_method, show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
-    goal: Goal = typer.Option(Goal.min_torque, "--goal", help="newton-euler: what the redundant torques minimise (torques, forces at S_i, HKP normal forces)."),
-    friction: Switch = typer.Option(Switch.on, "--friction", help="newton-euler: friction at the HKPs and the actuators."),
+    goal: Goal | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: what the redundant torques minimise (torques, forces at S_i, HKP normal forces). Default: min-torque."),
+    friction: Switch | None = typer.Option(None, "--friction", show_default=False, help="newton-euler: friction at the HKPs and the actuators. Default: on."),
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
     force: bool = typer.Option(False, "--force", help="Replace the results folder if it exists."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
@@ -128,8 +128,20 @@ def run(
 
     if method is None:
         method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
+    if method != "newton-euler" and (goal is not None or friction is not None):
+        _fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
+    if method == "newton-euler":  # what newton-euler uses; the other formulations take neither
+        from chewbot.params import load_model
+
+        try:
+            sixrss = not load_model(model).has_hkp
+        except ChewbotError as exc:
+            _fail(exc)
+        if sixrss and goal is not None:
+            _fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
+        goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
     options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
-                         goal=goal.value, friction=friction.value)
+                         goal=goal and goal.value, friction=friction and friction.value)
     try:
         check_output(out, force)  # before the work, not after it
         with _progress(quiet, "run", total=RUN_STEPS) as step:

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+
+import numpy as np
 
 from chewbot.errors import ChewbotError
 
@@ -56,3 +60,25 @@ def check_output(out: Path, force: bool) -> None:
         raise OutputExistsError(f"{out}: exists and is not a folder; choose another --out")
     if out.exists() and not force:
         raise OutputExistsError(f"{out}: the results folder exists; choose another --out or pass --force to replace it")
+
+
+def to_json(obj) -> str:
+    """Standard JSON (RFC 8259) of ``obj``: NumPy arrays and scalars as lists and numbers, paths as strings,
+    NaN and infinities (an index that does not apply, an infinite ratio) as null."""
+
+    def clean(o):
+        if isinstance(o, dict):
+            return {str(k): clean(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [clean(v) for v in o]
+        if isinstance(o, np.ndarray):
+            return clean(o.tolist())
+        if isinstance(o, (np.floating, np.integer, np.bool_)):
+            return clean(o.item())
+        if isinstance(o, float) and not math.isfinite(o):
+            return None
+        if isinstance(o, Path):
+            return str(o)
+        return o
+
+    return json.dumps(clean(obj), indent=2, allow_nan=False) + "\n"

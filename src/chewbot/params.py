@@ -25,6 +25,8 @@ BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
 # How far the printed geometry may disagree with the nominal lengths before a file is rejected. The papers'
 # own numbers disagree by up to 0.07 % (MODEL.md); 1 % catches a typo without tripping on rounding.
 LENGTH_TOLERANCE = 0.01
+# The condyles must lie on their planes at the home pose; this allows for coordinates rounded to 0.01 mm.
+HOME_PLANE_TOLERANCE_MM = 0.01
 # Printed rotation matrices are rounded to 4 digits: |R^T R - I| is about 1e-4 for them.
 ROTATION_TOLERANCE = 2e-3
 
@@ -36,7 +38,8 @@ Range = Annotated[list[float], Field(min_length=2, max_length=2)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: a quoted number is an error, not silently converted; no NaN or infinity anywhere
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
 
 
 class ChainsSection(_Strict):
@@ -174,7 +177,10 @@ def load_model(name_or_path: str | Path = "target") -> Model:
 def _format_validation_error(source: str, exc: ValidationError) -> str:
     lines = []
     for err in exc.errors():
-        key = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        key = ""
+        for part in err["loc"]:  # list positions 1-based, as chains and rows are counted everywhere else
+            key += f"[{part + 1}]" if isinstance(part, int) else (f".{part}" if key else str(part))
+        key = key or "(top level)"
         if err["type"] == "missing":
             reason = "missing key"
         elif err["type"] == "extra_forbidden":
@@ -249,6 +255,15 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "") -> Mode
         fail("hkp.T_R_mm", "must mirror hkp.T_L_mm in y (x and z equal, y opposite): the parasitic motions assume left-right symmetry")
     if not h.T_L_mm[1] > 0:
         fail("hkp.T_L_mm", "the left condyle has y > 0")
+    # {M} = {S} at home (MODEL.md): the home pose must satisfy the HKPs, the condyles on their planes in their sockets
+    for key, T, y_range in (("hkp.T_L_mm", h.T_L_mm, h.y_left_mm), ("hkp.T_R_mm", h.T_R_mm, h.y_right_mm)):
+        residual = h.p1 * T[0] + T[2] + h.p2_mm
+        if abs(residual) > HOME_PLANE_TOLERANCE_MM:
+            fail(key, f"the condyle is {residual:.4g} mm off its plane p1 x + z + p2 = 0 at the home pose ({{M}} = {{S}}); "
+                      f"its z should be {-(h.p1 * T[0] + h.p2_mm):.6g} mm")
+        if not (h.x_range_mm[0] <= T[0] <= h.x_range_mm[1] and y_range[0] <= T[1] <= y_range[1]):
+            fail(key, f"the condyle ({T[0]:g}, {T[1]:g}) mm is outside its socket at the home pose "
+                      f"(x in {h.x_range_mm}, y in {y_range} mm)")
 
     known = _known_keys(f)
     for key in f.assumed:

@@ -6,7 +6,6 @@ behind, and an existing folder is replaced only when ``force`` is given.
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import dataclass, field
@@ -20,7 +19,7 @@ from chewbot.report import dynamics_figures, figures
 from chewbot.report.html import write_report
 from chewbot.results import Table, kinematics_table
 from chewbot.task.base import Task
-from chewbot.outputs import atomic_folder
+from chewbot.outputs import atomic_folder, to_json
 
 
 @dataclass
@@ -32,8 +31,8 @@ class RunOptions:
     side: str = "left"
     orientation: str = "euler-angles"
     method: str | None = None
-    goal: str = "min-torque"
-    friction: str = "on"
+    goal: str | None = "min-torque"  # newton-euler on the target only
+    friction: str | None = "on"  # newton-euler only
 
 
 @dataclass
@@ -85,7 +84,8 @@ def _dynamics_stage(result: RunResult, step) -> None:
     o = result.options
     step(f"inverse dynamics ({o.method})")
     t0 = time.perf_counter()
-    dyn = inverse_dynamics(result.model, result.kinematics, o.method, goal=o.goal, friction=o.friction == "on")
+    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {})}
+    dyn = inverse_dynamics(result.model, result.kinematics, o.method, **used)
     result.info["timings"][f"dynamics_{o.method}_s"] = time.perf_counter() - t0
     result.dynamics = dyn
     result.table.add_block([f"tau{i + 1}" for i in range(6)], dyn.tau, "N*m", f"actuator torques ({o.method})")
@@ -159,20 +159,8 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None) -> P
                 from chewbot.report.newton_euler_figures import run_figures
 
                 result.figures += run_figures(result.table, tmp)
-        (tmp / "run.json").write_text(json.dumps(run_json(result), indent=2, default=_json_default) + "\n")
+        (tmp / "run.json").write_text(to_json(run_json(result)))
         step("writing report.html")
         write_report(result, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))
     result.figures = [out / p.name for p in result.figures]
     return out
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o)}")

@@ -5,15 +5,15 @@
 | ``tau_target``, ``tau_sixrss`` | q_EE, q_EE_dot, q_EE_ddot (Euler angles), B, F_B | minimum-norm (target) or unique (6RSS) tau, theta, theta_dot |
 | ``dynamics_target``, ``dynamics_sixrss`` | the same | the same and J_theta1, M_f, C_f, G_f, Q_B of Eq. 53 |
 | ``coupling_target``, ``coupling_sixrss`` | theta, q_EE | M_A, MCI |
-| ``g1_target`` | theta, q_EE, rates, F_B, B | friction-aware minimum torques (goal G1), N_L/N_R, the limit values, the optimality residual |
+| ``g1_target`` | theta, q_EE, rates, F_B, B | friction-aware minimum torques (goal G1), N_L/N_R, the gradient and last step, the limit values |
 
 The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
 :func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction
-(:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel by Newton's method on its two
-unknowns, started from the friction-free optimum (exact in one step: friction-free torques are affine in N) and
-iterated a fixed number of times (:data:`G1_ITERATIONS`): a fixed cost, as a real-time loop needs. The kernel
-returns the gradient of |tau|^2 at its answer (zero at the optimum) and the actuator-limit values, so the caller
-can verify both; it does not handle active limits (the Python solver falls back to SQP there).
+(:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel on its two unknowns: the
+best piecewise least-squares start, then a fixed number (:data:`G1_ITERATIONS`) of safeguarded Newton steps: a
+fixed cost, as a real-time loop needs. The kernel returns its last step and the gradient of |tau|^2 at its answer
+(both ~0 at the optimum) and the actuator-limit values, so the caller can verify all three; it does not handle
+active limits (the Python solver falls back to SQP there).
 
 :func:`chewbot.casadi_tools.native` wraps a kernel for calls from Python through ctypes (one sample in a few
 microseconds, or a whole trajectory in one C loop);
@@ -28,14 +28,19 @@ import numpy as np
 from chewbot.analysis.coupling import coupling_kernel
 from chewbot.casadi_tools import evaluate, native
 from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
-from chewbot.dynamics.newton_euler import coefficients_sx_function, forces_sx, n_unknowns
+from chewbot.dynamics.distribution import MEASURABLE
+from chewbot.dynamics.newton_euler import coefficients_sx_function, forces_sx, n_unknowns, start_sx
 from chewbot.export import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 
-# Newton iterations of the G1 kernel. From the friction-free optimum the friction-aware one is a few newtons
-# away and Newton converges quadratically: 4 iterations reach rounding level on the default task (tested).
-G1_ITERATIONS = 4
+# Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
+# least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
+# default up to 1 (HKP) and 0.5 (actuators) on the default task; 12 leave a margin. The kernel reports its
+# last step, so a caller sees when this was not enough.
+G1_ITERATIONS = 12
+HALVINGS = 4
+ARMIJO = 1e-4
 G1_ORIENTATION = "euler-parameters"
 # The example sample of the exported README: the peak of the second bite-force burst of the default task.
 EXAMPLE_T = 2.44
@@ -43,8 +48,15 @@ EXAMPLE_T = 2.44
 
 def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int = G1_ITERATIONS) -> ca.Function:
     """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B) ->
-    tau (N m), N (N_L, N_R in N), gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), limits (24: tau, power,
-    axial, radial load per actuator, in N m, W, N, N). q_EE in ``orientation``."""
+    tau (N m), N (N_L, N_R in N), grad: gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), step: the size
+    of the last Newton step (N; converged when tiny), limits (24: tau, power, axial, radial load per actuator,
+    in N m, W, N, N). q_EE in ``orientation``.
+
+    It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.newton_euler.start_sx`)
+    and takes ``iterations`` safeguarded Newton steps: the exact Hessian where it is positive definite, else
+    Gauss-Newton's, and the longest of the steps 1, 1/2, ..., 1/2^(HALVINGS-1) that satisfies Armijo's
+    condition (none: stay). Fixed cost, no branches in the C code.
+    """
     if not model.has_hkp:
         raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
 
@@ -54,33 +66,44 @@ def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int =
         F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
         D = coeff(theta, q, dq, ddq, F, B)[0]
         Dsym, N = ca.SX.sym("D", D.numel()), ca.SX.sym("N", n_unknowns(model))
-        free = forces_sx(model, Dsym, N, 0.0)["tau"]  # affine in N
         out = forces_sx(model, Dsym, N, 1.0)
         J = ca.sumsqr(out["tau"])
         H, g = ca.hessian(J, N)
+        Jr = ca.jacobian(out["tau"], N)
+        H_gn = 2 * ca.mtimes(Jr.T, Jr) + 1e-12 * ca.SX.eye(2)
+        convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
+        p = -ca.solve(ca.if_else(convex, H, H_gn), g)
+        slope = ca.dot(g, p)
+        value = ca.Function("g1_value", [Dsym, N], [J])
+        Np = N  # no acceptable step: stay
+        for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
+            alpha = 0.5**k
+            trial = N + alpha * p
+            Np = ca.if_else(value(Dsym, trial) <= J + ARMIJO * alpha * slope, trial, Np)
+        # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
+        # is taken (the quadratic-convergence region), as the distribution solver does
+        Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
+        step = ca.Function("g1_step", [Dsym, N], [Np])
+        start = ca.Function("g1_start", [Dsym], [start_sx(model, "min-torque", Dsym)])
         dth = Dsym[-6:]
         lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
-        step = ca.Function("g1_step", [Dsym, N], [N - ca.solve(H, g)])
-        a = ca.substitute(free, N, ca.DM.zeros(N.numel()))
-        A = ca.jacobian(free, N)
-        start = ca.Function("g1_start", [Dsym], [-ca.solve(ca.mtimes(A.T, A), ca.mtimes(A.T, a))])
         final = ca.Function("g1_final", [Dsym, N], [out["tau"], g, lim])
         Nk = start(D)
         for _ in range(iterations):
-            Nk = step(D, Nk)
+            N_prev, Nk = Nk, step(D, Nk)
         tau, grad, limits = final(D, Nk)
-        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, limits],
-                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["tau", "N", "grad", "limits"], {"cse": True})
+        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, ca.norm_2(Nk - N_prev), limits],
+                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["tau", "N", "grad", "step", "limits"], {"cse": True})
 
     return model.cached(("fn", "g1_kernel", orientation, iterations), build)
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
     """Friction-aware goal-G1 distribution along a whole task with the compiled :func:`g1_kernel` (one C loop):
-    tau (N, 6), N (N, 2), grad (N, 2), limits (N, 24), in ``kin.orientation``."""
+    tau (N, 6), N (N, 2), grad (N, 2), step (N, 1), limits (N, 24), in ``kin.orientation``."""
     fn = model.cached(("fn", "g1_kernel", kin.orientation, "native"), lambda: native(g1_kernel(model, kin.orientation)))
     out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side))
-    return dict(zip(("tau", "N", "grad", "limits"), out))
+    return dict(zip(("tau", "N", "grad", "step", "limits"), out))
 
 
 def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray]] | None = None) -> list[Kernel]:
@@ -110,11 +133,11 @@ def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray
         ]
     out.append(
         Kernel(g1_kernel(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
-               f"{G1_ITERATIONS} Newton iterations from the friction-free optimum; q in Euler parameters "
-               "(X, Y, e0, e1, e2). Check grad (0 at the optimum) and the limits.",
+               f"{G1_ITERATIONS} safeguarded Newton steps from the best piecewise least-squares start; q in Euler "
+               "parameters (X, Y, e0, e1, e2). Check step and grad (both ~0 at the optimum) and the limits.",
                {"theta": "rad", "q": "m, 1 (X, Y, e0, e1, e2)", "dq": "m/s, 1/s", "ddq": "m/s^2, 1/s^2",
                 "F_B": "N, in {S}, on the mandible", "B": "m, in {M}"},
-               {"tau": "N m", "N": "N (N_L, N_R along the planes' normal)", "grad": "N m^2 / N",
+               {"tau": "N m", "N": "N (N_L, N_R along the planes' normal)", "grad": "N m^2 / N", "step": "N",
                 "limits": "N m (tau 1-6), W (power 1-6), N (axial 1-6), N (radial 1-6)"}, sample["g1_target"]))
     return out
 

@@ -4,8 +4,9 @@ A problem is given by two CasADi functions of (D, x, friction): D the sample's d
 ``residual`` r, whose squared norm is the goal (minimise |r|^2), and ``limits`` c with |c| <= bound
 component-wise (the actuators' physical limits). Each sample is solved in two stages:
 
-1. Unconstrained, all samples at once: x starts at the friction-free optimum of the same sample (with
-   friction off r is affine in x, so one Newton step from 0 gives it exactly), then damped Newton on the
+1. Unconstrained, all samples at once: x starts at the problem's ``start`` (for the Newton–Euler goals the
+   best of the piecewise least-squares minimisers, :func:`chewbot.dynamics.newton_euler.start_sx`), or at
+   the friction-free optimum (r is affine in x then: one Newton step from 0 gives it), then damped Newton on the
    exact Hessian (Gauss-Newton where the exact one is not positive definite) with an Armijo backtracking
    line search, vectorised over the samples that have not converged.
 2. Where that optimum breaks a limit: SQP (CasADi ``sqpmethod``, exact Hessian) with the limits as
@@ -42,6 +43,7 @@ class Problem:
     ``objective``: (D, x, friction) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian (compiled);
     ``value``: (D, x, friction) -> J alone (for the line search);
     ``limits``: (D, x, friction) -> c; ``bound``: |c| <= bound; ``limit_names``: a label per entry of c;
+    ``start``: D -> x, where Newton starts with friction (None: the friction-free optimum);
     ``nlp``: the SQP solver over x with parameters (D, friction), built on first use.
     """
 
@@ -51,6 +53,7 @@ class Problem:
     bound: np.ndarray
     limit_names: list[str]
     nx: int
+    start: ca.Function | None = None
     _nlp_args: tuple = field(repr=False, default=())
     _nlp: object = field(repr=False, default=None)
 
@@ -62,8 +65,9 @@ class Problem:
 
 
 def build_problem(name: str, D: ca.SX, x: ca.SX, friction: ca.SX, residual: ca.SX, limits: ca.SX,
-                  bound, limit_names) -> Problem:
-    """Wrap the goal's residual r(D, x, friction) and the limits c(D, x, friction) into a :class:`Problem`."""
+                  bound, limit_names, start: ca.Function | None = None) -> Problem:
+    """Wrap the goal's residual r(D, x, friction) and the limits c(D, x, friction) into a :class:`Problem`;
+    ``start``: D -> x, the start of the Newton iteration with friction (default: the friction-free optimum)."""
     J = ca.sumsqr(residual)
     Jr = ca.jacobian(residual, x)
     H, grad = ca.hessian(J, x)
@@ -76,7 +80,7 @@ def build_problem(name: str, D: ca.SX, x: ca.SX, friction: ca.SX, residual: ca.S
             "print_status": False, "error_on_fail": False, "max_iter": 200,
             "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}}
     return Problem(compiled(objective), compiled(value), compiled(limits_fn), np.asarray(bound, dtype=float), list(limit_names),
-                   x.numel(), (nlp, opts))
+                   x.numel(), start and compiled(start), (nlp, opts))
 
 
 @dataclass
@@ -142,8 +146,11 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, st
     x = np.zeros((data.n, problem.nx))
     iterations, unconverged = 0, []
     if problem.nx:
-        _, g, H, _ = data(problem.objective, x, 0.0)
-        x = -np.linalg.solve(H, g[..., None])[..., 0]  # friction-free optimum: r is affine in x there
+        if friction and problem.start is not None:
+            (x,) = data(problem.start)
+        else:
+            _, g, H, _ = data(problem.objective, x, 0.0)
+            x = -np.linalg.solve(H, g[..., None])[..., 0]  # friction-free optimum: r is affine in x there
         if friction:
             x, iterations, unconverged = _newton(problem, data, x, friction)
     broken = broken_limits(problem, data, x, friction)

@@ -168,15 +168,16 @@ def _unpack(D, nN: int) -> dict:
     return out
 
 
-def forces_sx(model: Model, D, N, friction):
+def forces_sx(model: Model, D, N, friction, absN=None):
     """Every force of the sample as CasADi expressions of the data D, the normal forces N and the friction
     flag (0 or 1): a dict of tau, tau_f, tau_fT (HKP friction mapped onto the shafts), f (FS), F_G, M_G,
-    axial and radial loads at G_i, |N| smoothed, f_M (force of coupler i on the mandible at M_i). Shared by the solver, its limits and the outputs.
+    axial and radial loads at G_i, |N| smoothed, f_M (force of coupler i on the mandible at M_i). Shared by the
+    solver, its limits and the outputs. ``absN`` replaces the smoothed |N| (for :func:`start_sx`).
     """
     m, fr = model, model.friction
     nN = N.numel()
     d = _unpack(D, nN)
-    absN = ca.sqrt(N**2 + DELTA_N**2)
+    absN = ca.sqrt(N**2 + DELTA_N**2) if absN is None else absN
     f_fT = friction * (d["fV"] + (ca.mtimes(d["F2"], absN) if nN else 0))  # HKP friction's share of f
     f = d["f0"] + f_fT + (ca.mtimes(d["F1"], N) if nN else 0)
     dth = d["dtheta"]
@@ -238,15 +239,56 @@ def problem(model: Model, goal: str) -> Problem:
         nN = n_unknowns(model)
         D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
         out = forces_sx(model, D, N, fl)
-        residual = {"min-torque": out["tau"], "min-coupler-force": out["f"], "min-hkp-force": N}[goal]
+        residual = goal_residual(model, goal, D, N, fl)
         dth = _unpack(D, nN)["dtheta"]
         lim = model.limits
         limits = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
         bound = np.repeat([lim.torque, lim.power, lim.axial_load, lim.radial_load], 6)
         names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
-        return build_problem(f"ne_{model.mechanism}_{goal.replace('-', '_')}", D, N, fl, residual, limits, bound, names)
+        start = ca.Function("start", [D], [start_sx(model, goal, D) if nN else ca.SX(0, 1)])
+        return build_problem(f"ne_{model.mechanism}_{goal.replace('-', '_')}", D, N, fl, residual, limits, bound, names, start)
 
     return model.cached(("ne", "problem", goal), build)
+
+
+GOAL_RESIDUALS = {"min-torque": "tau", "min-coupler-force": "f"}
+
+
+def goal_residual(model: Model, goal: str, D, N, friction, absN=None):
+    """The residual r whose squared norm the goal minimises (seed 001, Eqs. 52-54)."""
+    if goal == "min-hkp-force":
+        return N
+    return forces_sx(model, D, N, friction, absN)[GOAL_RESIDUALS[goal]]
+
+
+def start_sx(model: Model, goal: str, D) -> ca.SX:
+    """A start for the distribution: the best of nine piecewise least-squares candidates (2 unknowns).
+
+    With friction the goal's residual is affine in N and |N| (apart from the small, smooth actuator-friction
+    term): on each sign pattern of (N_L, N_R), and on each kink N_j = 0, it is affine in N, so one Gauss-Newton
+    step from 0 gives that piece's minimiser. The candidate with the smallest (smoothed) goal is the start.
+    The optimum often lies on a kink (one condyle nearly unloaded), where Newton from the friction-free optimum
+    converges slowly or to another local minimum; from this start it converges in a few steps.
+    """
+    N = ca.SX.sym("N", n_unknowns(model))
+    best, best_J = None, None
+    for signs in ((1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0), (0, 0)):
+        free = [j for j in range(2) if signs[j]]
+        Nc = ca.vertcat(*[N[j] if signs[j] else 0 for j in range(2)])
+        r = goal_residual(model, goal, D, Nc, 1.0, absN=ca.vertcat(*[signs[j] * N[j] for j in range(2)]))
+        cand = ca.SX.zeros(2)
+        if free:
+            r0, A = ca.substitute([r, ca.jacobian(r, N[free])], [N], [ca.DM.zeros(2)])
+            step = -ca.solve(ca.mtimes(A.T, A), ca.mtimes(A.T, r0))
+            for k, j in enumerate(free):
+                cand[j] = step[k]
+        J = ca.sumsqr(goal_residual(model, goal, D, cand, 1.0))
+        if best is None:
+            best, best_J = cand, J
+        else:
+            better = J < best_J
+            best, best_J = ca.if_else(better, cand, best), ca.if_else(better, J, best_J)
+    return best
 
 
 def check_goal(goal: str) -> None:

@@ -9,7 +9,6 @@ figures after seed 000's Figs. 6-8.
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,7 +152,7 @@ def _figures(results: dict, folder: Path) -> list[Path]:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import atomic_folder, check_output
+    from chewbot.outputs import atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)
@@ -176,7 +175,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
                    "coupling_means": {name: r[3].means() for name, r in results.items()},
                    "peak_torque_N_m": {name: {s: np.abs(r[2][s, "hessian"]).max(axis=0).tolist() for s in SIDES}
                                        for name, r in results.items()}}
-        (tmp / "study.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (tmp / "study.json").write_text(to_json(summary))
         step("figures")
         _figures(results, tmp)
     return out

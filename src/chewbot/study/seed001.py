@@ -10,7 +10,6 @@ each goal, and Fig. 14 (times, Euler parameters against Euler angles).
 from __future__ import annotations
 
 import csv
-import json
 import statistics
 import time
 from pathlib import Path
@@ -90,7 +89,7 @@ def _fig14(rows: list[dict], path: Path) -> Path:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import atomic_folder, check_output
+    from chewbot.outputs import atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)
@@ -107,7 +106,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
         summary = {"rows": [{c: r[c] for c in COLUMNS} for r in rows],
                    "notes": "Newton-Euler with friction, default task, left side; time: median of "
                             f"{REPEATS} runs after a warm-up, kinematics excluded"}
-        (tmp / "study.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+        (tmp / "study.json").write_text(to_json(summary))
         step("figures")
         for r in rows:
             if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":
