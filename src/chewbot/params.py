@@ -23,7 +23,7 @@ from chewbot.model import Friction, HKPGeometry, Limits, Model
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
 
 # How far the printed geometry may disagree with the nominal lengths before a file is rejected. The papers'
-# own numbers disagree by up to 0.07 % (MODEL.md); 1 % catches a typo without tripping on rounding.
+# own numbers disagree by up to 0.07 % (docs/conventions.md); 1 % catches a typo without tripping on rounding.
 LENGTH_TOLERANCE = 0.01
 # The condyles must lie on their planes at the home pose; this allows for coordinates rounded to 0.01 mm.
 HOME_PLANE_TOLERANCE_MM = 0.01
@@ -255,7 +255,7 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "") -> Mode
         fail("hkp.T_R_mm", "must mirror hkp.T_L_mm in y (x and z equal, y opposite): the parasitic motions assume left-right symmetry")
     if not h.T_L_mm[1] > 0:
         fail("hkp.T_L_mm", "the left condyle has y > 0")
-    # {M} = {S} at home (MODEL.md): the home pose must satisfy the HKPs, the condyles on their planes in their sockets
+    # {M} = {S} at home (docs/conventions.md): the home pose must satisfy the HKPs, the condyles on their planes in their sockets
     for key, T, y_range in (("hkp.T_L_mm", h.T_L_mm, h.y_left_mm), ("hkp.T_R_mm", h.T_R_mm, h.y_right_mm)):
         residual = h.p1 * T[0] + T[2] + h.p2_mm
         if abs(residual) > HOME_PLANE_TOLERANCE_MM:

@@ -1,11 +1,11 @@
 """Orientation of the mandible: XYZ Euler angles and Euler parameters, symbolic and batched.
 
-Conventions (MODEL.md): R rotates {M} into {S}.
+Conventions (docs/conventions.md): R rotates {M} into {S}.
 
 * XYZ Euler angles: R = Rx(alpha) Ry(beta) Rz(gamma) (seed 000, Eq. 3); the angular velocity in {S} is
   omega = R_omega(alpha, beta) [alpha_dot, beta_dot, gamma_dot] with
   R_omega = [[1, 0, s_beta], [0, c_alpha, -s_alpha c_beta], [0, s_alpha, c_alpha c_beta]]
-  (MODEL.md erratum: seed 000 prints -c_alpha c_beta in the last entry).
+  (erratum (docs/conventions.md): seed 000 prints -c_alpha c_beta in the last entry).
 * Euler parameters e = (e0, e1, e2, e3), e0 the scalar part, abs(e) = 1:
   R = (e0^2 - ev.ev) I + 2 ev ev^T + 2 e0 [ev]x, and omega = 2 E(e) e_dot with E = [-ev, e0 I + [ev]x].
 
@@ -44,7 +44,7 @@ def matrix_from_euler_parameters_sx(e0, e1, e2, e3):
 
 
 def R_omega_sx(alpha, beta):
-    """The map from XYZ Euler-angle rates to the angular velocity in {S} (MODEL.md, with the erratum)."""
+    """The map from XYZ Euler-angle rates to the angular velocity in {S} (docs/conventions.md, with the erratum)."""
     return ca.vertcat(
         ca.horzcat(1, 0, ca.sin(beta)),
         ca.horzcat(0, ca.cos(alpha), -ca.sin(alpha) * ca.cos(beta)),

@@ -1,4 +1,4 @@
-"""Performance indices of an inverse-dynamics run (seed 001, Sect. 5.3, Eqs. 73–75; reading of MODEL.md).
+"""Performance indices of an inverse-dynamics run (seed 001, Sect. 5.3, Eqs. 73–75; reading of docs/conventions.md).
 
 Each index F_k is the mean over the samples of the Euclidean norm of one stacked vector:
 F1 torques tau (goal G1), F2 constraint forces at S_1..S_6 (goal G2), F3 HKP normal forces (goal G3),

@@ -10,7 +10,7 @@ delta theta = J_theta1 delta q_EE (Eq. 45):
 
     M_f = J_theta3' M J_theta3,  C_f = J_theta3' (M J_theta4 + C J_theta3),  G_f = J_theta3' dV/dq.
 
-Seed 000's F_EE is -Q_B (MODEL.md: the bite force is the food's force on the mandible and enters on the side of
+Seed 000's F_EE is -Q_B (docs/conventions.md: the bite force is the food's force on the mandible and enters on the side of
 the actuators). The target is redundantly actuated (4 equations, 6 torques): the minimum-norm torques (Eq. 54).
 
 A formulation gives the rates J_theta_dot, J_qEE_dot and the Coriolis-centrifugal matrix C (its own way: Hessians

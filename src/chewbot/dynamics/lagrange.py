@@ -1,7 +1,7 @@
 """Inverse dynamics by Lagrange's equations of the first kind (seed 000, Sect. 5.2, Eqs. 55-57).
 
 With L = T - V over q = [theta; q_EE] and the closure equations H(q) = 0 (Eq. 11) adjoined by six multipliers
-lambda, the generalised forces are the torques on theta and Q_B = J_B' F_B on q_EE (MODEL.md: the bite force
+lambda, the generalised forces are the torques on theta and Q_B = J_B' F_B on q_EE (docs/conventions.md: the bite force
 acts on the mandible, on the side of the actuators):
 
     D_theta = tau + J_theta' lambda          (Eq. 56, derived)

@@ -19,7 +19,7 @@ Free bodies and the forces they exchange (all vectors in {S}):
   F_G,i = f_i - m_c,i g,  M_G,i = ((S_i - G_i) x f_i) across z_i,
   tau_i = I_i theta_ddot_i + z_i . ((S_i - G_i) x f_i) + tau_f,i.
 
-Friction (MODEL.md): f_T,j = -(mu_c |N_j| + mu_v |v_T,j|) v_T,j/|v_T,j| and
+Friction (docs/conventions.md): f_T,j = -(mu_c |N_j| + mu_v |v_T,j|) v_T,j/|v_T,j| and
 tau_f,i = R_i mu_c,i |F_G,i| sgn(theta_dot_i) + mu_v,i theta_dot_i. The velocity directions are inputs and
 are regularised, v/sqrt(|v|^2 + eps^2); the magnitudes |N_j| and |F_G,i| depend on the unknowns and are
 smoothed, sqrt(x^2 + delta^2) (max error delta). The constants are below; docs/newton_euler.md explains them.
@@ -230,7 +230,7 @@ def problem(model: Model, goal: str) -> Problem:
     """The distribution problem of ``goal`` on ``model`` (seed 001, Eqs. 52–54), with the actuator limits.
 
     Goals: ``min-torque`` (G1, |tau|^2), ``min-coupler-force`` (G2, sum |f_i|^2 over S_1..S_6),
-    ``min-hkp-force`` (G3, N_L^2 + N_R^2). Limits (MODEL.md): |tau_i| <= torque, |tau_i theta_dot_i| <= power,
+    ``min-hkp-force`` (G3, N_L^2 + N_R^2). Limits (docs/conventions.md): |tau_i| <= torque, |tau_i theta_dot_i| <= power,
     |F_G,i . z_i| <= axial load, |F_G,i x z_i| <= radial load.
     """
     check_goal(goal)

@@ -1,6 +1,6 @@
 """Inverse kinematics in closed form (one chain at a time) and forward kinematics by Newton's method.
 
-Inverse kinematics of chain i (MODEL.md): with d = O_M + R M_i - G_i and u, v the first two columns of R_C0,i,
+Inverse kinematics of chain i (docs/conventions.md): with d = O_M + R M_i - G_i and u, v the first two columns of R_C0,i,
 the closure equation abs(S_i - M_i)^2 = L_r^2 reads A cos(theta) + B sin(theta) = C with A = 2 L_c u.d,
 B = 2 L_c v.d, C = L_c^2 + abs(d)^2 - L_r^2. Its two solutions are theta = atan2(B, A) +/- acos(C / r),
 r = sqrt(A^2 + B^2); abs(C) > r means the chain cannot reach the pose, abs(C) = r is the singular

@@ -115,7 +115,7 @@ def mechanism_coordinates(model: Model, orientation: str, X, dX, ddX):
 
 
 def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarray) -> None:
-    """Both condyles inside their sockets (x and y bounds of MODEL.md); raises naming the first bad sample."""
+    """Both condyles inside their sockets (x and y bounds of docs/conventions.md); raises naming the first bad sample."""
     h = model.hkp
     slack = 1e-12
     for label, T, yr in (("left", T_L, h.y_left), ("right", T_R, h.y_right)):

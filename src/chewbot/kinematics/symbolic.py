@@ -1,6 +1,6 @@
 """The kinematics of both mechanisms as CasADi expressions: one graph per (model, orientation).
 
-Generalised coordinates of the mandible, q_EE (MODEL.md):
+Generalised coordinates of the mandible, q_EE (docs/conventions.md):
 
 | mechanism | orientation | q_EE | parasitic |
 |---|---|---|---|
@@ -43,7 +43,7 @@ def gamma_parasitic_sx(model: Model, alpha, beta):
     """Parasitic gamma of the target from p1 R12 + R32 = 0 (difference of the two plane equations).
 
     R12 = -c_beta s_gamma, R32 = c_alpha s_beta s_gamma + s_alpha c_gamma, so
-    tan(gamma) = s_alpha / (p1 c_beta - c_alpha s_beta). MODEL.md erratum: seed 000 Eq. (5) prints
+    tan(gamma) = s_alpha / (p1 c_beta - c_alpha s_beta). erratum (docs/conventions.md): seed 000 Eq. (5) prints
     "+ c_alpha s_beta", which violates the constraint.
     """
     p1 = model.hkp.p1

@@ -24,7 +24,7 @@ from chewbot.results import Table
 # and errors in the geometry are amplified as much. The default task stays above 25 deg.
 NEAR_SINGULAR_DEG = 15.0
 
-# Names of the performance indices of seed 001 (Sect. 5.3), as MODEL.md reads them.
+# Names of the performance indices of seed 001 (Sect. 5.3), as docs/conventions.md reads them.
 INDEX_NAMES = {
     "F1": "actuator torques",
     "F2": "constraint forces at S_1..S_6",

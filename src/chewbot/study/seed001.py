@@ -3,7 +3,8 @@
 Newton–Euler with friction on the default task (left side): the target under the three goals with Euler
 parameters and with Euler angles, and the 6RSS (closed form) with both. Writes ``table3.csv`` and
 ``table3.md`` (indices F1..F7, the median time of the run, and whether each goal gives the smallest value of
-its own index), ``study.json`` and the figures: Figs. 10, 12, 13 for goal G1, Fig. 11 (friction share) for
+its own index), ``claims.md``/``claims.csv`` (items 6 and 7 of the papers' findings, docs/conventions.md),
+``study.json`` and the figures: Figs. 10, 12, 13 for goal G1, Fig. 11 (friction share) for
 each goal, and Fig. 14 (times, Euler parameters against Euler angles).
 """
 
@@ -24,6 +25,7 @@ from chewbot.params import load_model
 from chewbot.report import newton_euler_figures
 from chewbot.report.figures import _save, plt
 from chewbot.results import kinematics_table
+from chewbot.study.claims import Claim, write_claims
 from chewbot.task.default import default_task
 
 GOAL_LABELS = {"min-torque": "G1", "min-coupler-force": "G2", "min-hkp-force": "G3"}
@@ -87,6 +89,46 @@ def _fig14(rows: list[dict], path: Path) -> Path:
     return _save(fig, path)
 
 
+# A share of the actuating torque above this counts as "a large share" of friction (item 7).
+LARGE_SHARE = 50.0  # %
+
+
+def claims(rows: list[dict]) -> list[Claim]:
+    """Items 6 and 7 of the papers' findings (docs/conventions.md) from the rows of Table 3."""
+    def row(mech, orientation, goal):
+        return next(r for r in rows if r["mechanism"] == mech and r["orientation"] == orientation and r["goal"] == goal)
+
+    out = []
+    ratio = {}
+    for mech, goals in (("target", ("G1", "G2", "G3")), ("6rss", ("-",))):
+        ratio[mech] = statistics.median(row(mech, "euler-parameters", g)["time_s"] / row(mech, "euler-angles", g)["time_s"]
+                                        for g in goals)
+    ok6 = ratio["target"] < 0.5 and ratio["6rss"] < 0.8
+    out.append(Claim(6, "default", "Euler parameters take ~23 % of the Euler-angle model's time (target), ~60 % (6RSS)",
+                     f"Euler parameters / Euler angles, Newton-Euler with friction, whole task: {100 * ratio['target']:.0f} % "
+                     f"(target, median over the goals), {100 * ratio['6rss']:.0f} % (6RSS)", ok6,
+                     "" if ok6 else "compiled graphs make the trigonometric functions of the parasitic gamma a few dozen "
+                     "operations among thousands, and the distribution's Newton iterations dominate the time; the paper "
+                     "timed MATLAB code"))
+    for orientation in ORIENTATIONS:
+        own = all(r["smallest_own_index"] == "yes" for r in rows if r["mechanism"] == "target" and r["orientation"] == orientation)
+        g3, six = row("target", orientation, "G3"), row("6rss", orientation, "-")
+        near = max(abs(g3[k] / six[k] - 1) for k in ("F1", "F2", "F4", "F5", "F6"))
+        share = max(float(np.nanmax(np.where(np.isfinite(v), v, np.nan)))
+                    for k, v in row("target", orientation, "G1")["_dyn"].table.columns.items() if k.startswith("friction_share"))
+        parts = {"a goal does not minimise its own index": own,
+                 "the HKP forces under G3 are not near zero": g3["F3"] <= 1e-6 * row("target", orientation, "G1")["F3"],
+                 "the G3 indices differ from the 6RSS's by 1 % or more": near < 0.01,
+                 f"friction stays below {LARGE_SHARE:.0f} % of every torque": share >= LARGE_SHARE}
+        ok7 = all(parts.values())
+        out.append(Claim(7, orientation, "each goal minimises its own index F1..F3; under G3 the HKP forces are near zero "
+                         "and the indices approach the 6RSS's; friction can be a large share of the torque (Eq. 75)",
+                         f"own index smallest: {'yes' if own else 'no'}; F3 under G3 {g3['F3']:.2g} N; G3 vs 6RSS "
+                         f"indices within {100 * near:.2f} %; largest friction share under G1 {share:.0f} %", ok7,
+                         "; ".join(k for k, v in parts.items() if not v)))
+    return out
+
+
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
     from chewbot.outputs import atomic_folder, check_output, to_json
@@ -107,6 +149,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
                    "notes": "Newton-Euler with friction, default task, left side; time: median of "
                             f"{REPEATS} runs after a warm-up, kinematics excluded"}
         (tmp / "study.json").write_text(to_json(summary))
+        write_claims(claims(rows), tmp)
         step("figures")
         for r in rows:
             if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":

@@ -1,4 +1,4 @@
-"""The default synthetic chewing task (MODEL.md; assumed: the papers' measured data are not public).
+"""The default synthetic chewing task (docs/conventions.md; assumed: the papers' measured data are not public).
 
 A rest period, then ``cycles`` chewing cycles. In each cycle every coordinate follows a smooth bump
 b(s) = K s^a (1 - s)^c of the cycle phase s in [0, 1] (a, c >= 3: position, velocity and acceleration are
