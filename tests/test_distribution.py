@@ -76,6 +76,9 @@ def test_infeasible_limit_is_recorded_or_raised():
     Dv = np.zeros((4, 9))
     Dv[2, 2] = 1.0  # sample 2 carries a load of 1 > 0.5 whatever x is
     sol = solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1)
-    assert sol.infeasible == [{"sample": 2, "t": pytest.approx(0.2), "limits": ["fixed load"]}]
+    assert len(sol.infeasible) == 1
+    entry = sol.infeasible[0]
+    assert entry["sample"] == 2 and entry["t"] == pytest.approx(0.2) and entry["limits"] == ["fixed load"]
+    assert entry["solver"]  # the SQP's return status, which the report shows beside the sample
     with pytest.raises(InfeasibleError, match=r"sample 2 \(t = 0.2 s\).*fixed load"):
         solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1, strict=True)

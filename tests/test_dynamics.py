@@ -73,7 +73,10 @@ def test_inertia_matrix_symmetric_positive_definite(mechanism):
 
 @pytest.mark.parametrize("method", ("hessian", "liang", "lagrange"))
 def test_torques_solve_reduced_equation(mechanism, method):
-    """J_theta1' tau = M_f q_ddot + C_f q_dot + G_f - J_B' F_B (Eq. 53) with the Hessian method's terms."""
+    """J_theta1' tau = M_f q_ddot + C_f q_dot + G_f - J_B' F_B (Eq. 53) with the Hessian method's terms.
+
+    For the Hessian method itself this is a consistency check of the solve (its torques come from these very
+    terms); for Liang's and Lagrange's torques, computed from their own terms, it is a cross-check."""
     kin = default_kinematics(mechanism, "left")
     terms = reduced_terms(model(mechanism), kin, "hessian", hessian_rates)
     rhs = reduced_rhs(terms, kin)

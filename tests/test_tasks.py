@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import default_kinematics, model
@@ -235,3 +237,44 @@ def test_track_incisor_command_recovers_a_motion_and_writes_a_runnable_task(tmp_
     assert again.exit_code == 5 and "exists" in again.output
     run = runner.invoke(app, ["run", "--task", str(out), "--out", str(tmp_path / "run"), "--quiet"])
     assert run.exit_code == 0, run.output
+
+
+def test_pose_errors_of_a_csv_task_name_the_file_and_line(tmp_path):
+    """A condyle outside its socket at the 4th data row (after a comment line): the message names the file and
+    the line as an editor shows it, and still the sample and its time."""
+    from chewbot.pipeline import RunOptions, compute
+
+    rows = ["# comment", "t,X[mm],Y,alpha,beta"] + [f"{k * 0.001},{8.0 if k >= 3 else 0.0},0,0,0" for k in range(8)]
+    path = tmp_path / "far.csv"
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(KinematicsError, match=rf"^{re.escape(str(path))}: line 6: sample 3, t = 0.003 s: the left condyle leaves its socket") as err:
+        compute(RunOptions(task=str(path), method=None))
+    assert err.value.sample == 3
+
+
+def test_track_incisor_command_follows_a_pinned_column(tmp_path):
+    """The default task's own incisor path needs its roll: with the task's alpha as a column of the path file
+    (in degrees, rates estimated) the command tracks it, and the recovered motion is the task's to within the
+    derivative estimate of alpha."""
+    from typer.testing import CliRunner
+
+    from chewbot.cli import app
+    from chewbot.task.default import ChewingParameters
+
+    m = model("target")
+    known = default_task(m, "left", ChewingParameters(cycles=1, rest_s=0.1, rate_hz=200.0))
+    p, v, a = incisor_path(m, known.q, known.dq, known.ddq)
+    rows = ["t,Ix,Iy,Iz,dIx,dIy,dIz,ddIx,ddIy,ddIz,alpha[deg]"]
+    rows += [",".join(repr(float(x)) for x in (t, *p[k], *v[k], *a[k], np.degrees(known.q[k, 2]))) for k, t in enumerate(known.t)]
+    src = tmp_path / "incisor.csv"
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "tracked.csv"
+    result = CliRunner().invoke(app, ["track-incisor", str(src), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    task = read_task_csv(out)
+    assert np.abs(task.q - known.q).max() <= 1e-9  # positions: the pinned alpha is given exactly
+    # without the column, alpha is held at zero and the path cannot be followed within the sockets
+    src.write_text("\n".join(r.rsplit(",", 1)[0] for r in rows) + "\n")
+    failed = CliRunner().invoke(app, ["track-incisor", str(src), "--out", str(tmp_path / "no.csv")])
+    assert failed.exit_code == 3 and "pinned coordinate" in failed.output
+    assert not (tmp_path / "no.csv").exists()

@@ -26,7 +26,8 @@ app = typer.Typer(
     epilog="Exit codes: 0 success; 1 unexpected error (a bug); 2 bad input or usage; 3 unreachable or singular pose; "
            "4 infeasible torque distribution; 5 results folder exists or cannot be written. See docs/cli.md.",
 )
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # progress, warnings, errors: standard error, paths unwrapped
+stdout = Console(soft_wrap=True)  # results: standard output, for scripts
 
 # Exit codes (docs/cli.md). 1 is left to Python: an unexpected error, printed with its traceback.
 EXIT_OK = 0
@@ -72,8 +73,16 @@ class Switch(str, Enum):
     off = "off"
 
 
+def _version(value: bool) -> None:
+    if value:
+        from chewbot import __version__
+
+        stdout.print(f"chewbot {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit.")) -> None:
     """chewbot: run a chewing task on the robot model and write its results.
 
     Start with `chewbot run --out runs/default`; see `chewbot COMMAND --help` for each command.
@@ -181,12 +190,12 @@ def _print_run_summary(result, out: Path) -> None:
     """The lines a person wants after a run: where the report is, the peak torque, and any warning."""
     from chewbot.report.summary import column_stats, infeasible_samples, near_singular, numbered_columns
 
-    console.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
-                  f"open {escape(str(out / 'report.html'))}", highlight=False)
+    stdout.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
+                 f"open {escape(str(out / 'report.html'))}", highlight=False)
     taus = numbered_columns(result.table, "tau")
     if taus:
         top = max(column_stats(result.table, taus), key=lambda s: abs(s.peak))
-        console.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
+        stdout.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
     for i in near_singular(result.kinematics.t, result.kinematics.transmission):
         console.print(f"[yellow]warning:[/] chain {i.chain} near-singular from t = {i.t_first:.3f} s to {i.t_last:.3f} s "
                       f"(transmission angle down to {i.min_deg:.1f} deg)", highlight=False)
@@ -210,7 +219,7 @@ def bench(
 
     Example:
 
-      taskset -c 0 chewbot bench --out docs/benchmark.md
+      taskset -c 0 chewbot bench --out bench.md
     """
     from chewbot.bench import bench_kernels, bench_task, machine, ratios
 
@@ -219,7 +228,7 @@ def bench(
         step("kernels, one sample")
         kernel_timings = bench_kernels(calls)
     text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
-    Console().print(text, markup=False, highlight=False)
+    stdout.print(text, markup=False, highlight=False)
     if out is not None:
         out.write_text(text)
 
@@ -272,7 +281,7 @@ def export_c(
             write_c(ks, out, model_name=f"{t.name} + {s.name}", force=force)
     except ChewbotError as exc:
         _fail(exc)
-    console.print(f"wrote {out} ({len(ks)} kernels)")
+    stdout.print(f"wrote {escape(str(out))} ({len(ks)} kernels)", highlight=False)
 
 
 @app.command()
@@ -302,7 +311,7 @@ def study(
             written = STUDIES[name](out, force=force, progress=step)
     except ChewbotError as exc:
         _fail(exc)
-    console.print(f"wrote [bold]{written}[/]")
+    stdout.print(f"wrote [bold]{escape(str(written))}[/]", highlight=False)
 
 
 @app.command("track-incisor")
@@ -310,7 +319,7 @@ def track_incisor(
     path: Path = typer.Argument(..., help="CSV of the incisor path: t, Ix, Iy, Iz (point I in {S}), optional rates dIx..ddIz and bite force Fx, Fy, Fz; units in brackets."),
     out: Path = typer.Option(..., "--out", help="Task CSV to write (read it back with chewbot run --task); the residuals go beside it, *.residuals.csv."),
     model: str = typer.Option("target", "--model", help="The target robot's model (built-in name or TOML file)."),
-    pin: str = typer.Option("alpha", "--pin", help="The coordinate held at zero to resolve the redundancy (the incisor gives 3 equations for 4 DOF): X, Y, alpha or beta."),
+    pin: str = typer.Option("alpha", "--pin", help="The coordinate that resolves the redundancy (the incisor gives 3 equations for 4 DOF): X, Y, alpha or beta. It follows its column in the path file if there is one (e.g. alpha[deg]), else it is held at zero."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation the optimisation works in."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the file's bite force acts."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
@@ -341,7 +350,7 @@ def track_incisor(
         with _progress(False, "incisor tracking") as step:
             step("solving")
             result = track(m, path_data["t"], path_data["p"], path_data["v"], path_data["a"], orientation=orientation.value,
-                           pin=pin, force=path_data["force"], side=side.value, name=out.stem)
+                           pin=pin, pinned=path_data["pinned"].get(pin), force=path_data["force"], side=side.value, name=out.stem)
         tables = result.tables()
         out.parent.mkdir(parents=True, exist_ok=True)
         partial = [target.with_name(f".{target.name}.partial-{os.getpid()}") for target in (out, residuals)]
@@ -355,8 +364,8 @@ def track_incisor(
                 tmp.unlink(missing_ok=True)
     except ChewbotError as exc:
         _fail(exc)
-    console.print(f"wrote {out} and {residuals}; max |f_D| = {abs(result.f_D).max():.3g} m, "
-                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
+    stdout.print(f"wrote {escape(str(out))} and {escape(str(residuals))}; max |f_D| = {abs(result.f_D).max():.3g} m, "
+                 f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
 
 
 @app.command()
@@ -372,12 +381,15 @@ def models() -> None:
     from chewbot.params import BUILTIN_MODELS, builtin_model_path, load_model
 
     table = RichTable(title="built-in models")
-    for col in ("name", "mechanism", "description", "file"):
+    for col in ("name", "mechanism", "description"):
         table.add_column(col, overflow="fold")
     for name in BUILTIN_MODELS:
         m = load_model(name)
-        table.add_row(name, f"{m.mechanism} ({m.dof} DOF)", m.description, str(builtin_model_path(name)))
-    Console().print(table)
+        table.add_row(name, f"{m.mechanism} ({m.dof} DOF)", m.description)
+    stdout.print(table)
+    stdout.print("files (copy one to describe your own robot):")
+    for name in BUILTIN_MODELS:  # whole lines, so that a path can be copied as it is
+        stdout.print(f"  {name}: {builtin_model_path(name)}", highlight=False, markup=False)
 
 
 @app.command("check-model")
@@ -401,7 +413,7 @@ def check_model(
 
     try:
         m = load_model(model)
-        Console().print(_model_report(m))
+        stdout.print(_model_report(m))
     except ChewbotError as exc:
         _fail(exc)
 

@@ -21,10 +21,12 @@ class TaskError(ChewbotError):
 class KinematicsError(ChewbotError):
     """A pose of the task cannot be reached, leaves the workspace or is singular.
 
-    ``sample`` (0-based row of the task) and ``chain`` (1-based, or None) tell where.
+    ``sample`` (0-based row of the task) and ``chain`` (1-based, or None) tell where; ``reason`` is the message
+    without them. :meth:`located` adds the task file and its line.
     """
 
-    def __init__(self, message: str, sample: int | None = None, chain: int | None = None, time: float | None = None):
+    def __init__(self, message: str, sample: int | None = None, chain: int | None = None, time: float | None = None,
+                 location: str | None = None):
         where = []
         if sample is not None:
             where.append(f"sample {sample}")
@@ -33,10 +35,13 @@ class KinematicsError(ChewbotError):
         if chain is not None:
             where.append(f"chain {chain}")
         prefix = ", ".join(where)
-        super().__init__(f"{prefix}: {message}" if prefix else message)
-        self.sample = sample
-        self.chain = chain
-        self.time = time
+        text = f"{prefix}: {message}" if prefix else message
+        super().__init__(f"{location}: {text}" if location else text)
+        self.reason, self.sample, self.chain, self.time = message, sample, chain, time
+
+    def located(self, location: str) -> KinematicsError:
+        """The same error with ``location`` (e.g. ``"task.csv: line 12"``) in front."""
+        return KinematicsError(self.reason, self.sample, self.chain, self.time, location)
 
 
 class InfeasibleError(ChewbotError):

@@ -6,12 +6,14 @@ behind, and an existing folder is replaced only when ``force`` is given.
 
 from __future__ import annotations
 
+import hashlib
 import platform
 import time
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
+from chewbot.errors import KinematicsError
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
 from chewbot.params import load_model
@@ -68,7 +70,12 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     task = load_task(options.task, model, options.side)
     step("kinematics")
     t0 = time.perf_counter()
-    kin = solve_kinematics(model, task, options.orientation)
+    try:
+        kin = solve_kinematics(model, task, options.orientation)
+    except KinematicsError as exc:  # name the task file's line of the sample
+        if task.lines is None or exc.sample is None:
+            raise
+        raise exc.located(f"{task.source}: line {task.lines[exc.sample]}") from None
     timings = {"kinematics_s": time.perf_counter() - t0}
     table = kinematics_table(kin)
     result = RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
@@ -118,6 +125,10 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def _sha256(path: str) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 def run_json(result: RunResult) -> dict:
     """The run record (run.json): options, model and task identity, versions, platform, column units, info."""
     m, task = result.model, result.task
@@ -125,7 +136,8 @@ def run_json(result: RunResult) -> dict:
         "chewbot_run": 1,
         "options": vars(result.options),
         "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed)},
-        "task": {"name": task.name, "source": task.source, "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
+        "task": {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
+                 "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
         "versions": _versions(),
         "platform": platform.platform(),
         "columns": {name: {"unit": result.table.units[name], **({"description": d} if (d := result.table.descriptions.get(name)) else {})} for name in result.table.columns},

@@ -15,6 +15,9 @@ POSE_NAMES = ("X", "Y", "Z", "alpha", "beta", "gamma")
 POSE_UNITS = ("m", "m", "m", "rad", "rad", "rad")
 
 
+_LEVEL = ("", "rate of the ", "second rate of the ")
+
+
 def _rate_unit(unit: str, order: int) -> str:
     return unit if order == 0 else f"{unit}/s" if order == 1 else f"{unit}/s^2"
 
@@ -86,11 +89,12 @@ def kinematics_table(kin: Kinematics) -> Table:
     for order, (arr, prefix) in enumerate(((kin.X, ""), (kin.dX, "d"), (kin.ddX, "dd"))):
         for j, name in enumerate(POSE_NAMES):
             table.add(prefix + name, arr[:, j], _rate_unit(POSE_UNITS[j], order),
-                      "pose of the mandible: O_M in {S}, XYZ Euler angles" if order == 0 else "")
+                      _LEVEL[order] + "pose of the mandible: O_M in {S}, XYZ Euler angles")
     for order, (arr, prefix) in enumerate(((kin.theta, ""), (kin.dtheta, "d"), (kin.ddtheta, "dd"))):
-        table.add_block([f"{prefix}theta{i + 1}" for i in range(6)], arr, _rate_unit("rad", order), "actuator angles" if order == 0 else "")
+        table.add_block([f"{prefix}theta{i + 1}" for i in range(6)], arr, _rate_unit("rad", order), _LEVEL[order] + "actuator angle")
     if kin.orientation == "euler-parameters":
         for order, (arr, prefix) in enumerate(((kin.e, ""), (kin.de, "d"), (kin.dde, "dd"))):
-            table.add_block([f"{prefix}e{i}" for i in range(4)], arr, "1" if order == 0 else _rate_unit("1", order), "Euler parameters" if order == 0 else "")
+            table.add_block([f"{prefix}e{i}" for i in range(4)], arr, "1" if order == 0 else _rate_unit("1", order),
+                            _LEVEL[order] + "Euler parameters of the mandible (e0 scalar)")
     table.add_block(["Fx", "Fy", "Fz"], kin.force, "N", "bite force on the mandible at the molar, in {S}")
     return table

@@ -11,8 +11,9 @@ component-wise (the actuators' physical limits). Each sample is solved in two st
    line search, vectorised over the samples that have not converged.
 2. Where that optimum breaks a limit: SQP (CasADi ``sqpmethod``, exact Hessian) with the limits as
    inequality constraints, sample after sample in time order, each warm-started from the solution of the
-   previous sample. A sample where no admissible x exists is recorded (which sample, which limit), never
-   clipped; ``strict`` raises :class:`~chewbot.errors.InfeasibleError` instead.
+   previous sample. A sample where no admissible x is found is recorded (which sample, which limit, and the
+   SQP's return status, which tells a proven infeasible problem from a failure to converge), never clipped;
+   ``strict`` raises :class:`~chewbot.errors.InfeasibleError` instead.
 """
 
 from __future__ import annotations
@@ -156,17 +157,20 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, st
     broken = broken_limits(problem, data, x, friction)
     rows = np.flatnonzero(broken.any(axis=1))
     constrained, infeasible = [], []
+    status = {}
     if problem.nx and rows.size:
-        x, constrained = _constrained(problem, data, x, friction, rows)
+        x, constrained, status = _constrained(problem, data, x, friction, rows)
         broken = broken_limits(problem, data, x, friction)
         rows = np.flatnonzero(broken.any(axis=1))
     for k in rows:
         names = [problem.limit_names[j] for j in np.flatnonzero(broken[k])]
-        infeasible.append({"sample": int(k), "t": float(t[k]), "limits": names})
+        infeasible.append({"sample": int(k), "t": float(t[k]), "limits": names,
+                           "solver": status.get(int(k), "none: no redundancy to distribute" if not problem.nx else "unknown")})
     if infeasible and strict:
         first = infeasible[0]
-        raise InfeasibleError(f"sample {first['sample']} (t = {first['t']:.6g} s): no admissible distribution, "
-                              f"limits broken: {', '.join(first['limits'])} ({len(infeasible)} sample(s) in all)")
+        raise InfeasibleError(f"sample {first['sample']} (t = {first['t']:.6g} s): no distribution within the limits found "
+                              f"(SQP: {first['solver']}); limits broken: {', '.join(first['limits'])} "
+                              f"({len(infeasible)} sample(s) in all)")
     return Solution(x, iterations, unconverged, constrained, infeasible)
 
 
@@ -204,6 +208,7 @@ def _constrained(problem: Problem, data: SampleData, x, friction, rows):
     x = x.copy()
     solver = problem.nlp
     lb, ub = -problem.bound, problem.bound
+    status = {}
     for k in rows:
         x0 = x[k - 1] if k > 0 else x[k]
         sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction]]), lbg=lb, ubg=ub)
@@ -211,4 +216,6 @@ def _constrained(problem: Problem, data: SampleData, x, friction, rows):
         c = np.asarray(sol["g"]).ravel()
         if np.all(np.abs(c) <= problem.bound * (1 + LIMIT_RTOL)):
             x[k] = xk
-    return x, [int(k) for k in rows]
+        else:  # what the solver said: a proven infeasible problem and a failure to converge read differently
+            status[int(k)] = str(solver.stats().get("return_status", "unknown"))
+    return x, [int(k) for k in rows], status

@@ -72,7 +72,7 @@ def inverse_kinematics(model: Model, p: np.ndarray, R: np.ndarray, times: np.nda
     A, B, C = _coefficients(model, p, R)
     r = np.hypot(A, B)
     ratio = C / r
-    _raise_first(np.abs(ratio) > 1, times, lambda n, k: f"pose out of reach of chain {k + 1}: "
+    _raise_first(np.abs(ratio) > 1, times, lambda n, k: "pose out of reach: "
                  f"abs(C)/sqrt(A^2+B^2) = {abs(ratio[n, k]):.6f} > 1 (the coupler cannot close the loop)")
     sin_tr = np.sqrt(np.clip(1 - ratio**2, 0, None))
     _raise_first(sin_tr < SINGULAR_TOLERANCE, times, lambda n, k: f"chain {k + 1} is singular: crank and "

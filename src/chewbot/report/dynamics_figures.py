@@ -21,7 +21,7 @@ def _per_joint(ax, t, values, label, unit):
     for i in JOINTS:
         ax.plot(t, values[:, i - 1], lw=0.9, label=f"{label}{i}")
     ax.set_ylabel(f"{label} [{unit}]")
-    ax.legend(loc="upper right", fontsize=8, ncol=6)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(alpha=0.3)
 
 
@@ -39,7 +39,7 @@ def torques(table: Table, path: Path, method: str = "") -> Path:
         axf.plot(t, table[name], label=name)
     axf.set_ylabel("bite force F_B [N]")
     axf.set_xlabel("time t [s]")
-    axf.legend(loc="lower right", ncol=3, fontsize=8)
+    axf.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     axf.grid(alpha=0.3)
     return _save(fig, path)
 

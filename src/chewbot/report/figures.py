@@ -36,7 +36,7 @@ def task_space(table: Table, path: Path) -> Path:
         tr.set_ylabel(f"translation {level} [mm{unit}]")
         rot.set_ylabel(f"rotation {level} [deg{unit}]")
         for ax in (tr, rot):
-            ax.legend(loc="upper right", fontsize=8, ncol=3)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
             ax.grid(alpha=0.3)
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
@@ -52,7 +52,7 @@ def joint_space(table: Table, path: Path) -> Path:
         for i in range(1, 7):
             ax.plot(t, np.degrees(table[f"{prefix}theta{i}"]), label=f"{prefix}θ{i}")
         ax.set_ylabel(f"actuator {level} [{unit}]")
-        ax.legend(loc="upper right", fontsize=8, ncol=6)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time t [s]")
     fig.suptitle("Motion of the actuators (joint space)")
@@ -66,6 +66,6 @@ def bite_force(table: Table, path: Path) -> Path:
         ax.plot(table["t"], table[name], label=name)
     ax.set_xlabel("time t [s]")
     ax.set_ylabel("bite force F_B [N]")
-    ax.legend(loc="lower right", ncol=3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(alpha=0.3)
     return _save(fig, path)

@@ -19,7 +19,8 @@ class Task:
     ``coords`` is ``("X", "Y", "alpha", "beta")`` (the target's independent coordinates; Z and gamma follow
     from the HKPs) or ``("X", "Y", "Z", "alpha", "beta", "gamma")`` (all six, as the 6RSS needs).
     Arrays are samples first: ``t`` (N,) s; ``q``, ``dq``, ``ddq`` (N, k) in m, rad and their rates;
-    ``force`` (N, 3) the bite force F_B on the mandible in {S}, N; ``side`` the molar it acts on.
+    ``force`` (N, 3) the bite force F_B on the mandible in {S}, N; ``side`` the molar it acts on; ``lines``:
+    for a task read from a file, the file's line of each sample.
     """
 
     name: str
@@ -32,6 +33,7 @@ class Task:
     side: str = "left"
     source: str = "generated"
     meta: dict = field(default_factory=dict)
+    lines: np.ndarray | None = None  # line of the source file of each sample, for error messages
 
     def __post_init__(self):
         if self.coords not in (TARGET_COORDS, FULL_COORDS):

@@ -54,7 +54,8 @@ def _columns(kinds: dict[str, str]) -> dict[str, tuple[str, int]]:
 
 COLUMNS = _columns(KIND)
 INCISOR = ("Ix", "Iy", "Iz")  # the incisor point I in {S}
-INCISOR_COLUMNS = _columns({c: "length" for c in INCISOR})
+# An incisor path may also give the trajectory of the coordinate pinned to resolve the redundancy.
+INCISOR_COLUMNS = _columns({**{c: "length" for c in INCISOR}, **{c: KIND[c] for c in TARGET_COORDS}})
 
 
 def _unit_factor(unit: str, kind: str, order: int) -> float:
@@ -183,14 +184,21 @@ def _meta(path: Path, names, header, estimated) -> dict:
             **({"smoothing": {"method": "savgol", "polyorder": smoothing.POLYORDER, "window_s": smoothing.WINDOW_S}} if estimated else {})}
 
 
-def read_incisor_csv(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a path of the incisor point I in {S}: columns ``t, Ix, Iy, Iz``, optional rates ``dIx ... ddIz`` and
-    bite force ``Fx, Fy, Fz``, units in brackets as for tasks. Returns t (N,), p, v, a, force (N, 3), SI."""
+def read_incisor_csv(path: str | Path) -> dict:
+    """Read a path of the incisor point I in {S}: columns ``t, Ix, Iy, Iz``, optional rates ``dIx ... ddIz``,
+    bite force ``Fx, Fy, Fz`` and the trajectory of a coordinate to pin (``X``, ``Y``, ``alpha`` or ``beta``,
+    optionally with rates), units in brackets as for tasks. Returns t (N,), p, v, a, force (N, 3) and
+    ``pinned``: {coordinate: (values, rates, accelerations)}, SI."""
     path = Path(path)
     names, header, lines, col = _read_signals(path, INCISOR_COLUMNS, ("t",) + INCISOR, "an incisor path")
     p, v, a, _ = _with_rates(path, lines, col, INCISOR)
     force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
-    return {"t": col["t"], "p": p, "v": v, "a": a, "force": force}
+    pinned = {}
+    for c in TARGET_COORDS:
+        if c in col:
+            q, dq, ddq, _ = _with_rates(path, lines, col, (c,))
+            pinned[c] = (q[:, 0], dq[:, 0], ddq[:, 0])
+    return {"t": col["t"], "p": p, "v": v, "a": a, "force": force, "pinned": pinned}
 
 
 def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target", name: str | None = None) -> Task:
@@ -207,4 +215,4 @@ def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target
     q, dq, ddq, estimated = _with_rates(path, lines, col, coords)
     force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
     return Task(name=name or path.stem, t=col["t"], coords=coords, q=q, dq=dq, ddq=ddq, force=force,
-                side=side, source=str(path), meta=_meta(path, names, header, estimated))
+                side=side, source=str(path), meta=_meta(path, names, header, estimated), lines=lines)

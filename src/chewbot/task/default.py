@@ -123,5 +123,5 @@ def lift_to_full(model: Model, task: Task) -> Task:
     from chewbot.kinematics.functions import parasitic_function
 
     X, dX, ddX = evaluate(parasitic_function(model), task.q, task.dq, task.ddq)
-    return Task(name=task.name, t=task.t, coords=FULL_COORDS, q=X, dq=dX, ddq=ddX, force=task.force,
+    return Task(name=task.name, t=task.t, coords=FULL_COORDS, q=X, dq=dX, ddq=ddX, force=task.force, lines=task.lines,
                 side=task.side, source=task.source, meta=task.meta)

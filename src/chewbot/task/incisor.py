@@ -249,7 +249,9 @@ def _check_solution(t, f_D, max_residual, constraints, refs) -> None:
         if bad.size:
             i = int(bad[0])
             raise KinematicsError(f"incisor tracking: the incisor point cannot be reached within the sockets (abs(f_D) = "
-                                  f"{err[i]:.3g} m > {max_residual:g} m; {bad.size} sample(s))", sample=i, time=float(t[i]))
+                                  f"{err[i]:.3g} m > {max_residual:g} m; {bad.size} sample(s)) with the pinned coordinate's "
+                                  "trajectory; give the one the motion has (a column of the path file, such as "
+                                  "alpha[deg], or pinned= from Python) or pin another coordinate", sample=i, time=float(t[i]))
 
 
 def _angles(model: Model, orientation: str, q, dq, ddq, t):
