@@ -184,6 +184,17 @@ def test_native_calls_equal_casadi():
     one = nf(q[2100], dq[2100], ddq[2100], m.molar_left, kin.force[2100])
     for a, b in zip(one, ref):
         assert _rel(a, b[2100]) <= 1e-13
+    # matrix outputs, and results that stay valid after the next call reuses the buffers
+    full = NativeFunction(dynamics_kernel(m))
+    k = 2440  # inside a bite: every output is non-zero
+    first = full(q[k], dq[k], ddq[k], m.molar_left, kin.force[k])
+    full(q[900], dq[900], ddq[900], m.molar_left, kin.force[900])
+    for a, b in zip(first, evaluate(dynamics_kernel(m), q[k:k + 1], dq[k:k + 1], ddq[k:k + 1], m.molar_left, kin.force[k:k + 1])):
+        assert _rel(np.asarray(a).reshape(b[0].shape), b[0]) <= 1e-13
+    with pytest.raises(ValueError, match="5 inputs|takes 5"):
+        full(q[2100], dq[2100])
+    with pytest.raises(ValueError, match="entries, expected"):
+        full(q[2100], dq[2100], ddq[2100], m.molar_left, 3.0)
 
 
 @pytest.fixture(scope="module")

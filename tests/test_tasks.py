@@ -254,8 +254,8 @@ def test_pose_errors_of_a_csv_task_name_the_file_and_line(tmp_path):
 
 def test_track_incisor_command_follows_a_pinned_column(tmp_path):
     """The default task's own incisor path needs its roll: with the task's alpha as a column of the path file
-    (in degrees, rates estimated) the command tracks it, and the recovered motion is the task's to within the
-    derivative estimate of alpha."""
+    (in degrees; its rates estimated from it) the command tracks it, and the recovered positions are the task's
+    (the position problem uses the given alpha exactly; the rates depend on the estimate and are not compared)."""
     from typer.testing import CliRunner
 
     from chewbot.cli import app

@@ -8,11 +8,14 @@ of its generated source) and falls back to CasADi's virtual machine where no com
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import shutil
 import subprocess
 import tempfile
+import threading
+import warnings
 from pathlib import Path
 
 import casadi as ca
@@ -74,16 +77,27 @@ def compile_library(fn: ca.Function, flags: tuple[str, ...] = ("-O2",), batch: b
             with open(Path(tmp, cname), "a") as f:
                 f.write(_batch_wrapper(fn))
         source = Path(tmp, cname).read_bytes()
-        digest = hashlib.sha256(source + " ".join(flags).encode()).hexdigest()[:20]
+        digest = hashlib.sha256(source + " ".join([_compiler_identity(cc), *flags]).encode()).hexdigest()[:20]
         lib = cache_dir() / f"{fn.name()}_{digest}.so"
         if not lib.exists():
-            partial = lib.with_suffix(f".{os.getpid()}.tmp")
-            cmd = [cc, *flags, "-fPIC", "-shared", "-o", str(partial), str(Path(tmp, cname)), "-lm"]
-            result = subprocess.run(cmd, capture_output=True, text=True)
-            if result.returncode != 0:
-                raise RuntimeError(f"compiling kernel {fn.name()} failed:\n{result.stderr[-2000:]}")
-            os.replace(partial, lib)  # atomic: a concurrent process never loads a half-written library
+            fd, partial = tempfile.mkstemp(suffix=".tmp", prefix=f".{lib.stem}.", dir=lib.parent)
+            os.close(fd)
+            try:
+                cmd = [cc, *flags, "-fPIC", "-shared", "-o", partial, str(Path(tmp, cname)), "-lm"]
+                result = subprocess.run(cmd, capture_output=True, text=True)
+                if result.returncode != 0:
+                    raise RuntimeError(f"compiling kernel {fn.name()} failed:\n{result.stderr[-2000:]}")
+                os.replace(partial, lib)  # atomic: a concurrent process or thread never loads a half-written library
+            finally:
+                Path(partial).unlink(missing_ok=True)
     return lib
+
+
+@functools.cache
+def _compiler_identity(cc: str) -> str:
+    """The compiler's path and version line, part of the cache key: another compiler, another library."""
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()
+    return f"{shutil.which(cc)} {version[0] if version else ''}"
 
 
 def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
@@ -91,7 +105,11 @@ def compiled(fn: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function:
     (or ``$CHEWBOT_NO_COMPILE`` is set): the results are the same, only slower."""
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         return fn
-    return ca.external(fn.name(), str(compile_library(fn, flags)))
+    try:
+        return ca.external(fn.name(), str(compile_library(fn, flags)))
+    except OSError as exc:
+        _cache_unusable(exc)
+        return fn
 
 
 def native(fn: ca.Function) -> "NativeFunction | ca.Function":
@@ -99,7 +117,16 @@ def native(fn: ca.Function) -> "NativeFunction | ca.Function":
     compiler (or ``$CHEWBOT_NO_COMPILE`` is set): :func:`evaluate` takes either, with the same results."""
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         return fn
-    return NativeFunction(fn)
+    try:
+        return NativeFunction(fn)
+    except OSError as exc:
+        _cache_unusable(exc)
+        return fn
+
+
+def _cache_unusable(exc: OSError) -> None:
+    warnings.warn(f"the kernel cache cannot be used ({exc}); running the CasADi graphs in its virtual machine "
+                  "instead (same results, slower); set $CHEWBOT_CACHE to a writable folder", RuntimeWarning, stacklevel=3)
 
 
 class NativeFunction:
@@ -107,7 +134,8 @@ class NativeFunction:
     in one C loop with no conversion through CasADi's matrices.
 
     ``fn(*inputs)`` evaluates one sample (a few microseconds of overhead, where CasADi's own Python call costs
-    tens) and returns the outputs as NumPy arrays (vectors flat, matrices with their shape).
+    tens) and returns the outputs as new NumPy arrays (vectors flat, matrices with their shape). Calls from
+    several threads are serialised (the buffers are per instance).
     ``fn.batch(*inputs)`` evaluates N samples: inputs (N, k) (or (k,) for the same value at every sample),
     outputs (N, rows) or (N, rows, cols), as :func:`evaluate` returns them.
     """
@@ -134,15 +162,28 @@ class NativeFunction:
         self._res = (dbl_p * max(fn.sz_res(), 1))(*[a.ctypes.data_as(dbl_p) for a in self._out])
         self._iw = (ctypes.c_longlong * max(fn.sz_iw(), 1))()
         self._w = (ctypes.c_double * max(fn.sz_w(), 1))()
+        self._lock = threading.Lock()
+
+    def _check_count(self, inputs) -> None:
+        if len(inputs) != self.function.n_in():
+            raise ValueError(f"{self.name}: {len(inputs)} inputs given, it takes {self.function.n_in()} "
+                             f"({', '.join(self.function.name_in())})")
 
     def __call__(self, *inputs) -> list[np.ndarray]:
-        for buf, x in zip(self._in, inputs):
-            buf[:] = np.ravel(x, order="F")
-        if self._c(self._arg, self._res, self._iw, self._w, 0):
-            raise RuntimeError(f"kernel {self.name} failed")
-        return [o.reshape(shape, order="F") if shape[1] > 1 else o.copy() for o, shape in zip(self._out, self._shapes)]
+        self._check_count(inputs)
+        fn = self.function
+        with self._lock:  # the buffers are shared, and ctypes releases the GIL during the call
+            for i, (buf, x) in enumerate(zip(self._in, inputs)):
+                x = np.ravel(np.asarray(x, dtype=float), order="F")
+                if x.size != buf.size:
+                    raise ValueError(f"{self.name}: input {fn.name_in(i)} has {x.size} entries, expected {buf.size}")
+                buf[:] = x
+            if self._c(self._arg, self._res, self._iw, self._w, 0):
+                raise RuntimeError(f"kernel {self.name} failed")
+            return [o.reshape(shape, order="F").copy() if shape[1] > 1 else o.copy() for o, shape in zip(self._out, self._shapes)]
 
     def batch(self, *inputs) -> list[np.ndarray]:
+        self._check_count(inputs)
         fn = self.function
         n = next((np.shape(x)[0] for x in inputs if np.ndim(x) == 2), None)
         if n is None:
@@ -150,6 +191,8 @@ class NativeFunction:
         arrays, strides = [], []
         for i, x in enumerate(inputs):
             a = np.ascontiguousarray(x, dtype=float)
+            if a.ndim == 1 and fn.nnz_in(i) == 1 and a.size == n:  # a scalar per sample
+                a = a.reshape(n, 1)
             if a.ndim == 2:
                 if a.shape != (n, fn.nnz_in(i)):
                     raise ValueError(f"{self.name}: input {fn.name_in(i)} has shape {a.shape}, expected {(n, fn.nnz_in(i))}")
@@ -164,8 +207,9 @@ class NativeFunction:
         dbl_p = self._dbl_p
         ins = (dbl_p * len(arrays))(*[a.ctypes.data_as(dbl_p) for a in arrays])
         res = (dbl_p * len(outs))(*[o.ctypes.data_as(dbl_p) for o in outs])
-        if self._cb(n, ins, (ctypes.c_longlong * len(strides))(*strides), res, self._iw, self._w):
-            raise RuntimeError(f"kernel {self.name} failed")
+        with self._lock:  # the work arrays are shared
+            if self._cb(n, ins, (ctypes.c_longlong * len(strides))(*strides), res, self._iw, self._w):
+                raise RuntimeError(f"kernel {self.name} failed")
         return [o if c == 1 else o.reshape(n, c, r).transpose(0, 2, 1) for o, (r, c) in zip(outs, self._shapes)]
 
 

@@ -222,6 +222,7 @@ def bench(
       taskset -c 0 chewbot bench --out bench.md
     """
     from chewbot.bench import bench_kernels, bench_task, machine, ratios
+    from chewbot.outputs import write_text_atomic
 
     with _progress(False, "timing") as step:
         timings = bench_task(repeats=repeats, progress=step)
@@ -230,7 +231,10 @@ def bench(
     text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
     stdout.print(text, markup=False, highlight=False)
     if out is not None:
-        out.write_text(text)
+        try:
+            write_text_atomic(out, text)
+        except OSError as exc:
+            _fail(ChewbotError(f"{out}: cannot write the tables ({exc.strerror or exc})"), EXIT_OUTPUT)
 
 
 def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) -> str:
@@ -264,7 +268,7 @@ def export_c(
     """
     from chewbot.export import export_c as write_c
     from chewbot.params import load_model
-    from chewbot.outputs import OutputError
+    from chewbot.outputs import check_output
     from chewbot.realtime import kernels
 
     try:
@@ -272,8 +276,7 @@ def export_c(
         for m, want in ((t, "target"), (s, "6rss")):
             if m.mechanism != want:
                 raise ChewbotError(f"{m.source}: mechanism is {m.mechanism!r}, expected {want!r} here")
-        if out.exists() and not force:
-            raise OutputError(f"{out}: exists; choose another --out or pass --force to replace it")
+        check_output(out, force)  # before the kernels are built, not after
         with _progress(False, "generating C") as step:
             step("building kernels")
             ks = kernels(t, s)

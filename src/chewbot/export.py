@@ -108,7 +108,8 @@ def _readme(prefix: str, kernels: list[Kernel], model_name: str) -> str:
         "```",
         "",
         "`arg[i]` points to input i, `res[j]` to output j (matrices column-major); `iw` and `w` are work arrays",
-        "whose sizes `NAME_work(&n_arg, &n_res, &n_iw, &n_w)` returns (the example uses them). Returns 0 on success.",
+        "whose sizes `NAME_work(&n_arg, &n_res, &n_iw, &n_w)` returns (the example declares them with the sizes",
+        "known when it was generated). Returns 0 on success. A kernel keeps no state: calls are independent.",
         "",
     ]
     for k in kernels:

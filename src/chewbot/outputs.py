@@ -62,6 +62,18 @@ def check_output(out: Path, force: bool) -> None:
         raise OutputExistsError(f"{out}: the results folder exists; choose another --out or pass --force to replace it")
 
 
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary sibling: the file is whole or untouched."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
 def to_json(obj) -> str:
     """Standard JSON (RFC 8259) of ``obj``: NumPy arrays and scalars as lists and numbers, paths as strings,
     NaN and infinities (an index that does not apply, an infinite ratio) as null."""

@@ -12,8 +12,9 @@ The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rs
 (:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel on its two unknowns: the
 best piecewise least-squares start, then a fixed number (:data:`G1_ITERATIONS`) of safeguarded Newton steps: a
 fixed cost, as a real-time loop needs. The kernel returns its last step and the gradient of |tau|^2 at its answer
-(both ~0 at the optimum) and the actuator-limit values, so the caller can verify all three; it does not handle
-active limits (the Python solver falls back to SQP there).
+(both ~0 at the optimum: the step is the one Newton proposes there, so a stalled line search shows) and the
+actuator-limit values, so the caller can verify all three; it does not handle active limits (the Python solver
+falls back to SQP there).
 
 :func:`chewbot.casadi_tools.native` wraps a kernel for calls from Python through ctypes (one sample in a few
 microseconds, or a whole trajectory in one C loop);
@@ -36,8 +37,8 @@ from chewbot.model import Model
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
 # least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
-# default up to 1 (HKP) and 0.5 (actuators) on the default task; 12 leave a margin. The kernel reports its
-# last step, so a caller sees when this was not enough.
+# default up to 1 (HKP) and 0.5 (actuators) on the default task; 12 leave a margin. The kernel reports the
+# Newton step at its answer, so a caller sees when this was not enough.
 G1_ITERATIONS = 12
 HALVINGS = 4
 ARMIJO = 1e-4
@@ -49,8 +50,8 @@ EXAMPLE_T = 2.44
 def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int = G1_ITERATIONS) -> ca.Function:
     """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B) ->
     tau (N m), N (N_L, N_R in N), grad: gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), step: the size
-    of the last Newton step (N; converged when tiny), limits (24: tau, power, axial, radial load per actuator,
-    in N m, W, N, N). q_EE in ``orientation``.
+    of the Newton step proposed at the answer (N; tiny only at the optimum), limits (24: tau, power, axial,
+    radial load per actuator, in N m, W, N, N). q_EE in ``orientation``.
 
     It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.newton_euler.start_sx`)
     and takes ``iterations`` safeguarded Newton steps: the exact Hessian where it is positive definite, else
@@ -59,6 +60,8 @@ def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int =
     """
     if not model.has_hkp:
         raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
+    if iterations < 1:
+        raise ValueError(f"iterations must be at least 1, not {iterations}")
 
     def build():
         coeff = coefficients_sx_function(model, orientation)
@@ -87,12 +90,13 @@ def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int =
         start = ca.Function("g1_start", [Dsym], [start_sx(model, "min-torque", Dsym)])
         dth = Dsym[-6:]
         lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
-        final = ca.Function("g1_final", [Dsym, N], [out["tau"], g, lim])
+        # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
+        final = ca.Function("g1_final", [Dsym, N], [out["tau"], g, ca.norm_2(p), lim])
         Nk = start(D)
         for _ in range(iterations):
-            N_prev, Nk = Nk, step(D, Nk)
-        tau, grad, limits = final(D, Nk)
-        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, ca.norm_2(Nk - N_prev), limits],
+            Nk = step(D, Nk)
+        tau, grad, newton_step, limits = final(D, Nk)
+        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, newton_step, limits],
                            ["theta", "q", "dq", "ddq", "F_B", "B"], ["tau", "N", "grad", "step", "limits"], {"cse": True})
 
     return model.cached(("fn", "g1_kernel", orientation, iterations), build)

@@ -19,13 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.rotation import matrix_from_euler_angles
-
-
-def _cross(a, b):
-    return np.cross(a, b)
 
 
 @dataclass(frozen=True)
@@ -58,30 +55,30 @@ def _equations(model: Model, kin: Kinematics, side: str | None) -> _Sample:
         ux, uy, z = model.R_C0[i][:, 0], model.R_C0[i][:, 1], model.R_C0[i][:, 2]
         th, dth, ddth = kin.theta[:, i], kin.dtheta[:, i], kin.ddtheta[:, i]
         rGS = model.crank_length[i] * (np.cos(th)[:, None] * ux + np.sin(th)[:, None] * uy)
-        a_S = ddth[:, None] * _cross(z, rGS) - (dth**2)[:, None] * rGS
+        a_S = ddth[:, None] * np.cross(z, rGS) - (dth**2)[:, None] * rGS
         r = R @ model.M[i]
-        a_M = a + _cross(dw, r) + _cross(w_, _cross(w_, r))
+        a_M = a + np.cross(dw, r) + np.cross(w_, np.cross(w_, r))
         L, m = model.coupler_length[i], model.coupler_mass[i]
         u = (kin.X[:, :3] + r - model.G[i] - rGS) / L
         a_E = (a_S + a_M) / 2
         c = -(m / 2) * (a_E - grav) - (m * L / 12) * (a_M - a_S) / L
         g_perp = c - np.sum(u * c, axis=1, keepdims=True) * u
         A[:, :3, i] = u
-        A[:, 3:, i] = _cross(r, u)
+        A[:, 3:, i] = np.cross(r, u)
         g_perp_sum += g_perp
-        m_perp_sum += _cross(r, g_perp)
+        m_perp_sum += np.cross(r, g_perp)
         u_all[:, i] = u
         F_rest[:, i] = g_perp + m * (a_E - grav)
-        lever[:, i] = _cross(z, rGS)
+        lever[:, i] = np.cross(z, rGS)
     wrench = np.concatenate([
         model.mandible_mass * (a - grav) - F_B - g_perp_sum,
-        np.einsum("nij,nj->ni", I_S, dw) + _cross(w_, np.einsum("nij,nj->ni", I_S, w_)) - _cross(r_B, F_B) - m_perp_sum,
+        np.einsum("nij,nj->ni", I_S, dw) + np.cross(w_, np.einsum("nij,nj->ni", I_S, w_)) - np.cross(r_B, F_B) - m_perp_sum,
     ], axis=1)
     if model.has_hkp:
         nvec = model.hkp.normal
         r_T = np.stack([R @ model.hkp.T_L, R @ model.hkp.T_R], axis=1)
-        P = np.stack([np.concatenate([np.broadcast_to(nvec, (n, 3)), _cross(r_T[:, j], nvec)], axis=1) for j in range(2)], axis=2)
-        v_T = v[:, None, :] + _cross(w_[:, None, :], r_T)
+        P = np.stack([np.concatenate([np.broadcast_to(nvec, (n, 3)), np.cross(r_T[:, j], nvec)], axis=1) for j in range(2)], axis=2)
+        v_T = v[:, None, :] + np.cross(w_[:, None, :], r_T)
     else:
         r_T, P, v_T = np.zeros((n, 0, 3)), np.zeros((n, 6, 0)), np.zeros((n, 0, 3))
     inertial = model.crank_inertia * kin.ddtheta
@@ -152,6 +149,8 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
 
         res = minimize(lambda N, torques=torques: float(np.sum(torques(N)[0] ** 2)), x0, method="SLSQP",
                        constraints=[{"type": "ineq", "fun": limits}], options={"ftol": 1e-16, "maxiter": 200})
+        if not res.success:
+            raise ChewbotError(f"SciPy SLSQP failed at sample {k} (t = {kin.t[k]:.6g} s): {res.message}")
         x0 = res.x
         taus.append(torques(res.x)[0])
         Ns.append(res.x)

@@ -22,13 +22,14 @@ condyles slide on), so projecting onto M_J removes them:
       M_f = M_J' M_6 M_J,  C_f = M_J' (M_6 M_J_dot + C_6 M_J),  G_f = M_J' G_6,  Q_B = M_J' Q_6,
 
 the same Eq. (53) as the Hessian method (M_f and G_f identical, C_f q_EE_dot identical), solved for the
-minimum-norm torques. C_6 comes from the bodies' velocity Jacobians W (v = W x_dot): C_6 = W' K W_dot plus the
-mandible's gyroscopic term, so that C_6 x_dot is exact and M_6_dot - 2 C_6 is skew-symmetric (the property
-passivity-based controllers use); it needs one directional derivative of W instead of the six partial derivatives
-of M_6 a Christoffel form takes.
+minimum-norm torques. M_6 and C_6 are built from the structure of T (:func:`_structured_inertia`): the mandible
+with a point mass m_i/3 at each M_i as one rigid body, plus rank-one terms per chain; C_6 x_dot is exact and
+M_6_dot - 2 C_6 is skew-symmetric (the property passivity-based controllers use). The torque-only kernel
+takes the left-hand side through the bodies' accelerations instead, without forming M_6 or C_6.
 
 Everything, the inverse kinematics included, is one CasADi graph per sample, compiled to C: the per-sample
-kernel of :func:`torque_kernel` is what ``chewbot export-c`` writes for the robot's controller.
+kernels of :func:`torque_kernel` and :func:`dynamics_kernel` are what ``chewbot export-c`` writes for the robot's
+controller.
 """
 
 from __future__ import annotations
@@ -45,7 +46,9 @@ from chewbot.kinematics.symbolic import Z_parasitic_sx, gamma_parasitic_sx
 from chewbot.model import Model
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
+
 def _skew(v):
+    """[v]x, the cross-product matrix: [v]x w = v x w."""
     return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]), ca.horzcat(-v[1], v[0], 0))
 
 

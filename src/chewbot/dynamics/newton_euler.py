@@ -272,7 +272,8 @@ def start_sx(model: Model, goal: str, D) -> ca.SX:
     """
     N = ca.SX.sym("N", n_unknowns(model))
     best, best_J = None, None
-    for signs in ((1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0), (0, 0)):
+    # (0, 0) first: always finite, so a singular piece (NaN) never becomes the start (NaN < x is false)
+    for signs in ((0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0)):
         free = [j for j in range(2) if signs[j]]
         Nc = ca.vertcat(*[N[j] if signs[j] else 0 for j in range(2)])
         r = goal_residual(model, goal, D, Nc, 1.0, absN=ca.vertcat(*[signs[j] * N[j] for j in range(2)]))

@@ -89,7 +89,7 @@ def _fig14(rows: list[dict], path: Path) -> Path:
     return _save(fig, path)
 
 
-# A share of the actuating torque above this counts as "a large share" of friction (item 7).
+# A median share of the actuating torque above this counts as "a large share" of friction (item 7).
 LARGE_SHARE = 50.0  # %
 
 
@@ -114,17 +114,20 @@ def claims(rows: list[dict]) -> list[Claim]:
         own = all(r["smallest_own_index"] == "yes" for r in rows if r["mechanism"] == "target" and r["orientation"] == orientation)
         g3, six = row("target", orientation, "G3"), row("6rss", orientation, "-")
         near = max(abs(g3[k] / six[k] - 1) for k in ("F1", "F2", "F4", "F5", "F6"))
-        share = max(float(np.nanmax(np.where(np.isfinite(v), v, np.nan)))
-                    for k, v in row("target", orientation, "G1")["_dyn"].table.columns.items() if k.startswith("friction_share"))
+        # the typical share (median over the samples, largest over the actuators): the maximum sits where a
+        # torque crosses zero and the ratio is unbounded, which says nothing
+        share = max(float(np.median(v)) for k, v in row("target", orientation, "G1")["_dyn"].table.columns.items()
+                    if k.startswith("friction_share"))
         parts = {"a goal does not minimise its own index": own,
                  "the HKP forces under G3 are not near zero": g3["F3"] <= 1e-6 * row("target", orientation, "G1")["F3"],
                  "the G3 indices differ from the 6RSS's by 1 % or more": near < 0.01,
-                 f"friction stays below {LARGE_SHARE:.0f} % of every torque": share >= LARGE_SHARE}
+                 f"friction typically stays below {LARGE_SHARE:.0f} % of every torque": share >= LARGE_SHARE}
         ok7 = all(parts.values())
         out.append(Claim(7, orientation, "each goal minimises its own index F1..F3; under G3 the HKP forces are near zero "
                          "and the indices approach the 6RSS's; friction can be a large share of the torque (Eq. 75)",
                          f"own index smallest: {'yes' if own else 'no'}; F3 under G3 {g3['F3']:.2g} N; G3 vs 6RSS "
-                         f"indices within {100 * near:.2f} %; largest friction share under G1 {share:.0f} %", ok7,
+                         f"indices within {100 * near:.2f} %; friction share under G1, median over the task, up to "
+                         f"{share:.0f} % (the actuator with the largest)", ok7,
                          "; ".join(k for k, v in parts.items() if not v)))
     return out
 
