@@ -265,3 +265,21 @@ def test_example_inputs_sample_is_inside_a_bite():
     """The README's example sample carries a bite force, so the kernels' force path is exercised."""
     ex = example_inputs(model("target"), model("6rss"))
     assert np.linalg.norm(ex["tau_target"]["F_B"]) > 10
+
+
+def test_numpy_reference_with_friction_reproduces_the_newton_euler_torques():
+    """At the solver's normal forces, the plain NumPy Newton-Euler with friction (written independently of the
+    CasADi model) gives the same torques: an independent check of the friction model and the force chain."""
+    from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
+    from chewbot.reference import _equations, _sample_torques
+
+    assert DELTA_N == DELTA_F_G  # the reference smooths both magnitudes with one delta
+
+    m, kin = model("target"), default_kinematics("target")
+    _, ne = g1("euler-angles")
+    N = np.column_stack([ne.table["N_L"], ne.table["N_R"]])
+    e = _equations(m, kin, None)
+    rows = np.arange(0, kin.n, 7)
+    tau = np.array([_sample_torques(m, e, k, N[k], kin.dtheta[k], EPS_THETA_DOT, EPS_V_T, DELTA_N)[0] for k in rows])
+    # both exact given N (6x6 solves, cond ~1e3): rounding only
+    assert _rel(tau, ne.tau[rows]) <= 1e-10
