@@ -156,10 +156,10 @@ def example_inputs(target: Model, sixrss: Model, t: float = EXAMPLE_T) -> dict[s
         task = default_task(m, "left")
         k = int(np.argmin(np.abs(task.t - t)))
         kin = solve_kinematics(m, task, "euler-angles")
-        cols = [0, 1, 3, 4] if m.has_hkp else list(range(6))
+        q, dq, ddq = (x[k] for x in kin.euler_angle_state())
         B = m.molar("left")
-        out[f"tau_{tag}"] = {"q": kin.X[k, cols], "dq": kin.dX[k, cols], "ddq": kin.ddX[k, cols], "B": B, "F_B": kin.force[k]}
-        out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": kin.X[k, cols]}
+        out[f"tau_{tag}"] = {"q": q, "dq": dq, "ddq": ddq, "B": B, "F_B": kin.force[k]}
+        out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": q}
         if m.has_hkp:
             kp = solve_kinematics(m, task, G1_ORIENTATION)
             out["g1_target"] = {"theta": kp.theta[k], "q": kp.q[k], "dq": kp.dq[k], "ddq": kp.ddq[k], "F_B": kp.force[k], "B": B}

@@ -227,15 +227,10 @@ def dynamics_kernel(model: Model) -> ca.Function:
     return _kernel(model, "dynamics", DYNAMICS_OUTPUTS)
 
 
-def _coordinates(model: Model, kin: Kinematics):
-    cols = [0, 1, 3, 4] if model.has_hkp else list(range(6))
-    return kin.X[:, cols], kin.dX[:, cols], kin.ddX[:, cols]
-
-
 def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices: bool = True) -> dict[str, np.ndarray]:
     """The kernel outputs along the task (arrays samples first): those of :func:`dynamics_kernel`, or of
     :func:`torque_kernel` with ``matrices=False``."""
-    q, dq, ddq = _coordinates(model, kin)
+    q, dq, ddq = kin.euler_angle_state()
     kernel = dynamics_kernel(model) if matrices else torque_kernel(model)
     fn = model.cached(("fn", "core6rss", kernel.name(), "native"), lambda: native(kernel))
     out = evaluate(fn, q, dq, ddq, model.molar(side or kin.side), kin.force)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled
+from chewbot.casadi_tools import compiled, mapped
 from chewbot.errors import InfeasibleError
 
 # Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
@@ -95,19 +95,6 @@ class Solution:
     infeasible: list[dict]
 
 
-_MAPS: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
-
-
-def _mapped(fn: ca.Function, n: int) -> ca.Function:
-    """``fn`` mapped over n samples, kept: building a map costs about 10 us per sample, more than a call."""
-    entry = _MAPS.get((id(fn), n))
-    if entry is None or entry[0] is not fn:
-        if len(_MAPS) > 256:
-            _MAPS.clear()
-        entry = _MAPS[id(fn), n] = (fn, fn.map(n, "serial"))
-    return entry[1]
-
-
 class SampleData:
     """The per-sample data of a whole task as a CasADi matrix (one column per sample), kept in CasADi.
 
@@ -129,7 +116,7 @@ class SampleData:
         :func:`chewbot.casadi_tools.evaluate` gives them: (N, rows) or (N, rows, cols)."""
         ins = [self.D] + [np.atleast_2d(np.asarray(a, dtype=float).T) if np.ndim(a) else a for a in args]
         out = []
-        for j, o in enumerate(_mapped(fn, self.n).call(ins)):
+        for j, o in enumerate(mapped(fn, self.n).call(ins)):
             r, c = fn.size1_out(j), fn.size2_out(j)
             o = o.full()
             out.append(o.T if c == 1 else o.reshape(r, self.n, c).transpose(1, 0, 2))

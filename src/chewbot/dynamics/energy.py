@@ -120,9 +120,8 @@ def generalised_state(kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
     q_EE is taken from X_EE in Euler angles, whatever ``kin.orientation``: it is the same motion.
     """
-    cols = [0, 1, 3, 4] if kin.model.has_hkp else list(range(6))
-    return (np.hstack([kin.theta, kin.X[:, cols]]), np.hstack([kin.dtheta, kin.dX[:, cols]]),
-            np.hstack([kin.ddtheta, kin.ddX[:, cols]]))
+    q, dq, ddq = kin.euler_angle_state()
+    return np.hstack([kin.theta, q]), np.hstack([kin.dtheta, dq]), np.hstack([kin.ddtheta, ddq])
 
 
 def energies(model: Model, kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

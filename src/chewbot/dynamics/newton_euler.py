@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.indices import friction_share, performance_indices
-from chewbot.casadi_tools import compiled
+from chewbot.casadi_tools import compiled, mapped
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.distribution import Problem, SampleData, build_problem, solve
 from chewbot.kinematics.motion import Kinematics
@@ -220,7 +220,7 @@ def sample_data(model: Model, kin: Kinematics, side: str | None = None):
     B = model.molar(side or kin.side)
     fn = coefficients_function(model, kin.orientation)
     args = [np.asarray(a, dtype=float).T for a in (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)]
-    D, vhat, v_T = fn.map(kin.n, "serial").call([*args, B])
+    D, vhat, v_T = mapped(fn, kin.n).call([*args, B])
     nN = n_unknowns(model)
     return (SampleData(D), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
             v_T.full().reshape(3, kin.n, nN).transpose(1, 0, 2))

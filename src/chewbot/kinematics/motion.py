@@ -71,6 +71,11 @@ class Kinematics:
     def n(self) -> int:
         return self.t.shape[0]
 
+    def euler_angle_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q_EE in Euler angles and its rates, (N, 4) or (N, 6), whatever ``orientation``: the same motion."""
+        cols = euler_angle_columns(self.model)
+        return self.X[:, cols], self.dX[:, cols], self.ddX[:, cols]
+
     def jacobians(self) -> dict[str, np.ndarray]:
         """J_theta (diagonal, (N, 6)), J_qEE, J_theta1 .. J_theta4, M_J, M_0a, M_0b along the task (seed 000,
         Sect. 4; seed 001 for Euler parameters)."""
@@ -81,13 +86,20 @@ class Kinematics:
         return out
 
 
+def euler_angle_columns(model: Model) -> list[int]:
+    """Columns of X_EE = [X, Y, Z, alpha, beta, gamma] that form q_EE in Euler angles: X, Y, alpha, beta for the
+    target (Z and gamma are parasitic), all six for the 6RSS."""
+    return [0, 1, 3, 4] if model.has_hkp else list(range(6))
+
+
 def full_motion(model: Model, task: Task) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """X_EE (N, 6) and its rates for a task, lifting a 4-coordinate task with the sockets' parasitic motions."""
     if task.coords == TARGET_COORDS:
         X, dX, ddX = evaluate(parasitic_function(model), task.q, task.dq, task.ddq)
         return X, dX, ddX
     if model.has_hkp:
-        X, _, _ = evaluate(parasitic_function(model), task.q[:, [0, 1, 3, 4]], task.dq[:, [0, 1, 3, 4]], task.ddq[:, [0, 1, 3, 4]])
+        cols = euler_angle_columns(model)
+        X, _, _ = evaluate(parasitic_function(model), task.q[:, cols], task.dq[:, cols], task.ddq[:, cols])
         dev = np.abs(X[:, [2, 5]] - task.q[:, [2, 5]])
         bad = np.flatnonzero(dev.max(axis=1) > PARASITIC_TOLERANCE)
         if bad.size:
@@ -103,7 +115,7 @@ def mechanism_coordinates(model: Model, orientation: str, X, dX, ddX):
     """q_EE of the mechanism in ``orientation`` from a motion in Euler angles, plus (e, e_dot, e_ddot)."""
     e, de, dde = euler_angles_to_parameters(X[:, 3:6], dX[:, 3:6], ddX[:, 3:6])
     if orientation == "euler-angles":
-        cols = [0, 1, 3, 4] if model.has_hkp else list(range(6))
+        cols = euler_angle_columns(model)
         q, dq, ddq = X[:, cols], dX[:, cols], ddX[:, cols]
     else:
         k = 2 if model.has_hkp else 3
