@@ -302,15 +302,13 @@ def study(
 
       chewbot study seed001 --out runs/seed001
     """
-    from chewbot.outputs import check_output
     from chewbot.study import STUDIES
 
     if name not in STUDIES:
         _fail(ValueError(f"unknown study {name!r}; available: {', '.join(sorted(STUDIES))}"), EXIT_BAD_INPUT)
     try:
         out = out or Path("runs") / name
-        check_output(out, force)
-        with _progress(False, f"study {name}") as step:
+        with _progress(False, f"study {name}") as step:  # each study refuses an existing folder before its work
             written = STUDIES[name](out, force=force, progress=step)
     except ChewbotError as exc:
         _fail(exc)
