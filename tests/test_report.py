@@ -149,8 +149,10 @@ def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_fol
     with pytest.raises(RuntimeError):
         write(run_with_dynamics, out)
     assert list(tmp_path.iterdir()) == []
-    out.mkdir()
+    monkeypatch.undo()
+    write(run_with_dynamics, out)
     (out / "keep.txt").write_text("old result")
+    monkeypatch.setattr(pipeline, "write_report", broken)
     with pytest.raises(OutputExistsError):
         write(run_with_dynamics, out)
     with pytest.raises(RuntimeError):

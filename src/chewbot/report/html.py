@@ -19,8 +19,6 @@ import os
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import TYPE_CHECKING
-
 import numpy as np
 import plotly.graph_objects as go
 import plotly.io as pio
@@ -28,12 +26,12 @@ from plotly.offline import get_plotlyjs
 from plotly.subplots import make_subplots
 from scipy.spatial import ConvexHull
 
+from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.analysis.indices import INDEX_UNITS
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.report.summary import (
     INDEX_NAMES,
-    NEAR_SINGULAR_DEG,
     column_stats,
     crank_tips,
     infeasible_samples,
@@ -42,11 +40,8 @@ from chewbot.report.summary import (
     performance_indices,
     solver_notes,
 )
-from chewbot.results import POSE_NAMES, Table
+from chewbot.results import POSE_NAMES, RunResult, Table
 from chewbot.rotation import matrix_from_euler_angles
-
-if TYPE_CHECKING:
-    from chewbot.pipeline import RunResult
 
 MAX_PLOT_POINTS = 1000
 FRAME_STEP_S = 0.04  # 25 frames per second of task: the animation plays in real time
@@ -73,8 +68,7 @@ def write_report(result: RunResult, path: Path, files: list[str] | None = None) 
     template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
     page = template.substitute(
         title=html.escape(f"chewbot report: {result.model.name}, {result.task.name} ({o.side} side)"),
-        subtitle=html.escape(f"{result.model.description} · {result.table.n} samples · "
-                             f"{o.orientation}" + (f" · inverse dynamics: {o.method}" if o.method else "")),
+        subtitle=html.escape(f"{result.model.description} · {result.table.n} samples · {o.orientation} · {dynamics_label(result)}"),
         plotlyjs=get_plotlyjs(),
         body="\n".join(body),
         # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
@@ -367,14 +361,25 @@ def _run_section(result: RunResult, files: list[str]) -> str:
         ["parameter file", f"<code>{_e(m.source)}</code> (sha256 {_e(m.sha256[:12])}…)"],
         ["task", f"{_e(task.name)} from <code>{_e(task.source)}</code>: {task.n} samples, "
                  f"{t[-1] - t[0]:.3f} s, {(task.n - 1) / (t[-1] - t[0]):.4g} Hz" if task.n > 1 else _e(task.name)],
-        ["options", f"bite side {_e(o.side)}, orientation {_e(o.orientation)}, inverse dynamics "
-                    + (f"{_e(o.method)} (goal {_e(o.goal)}, friction {_e(o.friction)})" if o.method else "not run")],
+        ["options", f"bite side {_e(o.side)}, orientation {_e(o.orientation)}, {_e(dynamics_label(result))}, "
+                    f"contact model {_e(o.contact)}"],
         ["timings", ", ".join(f"{_e(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items()) or "-"],
         ["assumed values", ", ".join(f"<code>{_e(k)}</code>" for k in m.assumed) + " (not in the papers; <code>chewbot check-model</code> lists their values)"],
     ]
     if files:
         rows.append(["files", ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)])
     return f'<section id="run"><h2>Run</h2>{_table(["", ""], [[r[0], r[1]] for r in rows]).replace("<td>", "<td class=text>")}</section>'
+
+
+def dynamics_label(result: RunResult) -> str:
+    """The inverse dynamics as run, in words: the method with the goal and friction in effect."""
+    o = result.options
+    if not o.method:
+        return "inverse dynamics not run"
+    if o.method != "newton-euler":
+        return f"inverse dynamics: {o.method} (minimum-norm torques, no friction)"
+    goal = o.goal if result.model.has_hkp and o.goal else "no redundancy to distribute (6RSS)"
+    return f"inverse dynamics: newton-euler (goal {goal}, friction {o.friction or 'on'})"
 
 
 def _robot_section(result: RunResult, figures: dict) -> str:
