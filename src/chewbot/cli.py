@@ -68,11 +68,12 @@ def flag(*names: str, help: str) -> bool:
 
 
 def exit_code(exc: BaseException) -> int:
-    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md)."""
-    from chewbot.errors import InfeasibleError, KinematicsError
+    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md). Exit code 4 is not an
+    error's: it follows a complete output whose validity checks failed (:func:`exit_after_checks`)."""
+    from chewbot.errors import KinematicsError
     from chewbot.outputs import OutputError
 
-    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (InfeasibleError, EXIT_CHECK_FAILED), (OutputError, EXIT_OUTPUT)):
+    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (OutputError, EXIT_OUTPUT)):
         if isinstance(exc, kind):
             return code
     return EXIT_BAD_INPUT

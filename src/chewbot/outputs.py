@@ -120,8 +120,12 @@ def check_output(out: Path, force: bool, marker: Marker = RESULTS_FOLDER, inputs
     * it is not the current folder and does not contain it, and no input (``inputs``: paths, None skipped)
       lies inside it (or is it);
     * it does not exist, or it is an output of ``marker``'s kind that chewbot wrote and ``force`` is given.
+
+    The folder ``out`` is in is tidied first (:func:`remove_stale`): an output of a killed process that was
+    moved aside is back in place before the rule looks at it.
     """
     out = Path(out)
+    remove_stale(out.parent)
     if _inside(Path.cwd(), out):
         raise OutputError(f"{out}: is the current folder or contains it; chewbot writes a new {marker.kind} of its own, "
                           "it does not write over the folder it runs in: choose another --out, e.g. runs/NAME")
@@ -157,8 +161,8 @@ _REASONS = {
     errno.EISDIR: "it is a folder",
     errno.ENOENT: "a folder on the way does not exist",
     errno.ENAMETOOLONG: "the name is too long",
-    errno.EEXIST: "something with that name appeared meanwhile",
-    errno.ENOTEMPTY: "something with that name appeared meanwhile",
+    errno.EEXIST: "a file of that name is in the way",
+    errno.ENOTEMPTY: "a folder of that name is in the way",
     errno.EXDEV: "it is on another file system than its temporary copy",
 }
 
@@ -225,7 +229,6 @@ def _prepare_folder(folder: Path, out: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise cannot_write(out, exc, f"create the folder {folder} for it") from exc
-    remove_stale(folder)
 
 
 def _remove(path: Path) -> None:

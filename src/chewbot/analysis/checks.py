@@ -304,9 +304,11 @@ class ContactPull(Check):
                 else "0 (reported only: under the bilateral contact model the plane may hold the condyle)")
 
     def measure(self, columns, info):
+        if not self.ctx.has_hkp:
+            return _missing(self, "the 6RSS has no HKP contacts")
         N = _columns(columns, ["N_L", "N_R"])
         if N is None:
-            return _missing(self, "the run has no normal forces N_L, N_R" if self.ctx.has_hkp else "the 6RSS has no HKP contacts")
+            return _missing(self, "the run has no normal forces N_L, N_R")
         j = np.argmin(N, axis=1)
         low = N[np.arange(N.shape[0]), j]
         return Measure(-low, low < -PULL_TOLERANCE_N, low, lambda k: "N_" + "LR"[j[k]])

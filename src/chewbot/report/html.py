@@ -60,6 +60,7 @@ def write_report(result: RunResult, path: Path, files: list[str] | None = None) 
     figures: dict[str, go.Figure] = {}
     body = [
         _robot_section(result, figures),
+        _checks_section(result),
         _summary_section(result),
         _plots_section(result, figures),
         _run_section(result, files or []),
@@ -329,7 +330,8 @@ def transmission_figure(kin: Kinematics) -> go.Figure:
 def time_figures(result: RunResult) -> list[tuple[str, go.Figure]]:
     """Every plot of the run, titled: the kinematics first, then each further group of columns."""
     table = result.table
-    known = {"t", "Fx", "Fy", "Fz"} | {p + n for p, _ in LEVELS for n in POSE_NAMES + THETA_NAMES}
+    known = ({"t", "Fx", "Fy", "Fz"} | {p + n for p, _ in LEVELS for n in POSE_NAMES + THETA_NAMES}
+             | {f"mu{i}" for i in range(1, 7)})  # the transmission angles have their figure
     out = [("Motion of the mandible (task space)", task_space_figure(table)),
            ("Motion of the actuators (joint space)", joint_space_figure(table)),
            ("Bite force F_B on the mandible at the molar, in {S}", group_figure(table, ["Fx", "Fy", "Fz"])),
@@ -380,6 +382,24 @@ def dynamics_label(result: RunResult) -> str:
         return f"inverse dynamics: {o.method} (minimum-norm torques, no friction)"
     goal = o.goal if result.model.has_hkp and o.goal else "no redundancy to distribute (6RSS)"
     return f"inverse dynamics: newton-euler (goal {goal}, friction {o.friction or 'on'})"
+
+
+def _checks_section(result: RunResult) -> str:
+    """The validity checks of the run (chewbot.analysis.checks), failed ones marked."""
+    rows = []
+    for c in result.checks:
+        verdict = ("not evaluated" if c.samples is None else "passed" if c.passed
+                   else f'<span class="warn">{"FAILED" if c.fails_run else "warning"}</span>')
+        worst = "" if c.worst is None else f"{_fmt(c.worst['value'])} {_e(c.worst['unit'])}"
+        first = "" if c.first_sample is None else f"{c.first_sample['t']:.3f}"
+        rows.append([_e(c.name), verdict, _e(c.severity), "" if c.samples is None else str(c.samples), first, worst, _e(c.message)])
+    failing = [c.name for c in result.checks if c.fails_run]
+    verdict = (f'<p class="warn">Failed: {_e(", ".join(failing))} (the run exits with code 4).</p>' if failing
+               else '<p class="ok">No check that counts as a failure failed.</p>')
+    return ('<section id="checks"><h2>Validity checks</h2>' + verdict
+            + _table(["check", "verdict", "counts as", "samples", "first at t [s]", "worst", "message"], rows).replace("<td>", "<td class=text>")
+            + f'<p class="note">Contact model: {_e(result.options.contact)}. Every sample is checked; docs/cli.md lists the checks and '
+            "their bounds. A failure makes the run exit with code 4 (unless --allow-violations); a warning is reported only.</p></section>")
 
 
 def _robot_section(result: RunResult, figures: dict) -> str:
