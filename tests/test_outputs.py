@@ -323,7 +323,7 @@ def test_check_model_prints_units_and_warns_near_a_singular_home_pose(monkeypatc
 
     result = invoke("check-model", "target")
     assert result.exit_code == 0
-    for header in ("crank [mm]", "coupler mass [g]", "θ home [deg]", "transmission angle home [deg]"):
+    for header in ("crank [mm]", "coupler mass [g]", "θ home [deg]", "μ home [deg]"):
         assert header in result.output, header
     assert "17.96" in result.output and "warning" not in result.output  # chains 3, 4 at home: above 10 deg
     # turn chain 3's crank about its shaft (a new home pose of the crank, the coupler fitted to it) until its

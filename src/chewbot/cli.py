@@ -98,28 +98,32 @@ def errors_reported():
 
 def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> None:
     """After the output is written: print a table of the failed checks (standard error) and exit 4 if one of them
-    fails the run, unless ``allow_violations``."""
+    fails the run, unless ``allow_violations``. With ``quiet`` only the checks that make it exit 4 are printed
+    (they are its error)."""
     from chewbot.analysis.checks import run_fails
 
-    failed = [c for c in checks if not c.passed]
-    if failed and not quiet:
+    stops = run_fails(checks) and not allow_violations
+    if quiet:
+        failed = [c for c in checks if c.fails_run] if stops else []
+    else:
+        failed = [c for c in checks if not c.passed]
+    if failed:
+        from rich import box
         from rich.table import Table as RichTable
 
-        table = RichTable(title="failed checks (all of them: run.json, \"checks\")", title_justify="left")
-        for col, justify in (("check", "left"), ("counts as", "left"), ("samples", "right"), ("first at t [s]", "right"),
-                             ("worst", "right"), ("message", "left")):
-            table.add_column(escape(col), justify=justify, overflow="fold")
+        table = RichTable(title="failed validity checks (details: run.json, \"checks\", and report.html)", title_justify="left",
+                          box=box.SIMPLE_HEAD, pad_edge=False)
+        for col, justify in (("check", "left"), ("counts as", "left"), ("samples", "right"), ("first at t [s]", "right"), ("worst", "right")):
+            table.add_column(escape(col), justify=justify, no_wrap=True)
         for c in failed:
             worst = "" if c.worst is None else f"{c.worst['value']:.4g} {c.worst['unit']}"
             first = "" if c.first_sample is None else f"{c.first_sample['t']:.4g}"
-            table.add_row(c.name, "failure" if c.fails_run else "warning", str(c.samples), first, escape(worst), escape(c.message))
+            table.add_row(c.name, "failure" if c.fails_run else "warning", str(c.samples), first, escape(worst))
         console.print(table)
-    if run_fails(checks):
-        if allow_violations:
-            if not quiet:
-                console.print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
-            return
+    if stops:
         raise typer.Exit(EXIT_CHECK_FAILED)
+    if run_fails(checks) and not quiet:
+        console.print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
 
 
 class Side(str, Enum):
@@ -497,7 +501,7 @@ def _model_report(m, home: dict):
     theta = np.degrees(home["theta"])
     chains = RichTable(title=escape(f"{m.name}: {m.mechanism}, {m.dof} DOF, {m.source}"), title_justify="left")
     for col in ("chain", "crank [mm]", "coupler [mm]", "coupler mass [g]", "crank mass [g]", "crank inertia [g·mm²]",
-                "θ home [deg]", "transmission angle home [deg]"):
+                "θ home [deg]", "μ home [deg]"):
         chains.add_column(escape(col), justify="right")  # escaped: rich would take "[mm]" for markup
     for i in range(6):
         chains.add_row(str(i + 1), f"{m.crank_length[i] * 1e3:.4g}", f"{m.coupler_length[i] * 1e3:.4g}", f"{m.coupler_mass[i] * 1e3:.4g}",
@@ -509,7 +513,8 @@ def _model_report(m, home: dict):
     facts.add_row("masses", f"couplers {couplers:.4g} g, cranks {cranks:.5g} g, mandible {m.mandible_mass * 1e3:.5g} g; "
                             f"total moving {couplers + cranks + m.mandible_mass * 1e3:.5g} g")
     facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home); "
-                               f"kappa of the chains' Jacobian {home['kappa']:.3g} [-] (1 best, 0 singular)")
+                               f"μ_i: transmission angles (90 deg best, 0 at the dead point); kappa of the chains' Jacobian "
+                               f"{home['kappa']:.3g} [-] (1 best, 0 singular)")
     h = m.hkp
     for label, T, y_range in (("left condyle T_L", h.T_L, h.y_left), ("right condyle T_R", h.T_R, h.y_right)):
         text = f"({', '.join(f'{v * 1e3:.4g}' for v in T)}) mm in {{S}} at home"
