@@ -79,7 +79,7 @@ def test_a_task_over_the_torque_limit_exits_4_with_the_folder_complete(task_csv,
     assert not torque["passed"] and torque["samples"] > 0 and torque["severity"] == "failure"
     assert torque["worst"]["unit"] == "N*m" and torque["worst"]["value"] > 0.02
     assert set(torque["first_sample"]) == {"index", "t"}
-    assert "failed checks" in result.output and "torque-limit" in result.output
+    assert "failed validity checks" in result.output and "torque-limit" in result.output
     # what --allow-violations changes: the same checks, printed, and no exit
     results = results_from_json(json.loads((out / "run.json").read_text())["checks"])
     with pytest.raises(typer.Exit) as stop:
