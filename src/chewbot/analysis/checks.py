@@ -147,8 +147,10 @@ class Check:
         severity = self.severity()
         if not self.evaluated:
             return CheckResult(self.name, True, None, None, None, f"not evaluated: {self.reason}", severity)
+        if self.worst is None:  # evaluated on chunks without a sample
+            return CheckResult(self.name, True, 0, None, None, "no samples to check", severity)
         first = None if self.first is None else {"index": self.first[0], "t": self.first[1]}
-        worst = None if self.worst is None or not self.unit else {"value": self.worst[1], "unit": self.unit}
+        worst = {"value": self.worst[1], "unit": self.unit} if self.unit else None
         return CheckResult(self.name, self.samples == 0, self.samples, first, worst, self.message(), severity)
 
     def message(self) -> str:

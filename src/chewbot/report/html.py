@@ -386,6 +386,8 @@ def dynamics_label(result: RunResult) -> str:
 
 def _checks_section(result: RunResult) -> str:
     """The validity checks of the run (chewbot.analysis.checks), failed ones marked."""
+    if not result.checks:
+        return '<section id="checks"><h2>Validity checks</h2><p class="note">No validity checks were run.</p></section>'
     rows = []
     for c in result.checks:
         verdict = ("not evaluated" if c.samples is None else "passed" if c.passed
