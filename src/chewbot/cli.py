@@ -52,11 +52,13 @@ FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything els
 
 
 def _flags_without_a_type() -> None:
-    """Show boolean flags as flags in help (``--force``), not with typer's ``<bool>`` type (a value they do not take)."""
+    """Show boolean flags as flags in help (``--force``), not with the ``<bool>`` type that typer 0.2x prints
+    beside them (a value they do not take). Older typer versions have no such type column: nothing to do."""
     from typer.core import TyperOption
 
-    shown = TyperOption.display_type_rich
-    TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else shown(self, ctx)
+    shown = getattr(TyperOption, "display_type_rich", None)
+    if shown is not None:
+        TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else shown(self, ctx)
 
 
 _flags_without_a_type()

@@ -72,9 +72,12 @@ def _singularity_columns(result: RunResult) -> None:
     from chewbot.kinematics.conditioning import jacobian_conditioning
 
     kin = result.kinematics
+    t0 = time.perf_counter()
+    kappa = jacobian_conditioning(result.model, kin.theta, kin.X)
+    result.info["timings"]["conditioning_s"] = time.perf_counter() - t0
     result.table.add_block([f"mu{i + 1}" for i in range(6)], np.arcsin(np.clip(kin.transmission, 0.0, 1.0)), "rad",
                            "transmission angle of chain i (90 deg best, 0 at the dead point)")
-    result.table.add("kappa_J", jacobian_conditioning(result.model, kin.theta, kin.X), "1",
+    result.table.add("kappa_J", kappa, "1",
                      "reciprocal condition number of the chains' Jacobian J_theta1, columns scaled (0: singular)")
 
 
@@ -83,7 +86,9 @@ def _checks_stage(result: RunResult, step) -> None:
     from chewbot.analysis.checks import run_checks
 
     step("validity checks")
+    t0 = time.perf_counter()
     result.checks = run_checks(result.model, result.table, result.info.get("dynamics"), result.options.contact)
+    result.info["timings"]["checks_s"] = time.perf_counter() - t0
 
 
 def _dynamics_stage(result: RunResult, step) -> None:
