@@ -150,6 +150,7 @@ def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_fol
         write(run_with_dynamics, out)
     assert list(tmp_path.iterdir()) == []
     out.mkdir()
+    (out / "run.json").write_text('{"chewbot_run": 2}')  # an earlier result of chewbot's: --force may replace it
     (out / "keep.txt").write_text("old result")
     with pytest.raises(OutputExistsError):
         write(run_with_dynamics, out)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ ISSUE_COLUMNS = (
     ["t"] + list(COORDS) + ["d" + c for c in COORDS] + ["dd" + c for c in COORDS]
     + [f"{p}theta{i}" for p in ("", "d", "dd") for i in range(1, 7)] + ["Fx", "Fy", "Fz"]
 )
+SINGULARITY_COLUMNS = [f"mu{i}" for i in range(1, 7)] + ["kappa_J"]  # transmission angles, conditioning
 
 
 @pytest.fixture(scope="module")
@@ -26,13 +28,18 @@ def run_folder(tmp_path_factory):
     return result, out
 
 
-def test_results_csv_has_the_issue_columns_and_exact_numbers(run_folder):
+def test_results_csv_has_the_issue_columns_with_units_and_exact_numbers(run_folder):
     result, out = run_folder
-    header = (out / "results.csv").read_text().split("\n", 1)[0].split(",")
-    assert header == ISSUE_COLUMNS
+    text = (out / "results.csv").read_text()
+    header = text.split("\n", 1)[0].split(",")
+    assert header == [f"{name} [{result.table.units[name]}]" for name in ISSUE_COLUMNS + SINGULARITY_COLUMNS]
+    assert header[:2] == ["t [s]", "X [m]"] and "ddalpha [rad/s^2]" in header
+    assert not re.search(r"(^|,)-0\.0(,|$)", text, re.MULTILINE)  # a signed zero reads as a sign a person looks for
+    assert re.search(r"(^|,)0\.0(,|$)", text, re.MULTILINE)  # the zeros are there (the rest at t = 0), unsigned
     back = Table.read_csv(out / "results.csv")
-    for name in ISSUE_COLUMNS:
+    for name in ISSUE_COLUMNS + SINGULARITY_COLUMNS:
         assert np.array_equal(back[name], result.table[name]), name  # bit-exact round trip
+        assert back.units[name] == result.table.units[name]
     assert back.n == 5001
 
 
@@ -43,7 +50,7 @@ def test_run_json_records_model_options_versions_and_units(run_folder):
     assert info["options"]["model"] == "target" and info["options"]["side"] == "left"
     assert {"python", "numpy", "scipy", "casadi"} <= set(info["versions"])
     units = {name: c["unit"] for name, c in info["columns"].items()}
-    assert set(units) == set(ISSUE_COLUMNS)
+    assert set(units) == set(ISSUE_COLUMNS + SINGULARITY_COLUMNS)
     assert units["t"] == "s" and units["X"] == "m" and units["dalpha"] == "rad/s" and units["ddZ"] == "m/s^2"
     assert units["ddtheta3"] == "rad/s^2" and units["Fz"] == "N"
 

@@ -1,9 +1,29 @@
-"""chewbot: kinematics, inverse dynamics and inertia coupling of the bio-inspired chewing robot."""
+"""chewbot: kinematics, inverse dynamics and inertia coupling of the bio-inspired chewing robot.
 
-from chewbot.errors import ChewbotError, KinematicsError, ParameterError, TaskError
-from chewbot.model import Model
-from chewbot.params import BUILTIN_MODELS, load_model
+The names below are imported on first use, so that ``import chewbot`` (and the ``chewbot`` program's start,
+which must take over SIGINT before anything heavy loads: :mod:`chewbot.command`) costs nothing.
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
 
-__all__ = ["BUILTIN_MODELS", "ChewbotError", "KinematicsError", "Model", "ParameterError", "TaskError", "load_model", "__version__"]
+_LAZY = {
+    "ChewbotError": "chewbot.errors",
+    "KinematicsError": "chewbot.errors",
+    "ParameterError": "chewbot.errors",
+    "TaskError": "chewbot.errors",
+    "Model": "chewbot.model",
+    "BUILTIN_MODELS": "chewbot.params",
+    "load_model": "chewbot.params",
+}
+
+__all__ = [*sorted(_LAZY), "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'chewbot' has no attribute {name!r}")

@@ -1,4 +1,10 @@
-"""The ``chewbot`` command line (typer + rich)."""
+"""The ``chewbot`` command line (typer + rich).
+
+Every command follows the same rules (docs/cli.md): exit codes and signals (:mod:`chewbot.command`), outputs
+written whole and never over what chewbot did not write (:mod:`chewbot.outputs`). The helpers below are what a
+command calls: :func:`errors_reported`, :func:`fail`, :func:`progress`, :func:`exit_after_checks`, and the
+options :data:`FORCE_HELP`, :func:`flag`.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +16,16 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from chewbot.command import (  # noqa: F401  (the exit codes, for the commands and their tests)
+    EXIT_BAD_INPUT,
+    EXIT_CHECK_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_OUTPUT,
+    EXIT_TERMINATED,
+    EXIT_UNREACHABLE,
+    check_interrupted,
+)
 from chewbot.errors import ChewbotError
 
 app = typer.Typer(
@@ -23,31 +39,93 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
     epilog="Exit codes: 0 success; 1 unexpected error (a bug); 2 bad input or usage; 3 unreachable or singular pose; "
-           "4 infeasible torque distribution; 5 results folder exists or cannot be written. See docs/cli.md.",
+           "4 results written, a validity check failed; 5 output exists (not written by chewbot, or no --force) or cannot be "
+           "written; 130 interrupted (SIGINT); 143 terminated (SIGTERM). See docs/cli.md.",
 )
 console = Console(stderr=True, soft_wrap=True)  # progress, warnings, errors: standard error, paths unwrapped
 stdout = Console(soft_wrap=True)  # results: standard output, for scripts
 
-# Exit codes (docs/cli.md). 1 is left to Python: an unexpected error, printed with its traceback.
-EXIT_OK = 0
-EXIT_BAD_INPUT = 2  # bad parameter file, task, option or missing file; typer's own usage errors use 2 as well
-EXIT_UNREACHABLE = 3  # a pose of the task is out of reach, outside the sockets or singular
-EXIT_INFEASIBLE = 4  # no torque distribution within the actuator limits
-EXIT_OUTPUT = 5  # the results folder exists (no --force) or cannot be written
+RUN_STEPS = 8  # task, kinematics, inverse dynamics, coupling, checks, results.csv, figures, report.html
+FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything else is never replaced)."
 
-RUN_STEPS = 7  # task, kinematics, inverse dynamics, coupling, results.csv, figures, report.html
+
+def _flags_without_a_type() -> None:
+    """Show boolean flags as flags in help (``--force``), not with the ``<bool>`` type that typer 0.2x prints
+    beside them (a value they do not take). Older typer versions have no such type column: nothing to do."""
+    from typer.core import TyperOption
+
+    shown = getattr(TyperOption, "display_type_rich", None)
+    if shown is not None:
+        TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else shown(self, ctx)
+
+
+_flags_without_a_type()
+
+
+def flag(*names: str, help: str) -> bool:
+    """A boolean option that is off unless given (``--force``)."""
+    return typer.Option(False, *names, help=help)
 
 
 def exit_code(exc: BaseException) -> int:
-    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md)."""
-    from chewbot.errors import InfeasibleError, KinematicsError
+    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md). Exit code 4 is not an
+    error's: it follows a complete output whose validity checks failed (:func:`exit_after_checks`)."""
+    from chewbot.errors import KinematicsError
     from chewbot.outputs import OutputError
 
-    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (InfeasibleError, EXIT_INFEASIBLE), (OutputError, EXIT_OUTPUT)):
+    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (OutputError, EXIT_OUTPUT)):
         if isinstance(exc, kind):
             return code
     return EXIT_BAD_INPUT
+
+
+def fail(exc: Exception, code: int | None = None) -> None:
+    """Print the error (its message names the file, row, key or sample) and exit with its code."""
+    console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)  # unwrapped: paths stay whole
+    raise typer.Exit(exit_code(exc) if code is None else code)
+
+
+
+
+@contextmanager
+def errors_reported():
+    """Turn the errors chewbot raises on purpose into one line on standard error and their exit code."""
+    try:
+        yield
+    except ChewbotError as exc:
+        fail(exc)
+
+
+def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> None:
+    """After the output is written: print a table of the failed checks (standard error) and exit 4 if one of them
+    fails the run, unless ``allow_violations``. With ``quiet`` only the checks that make it exit 4 are printed
+    (they are its error)."""
+    from chewbot.analysis.checks import run_fails
+
+    stops = run_fails(checks) and not allow_violations
+    if quiet:
+        failed = [c for c in checks if c.fails_run] if stops else []
+    else:
+        failed = [c for c in checks if not c.passed]
+    if failed:
+        from rich import box
+        from rich.table import Table as RichTable
+
+        table = RichTable(title="failed validity checks (details: run.json, \"checks\", and report.html)", title_justify="left",
+                          box=box.SIMPLE_HEAD, pad_edge=False)
+        for col, justify in (("check", "left"), ("counts as", "left"), ("samples", "right"), ("first at t [s]", "right"), ("worst", "right")):
+            table.add_column(escape(col), justify=justify, no_wrap=True)
+        for c in failed:
+            worst = "" if c.worst is None else f"{c.worst['value']:.4g} {c.worst['unit']}"
+            first = "" if c.first_sample is None else f"{c.first_sample['t']:.4g}"
+            table.add_row(c.name, "failure" if c.fails_run else "warning", str(c.samples), first, escape(worst))
+        console.print(table)
+    if stops:
+        raise typer.Exit(EXIT_CHECK_FAILED)
+    if run_fails(checks) and not quiet:
+        console.print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
 
 
 class Side(str, Enum):
@@ -89,12 +167,6 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
     """
 
 
-def _fail(exc: Exception, code: int | None = None) -> None:
-    """Print the error (its message names the file, row, key or sample) and exit with its code."""
-    console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)  # unwrapped: paths stay whole
-    raise typer.Exit(exit_code(exc) if code is None else code)
-
-
 def _check_method(name: str | None) -> str | None:
     """Accept the name of a registered inverse-dynamics formulation (the registry is the list of choices)."""
     from chewbot.dynamics import METHODS
@@ -107,20 +179,23 @@ def _check_method(name: str | None) -> str | None:
 @app.command()
 def run(
     model: str = typer.Option("target", "--model", help="Built-in model (target, 6rss, target-as-printed, 6rss-as-printed) or a TOML parameter file."),
-    task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file."),
-    side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts, and side of the default task."),
+    task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
+    side: Side | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts, and side of the default task. Default: left, or the side of the run whose results.csv is the --task."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation of the mandible's orientation."),
     method: str | None = typer.Option(None, "--method", callback=_check_method, show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
     goal: Goal | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: what the redundant torques minimise (torques, forces at S_i, HKP normal forces). Default: min-torque."),
     friction: Switch | None = typer.Option(None, "--friction", show_default=False, help="newton-euler: friction at the HKPs and the actuators. Default: on."),
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
-    force: bool = typer.Option(False, "--force", help="Replace the results folder if it exists."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+    force: bool = flag("--force", help=FORCE_HELP),
+    allow_violations: bool = flag("--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
+    quiet: bool = flag("--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
-    """Compute the kinematics and inverse dynamics of a task and write a results folder.
+    """Compute the kinematics and inverse dynamics of a task, check every sample, and write a results folder.
 
-    Writes results.csv (one row per sample, SI units; torques tau1..tau6 and inertia coupling MCI1..MCI6 included),
-    run.json (model, options, versions, units) and figures.
+    Writes results.csv (one row per sample, SI units in the header; torques tau1..tau6 and inertia coupling
+    MCI1..MCI6 included), run.json (model, options, versions, units, the validity checks), figures and report.html.
+    The folder is always written in full; the exit code is then 4 if a validity check failed (torque, power or
+    bearing limits, crank range, speed, an infeasible distribution), unless --allow-violations.
 
     Examples:
 
@@ -131,43 +206,44 @@ def run(
       chewbot run --task my_chewing.csv --orientation euler-parameters --out runs/mine
 
       chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
+
+      chewbot run --task runs/left/results.csv --method liang --out runs/left-liang
     """
-    from chewbot.outputs import check_output
-    from chewbot.pipeline import RunOptions, compute, write
+    from chewbot.outputs import RESULTS_FOLDER, check_output
+    from chewbot.pipeline import RunOptions, compute, input_files, write
 
     if method is None:
         method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
     if method != "newton-euler" and (goal is not None or friction is not None):
-        _fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
+        fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
     if method == "newton-euler":  # what newton-euler uses; the other formulations take neither
         from chewbot.params import load_model
 
-        try:
+        with errors_reported():
             sixrss = not load_model(model).has_hkp
-        except ChewbotError as exc:
-            _fail(exc)
         if sixrss and goal is not None:
-            _fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
+            fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
         goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
-    options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
+    options = RunOptions(model=model, task=task, side=side and side.value, orientation=orientation.value, method=method,
                          goal=goal and goal.value, friction=friction and friction.value)
-    try:
-        check_output(out, force)  # before the work, not after it
-        with _progress(quiet, "run", total=RUN_STEPS) as step:
+    with errors_reported():
+        check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
+        with progress(quiet, "run", total=RUN_STEPS) as step:
             result = compute(options, progress=step)
             write(result, out, force=force, progress=step)
-    except ChewbotError as exc:
-        _fail(exc)
     if not quiet:
         _print_run_summary(result, out)
+    exit_after_checks(result.checks, allow_violations, quiet)
 
 
 @contextmanager
-def _progress(quiet: bool, label: str, total: int | None = None):
+def progress(quiet: bool, label: str, total: int | None = None):
     """A progress bar that advances one step per call of the yielded callback and names the current step
-    (nothing with --quiet). ``total``: the number of steps if known; otherwise the bar pulses."""
-    if quiet:
-        yield None
+    (nothing with --quiet, nor where standard error is not a terminal: a log gets no bar). ``total``: the number
+    of steps if known; otherwise the bar pulses. Each step also stops the command if a signal arrived that a
+    library swallowed (:func:`chewbot.command.check_interrupted`)."""
+    if quiet or not console.is_terminal:
+        yield lambda msg: check_interrupted()
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
@@ -179,6 +255,7 @@ def _progress(quiet: bool, label: str, total: int | None = None):
 
         def step(msg: str) -> None:
             nonlocal started
+            check_interrupted()
             bar.update(task, description=f"{label}: {msg}", advance=1 if started else 0)
             started = True
 
@@ -187,8 +264,8 @@ def _progress(quiet: bool, label: str, total: int | None = None):
 
 
 def _print_run_summary(result, out: Path) -> None:
-    """The lines a person wants after a run: where the report is, the peak torque, and any warning."""
-    from chewbot.report.summary import column_stats, infeasible_samples, near_singular, numbered_columns
+    """The lines a person wants after a run: where the report is and the peak torque (the checks follow)."""
+    from chewbot.report.summary import column_stats, numbered_columns
 
     stdout.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
                  f"open {escape(str(out / 'report.html'))}", highlight=False)
@@ -196,12 +273,9 @@ def _print_run_summary(result, out: Path) -> None:
     if taus:
         top = max(column_stats(result.table, taus), key=lambda s: abs(s.peak))
         stdout.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
-    for i in near_singular(result.kinematics.t, result.kinematics.transmission):
-        console.print(f"[yellow]warning:[/] chain {i.chain} near-singular from t = {i.t_first:.3f} s to {i.t_last:.3f} s "
-                      f"(transmission angle down to {i.min_deg:.1f} deg)", highlight=False)
-    bad = infeasible_samples(result.info.get("dynamics", {}), result.table["t"])
-    if bad:
-        console.print(f"[yellow]warning:[/] {len(bad)} infeasible sample(s), first at t = {bad[0]['t']:.3f} s (see report.html)", highlight=False)
+    passed = sum(c.passed and c.samples is not None for c in result.checks)
+    stdout.print(f"validity checks: {passed} passed, {sum(not c.passed for c in result.checks)} failed, "
+                 f"{sum(c.samples is None for c in result.checks)} not evaluated (run.json, \"checks\")", highlight=False)
 
 
 @app.command()
@@ -209,6 +283,7 @@ def bench(
     repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
     calls: int = typer.Option(20000, "--calls", min=100, help="Calls per kernel for the one-sample timings."),
     out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file."),
+    force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
     """Time every formulation on the default task (5001 samples), both mechanisms, and the real-time kernels.
 
@@ -222,19 +297,20 @@ def bench(
       taskset -c 0 chewbot bench --out bench.md
     """
     from chewbot.bench import bench_kernels, bench_task, machine, ratios
-    from chewbot.outputs import write_text_atomic
+    from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
-    with _progress(False, "timing") as step:
-        timings = bench_task(repeats=repeats, progress=step)
-        step("kernels, one sample")
-        kernel_timings = bench_kernels(calls)
-    text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
-    stdout.print(text, markup=False, highlight=False)
-    if out is not None:
-        try:
-            write_text_atomic(out, text)
-        except OSError as exc:
-            _fail(ChewbotError(f"{out}: cannot write the tables ({exc.strerror or exc})"), EXIT_OUTPUT)
+    with errors_reported():
+        if out is not None:
+            check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
+        with progress(False, "timing") as step:
+            timings = bench_task(repeats=repeats, progress=step)
+            step("kernels, one sample")
+            kernel_timings = bench_kernels(calls)
+        text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
+        stdout.print(text, markup=False, highlight=False)
+        if out is not None:
+            with atomic_file(out, force) as tmp:
+                tmp.write_text(marker_line("<!--", "chewbot bench") + "\n" + text)
 
 
 def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) -> str:
@@ -253,7 +329,7 @@ def export_c(
     out: Path = typer.Option(..., "--out", help="Folder to write the C kernels to."),
     target: str = typer.Option("target", "--target-model", help="The target robot's model (built-in name or TOML file)."),
     sixrss: str = typer.Option("6rss", "--6rss-model", help="The 6RSS counterpart's model (built-in name or TOML file)."),
-    force: bool = typer.Option(False, "--force", help="Replace the folder if it exists."),
+    force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
     """Write the real-time kernels as dependency-free C for the robot's controller.
 
@@ -267,23 +343,22 @@ def export_c(
       chewbot export-c --out controller/chewbot && make -C controller/chewbot
     """
     from chewbot.export import export_c as write_c
+    from chewbot.outputs import EXPORT_FOLDER, check_output
     from chewbot.params import load_model
-    from chewbot.outputs import check_output
     from chewbot.realtime import kernels
 
-    try:
+    with errors_reported():
         t, s = load_model(target), load_model(sixrss)
         for m, want in ((t, "target"), (s, "6rss")):
             if m.mechanism != want:
                 raise ChewbotError(f"{m.source}: mechanism is {m.mechanism!r}, expected {want!r} here")
-        check_output(out, force)  # before the kernels are built, not after
-        with _progress(False, "generating C") as step:
+        inputs = [Path(m.source) for m in (t, s)]
+        check_output(out, force, EXPORT_FOLDER, inputs)  # before the kernels are built, not after
+        with progress(False, "generating C") as step:
             step("building kernels")
             ks = kernels(t, s)
             step("writing C")
-            write_c(ks, out, model_name=f"{t.name} + {s.name}", force=force)
-    except ChewbotError as exc:
-        _fail(exc)
+            write_c(ks, out, model_name=f"{t.name} + {s.name}", force=force, inputs=inputs)
     stdout.print(f"wrote {escape(str(out))} ({len(ks)} kernels)", highlight=False)
 
 
@@ -292,9 +367,9 @@ def study(
     name: str = typer.Argument(..., help="The study to run: seed000 (inverse dynamics and inertia coupling, seed 000) "
                                "or seed001 (Newton-Euler with friction, optimal distribution, Euler parameters, seed 001)."),
     out: Path | None = typer.Option(None, "--out", help="Folder to write the table and figures to (default runs/NAME)."),
-    force: bool = typer.Option(False, "--force", help="Replace the folder if it exists."),
+    force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
-    """Reproduce a paper's findings on the default models and write a table of claims and figures.
+    """Reproduce a paper's findings on the default models, write a table of claims and figures, and print the table.
 
     Examples:
 
@@ -303,15 +378,15 @@ def study(
       chewbot study seed001 --out runs/seed001
     """
     from chewbot.study import STUDIES
+    from chewbot.study.claims import claims_table
 
     if name not in STUDIES:
-        _fail(ValueError(f"unknown study {name!r}; available: {', '.join(sorted(STUDIES))}"), EXIT_BAD_INPUT)
-    try:
+        fail(ValueError(f"unknown study {name!r}; available: {', '.join(sorted(STUDIES))}"), EXIT_BAD_INPUT)
+    with errors_reported():
         out = out or Path("runs") / name
-        with _progress(False, f"study {name}") as step:  # each study refuses an existing folder before its work
+        with progress(False, f"study {name}") as step:  # each study refuses an existing folder before its work
             written = STUDIES[name](out, force=force, progress=step)
-    except ChewbotError as exc:
-        _fail(exc)
+        stdout.print(claims_table(written))
     stdout.print(f"wrote [bold]{escape(str(written))}[/]", highlight=False)
 
 
@@ -323,7 +398,7 @@ def track_incisor(
     pin: str = typer.Option("alpha", "--pin", help="The coordinate that resolves the redundancy (the incisor gives 3 equations for 4 DOF): X, Y, alpha or beta. It follows its column in the path file if there is one (e.g. alpha[deg]), else it is held at zero."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation the optimisation works in."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the file's bite force acts."),
-    force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
+    force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
     """Find the mandible's motion that makes the incisor follow a path (seed 001, Sect. 5.1).
 
@@ -334,37 +409,26 @@ def track_incisor(
 
       chewbot track-incisor incisor.csv --out task.csv --pin alpha && chewbot run --task task.csv --out runs/tracked
     """
-    import os
-
-    from chewbot.outputs import OutputExistsError
+    from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line
     from chewbot.params import load_model
     from chewbot.task.csvio import read_incisor_csv
     from chewbot.task.incisor import track_incisor as track
 
     residuals = out.with_name(out.stem + ".residuals.csv")
-    try:
-        for target in (out, residuals):
-            if target.exists() and not force:
-                raise OutputExistsError(f"{target}: exists; choose another --out or pass --force to replace it")
+    with errors_reported():
         m = load_model(model)
+        inputs = [path, Path(m.source)]
+        for target in (out, residuals):  # before the work, not after it
+            check_output(target, force, WRITTEN_FILE, inputs)
         path_data = read_incisor_csv(path)
-        with _progress(False, "incisor tracking") as step:
+        with progress(False, "incisor tracking") as step:
             step("solving")
             result = track(m, path_data["t"], path_data["p"], path_data["v"], path_data["a"], orientation=orientation.value,
                            pin=pin, pinned=path_data["pinned"].get(pin), force=path_data["force"], side=side.value, name=out.stem)
-        tables = result.tables()
-        out.parent.mkdir(parents=True, exist_ok=True)
-        partial = [target.with_name(f".{target.name}.partial-{os.getpid()}") for target in (out, residuals)]
-        try:
-            for table, tmp in zip(tables, partial):
-                table.to_csv(tmp)
-            for tmp, target in zip(partial, (out, residuals)):
-                os.replace(tmp, target)
-        finally:
-            for tmp in partial:
-                tmp.unlink(missing_ok=True)
-    except ChewbotError as exc:
-        _fail(exc)
+        with atomic_files((out, residuals), force, inputs) as temporaries:
+            for table, tmp, what in zip(result.tables(), temporaries, ("a task, read it with chewbot run --task",
+                                                                       "residuals of chewbot track-incisor")):
+                table.to_csv(tmp, first_line=marker_line("#", f"{what}; from {path.name}"))
     stdout.print(f"wrote {escape(str(out))} and {escape(str(residuals))}; max |f_D| = {abs(result.f_D).max():.3g} m, "
                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
 
@@ -401,7 +465,8 @@ def check_model(
 
     Prints the lengths and masses of the chains (couplers: density x area x length), the total moving mass,
     the home pose (theta_i and their largest absolute value, transmission angles), the condyles at home and
-    whether they lie on their planes inside the sockets, and the values the file marks as assumed.
+    whether they lie on their planes inside the sockets, and the values the file marks as assumed; warns when the
+    home pose is near a singularity (a transmission angle or kappa of the chains' Jacobian below its threshold).
     Exit code 2 names the file and the key of the first problem; 3 means the home pose is out of reach.
 
     Examples:
@@ -410,40 +475,48 @@ def check_model(
 
       chewbot check-model my_robot.toml
     """
+    from chewbot.analysis.checks import KAPPA_MIN, NEAR_SINGULAR_DEG
     from chewbot.params import load_model
+    from chewbot.report.summary import home_pose
 
-    try:
+    with errors_reported():
         m = load_model(model)
-        stdout.print(_model_report(m))
-    except ChewbotError as exc:
-        _fail(exc)
+        home = home_pose(m)
+        stdout.print(_model_report(m, home))
+    for i, mu in enumerate(home["mu_deg"]):
+        if mu < NEAR_SINGULAR_DEG:
+            console.print(f"[yellow]warning:[/] chain {i + 1} is near-singular at the home pose: transmission angle "
+                          f"{mu:.2f} deg < {NEAR_SINGULAR_DEG:g} deg (docs/conventions.md)", highlight=False)
+    if home["kappa"] < KAPPA_MIN:
+        console.print(f"[yellow]warning:[/] the home pose is near a singularity: kappa of the chains' Jacobian "
+                      f"{home['kappa']:.3g} < {KAPPA_MIN:g} (docs/conventions.md)", highlight=False)
 
 
-def _model_report(m):
-    """Tables of a model's derived quantities (SI inside, printed in mm, g and degrees)."""
+def _model_report(m, home: dict):
+    """Tables of a model's derived quantities (SI inside, printed in mm, g and degrees, each with its unit)."""
     import numpy as np
     from rich.console import Group
     from rich.table import Table as RichTable
 
-    from chewbot.report.summary import assumed_values, home_pose
+    from chewbot.report.summary import assumed_values
 
-    home = home_pose(m)
     theta = np.degrees(home["theta"])
-    chains = RichTable(title=f"{m.name}: {m.mechanism}, {m.dof} DOF, {m.source}", title_justify="left")
+    chains = RichTable(title=escape(f"{m.name}: {m.mechanism}, {m.dof} DOF, {m.source}"), title_justify="left")
     for col in ("chain", "crank [mm]", "coupler [mm]", "coupler mass [g]", "crank mass [g]", "crank inertia [g·mm²]",
-                "θ home [deg]", "transm. home [deg]"):
-        chains.add_column(col, justify="right")
+                "θ home [deg]", "μ home [deg]"):
+        chains.add_column(escape(col), justify="right")  # escaped: rich would take "[mm]" for markup
     for i in range(6):
         chains.add_row(str(i + 1), f"{m.crank_length[i] * 1e3:.4g}", f"{m.coupler_length[i] * 1e3:.4g}", f"{m.coupler_mass[i] * 1e3:.4g}",
-                       f"{m.crank_mass[i] * 1e3:.5g}", f"{m.crank_inertia[i] * 1e9:.6g}", f"{theta[i]:.4f}",
-                       f"{np.degrees(np.arcsin(home['transmission'][i])):.2f}")
+                       f"{m.crank_mass[i] * 1e3:.5g}", f"{m.crank_inertia[i] * 1e9:.6g}", f"{theta[i]:.4f}", f"{home['mu_deg'][i]:.2f}")
     couplers, cranks = m.coupler_mass.sum() * 1e3, m.crank_mass.sum() * 1e3
     facts = RichTable(show_header=False, box=None)
     facts.add_column(style="bold")
     facts.add_column()
     facts.add_row("masses", f"couplers {couplers:.4g} g, cranks {cranks:.5g} g, mandible {m.mandible_mass * 1e3:.5g} g; "
                             f"total moving {couplers + cranks + m.mandible_mass * 1e3:.5g} g")
-    facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home)")
+    facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home); "
+                               f"μ_i: transmission angles (90 deg best, 0 at the dead point); kappa of the chains' Jacobian "
+                               f"{home['kappa']:.3g} [-] (1 best, 0 singular)")
     h = m.hkp
     for label, T, y_range in (("left condyle T_L", h.T_L, h.y_left), ("right condyle T_R", h.T_R, h.y_right)):
         text = f"({', '.join(f'{v * 1e3:.4g}' for v in T)}) mm in {{S}} at home"
@@ -455,9 +528,5 @@ def _model_report(m):
     for label, p in (("incisor I", m.incisor), ("molars B_L, B_R", np.hstack([m.molar_left, m.molar_right]))):
         facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
     assumed = assumed_values(m)
-    facts.add_row("assumed", "\n".join(f"{k} = {v}" for k, v in assumed.items()) or "none")
+    facts.add_row("assumed", escape("\n".join(f"{k} = {v}" for k, v in assumed.items())) or "none")
     return Group(chains, facts, f"[green]valid:[/] {escape(m.source)}")
-
-
-def main() -> None:  # pragma: no cover
-    app()

@@ -4,7 +4,9 @@
 code generator: plain C99 with <math.h> only), a README describing every kernel's inputs and outputs with
 their units, a minimal example program that evaluates each kernel once on a known sample and prints the
 outputs, and a Makefile. The example's numbers are the ones chewbot computes in Python for the same sample,
-listed in the README, so the export can be checked on the target machine.
+listed in the README, so the export can be checked on the target machine. ``chewbot-export.json`` names the
+kernels and chewbot's version; it is also how chewbot recognises a folder it exported (``--force`` replaces
+only such a folder, :data:`chewbot.outputs.EXPORT_FOLDER`).
 """
 
 from __future__ import annotations
@@ -16,7 +18,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from chewbot.outputs import atomic_folder
+from chewbot.outputs import EXPORT_FOLDER, atomic_folder, to_json
+
+# Version of chewbot-export.json, the exported folder's marker.
+EXPORT_FORMAT = 1
 
 
 @dataclass(frozen=True)
@@ -131,13 +136,20 @@ def _readme(prefix: str, kernels: list[Kernel], model_name: str) -> str:
     return "\n".join(out)
 
 
-def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", model_name: str = "", force: bool = False) -> Path:
-    """Write C source, header, README, example program and Makefile for ``kernels`` into the folder ``out``.
+def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", model_name: str = "", force: bool = False,
+             inputs=()) -> Path:
+    """Write C source, header, README, example program, Makefile and the marker ``chewbot-export.json`` for
+    ``kernels`` into the folder ``out``.
 
     The folder is written in a temporary sibling and moved into place; an existing folder is replaced only
-    with ``force`` (:func:`chewbot.outputs.atomic_folder`).
+    with ``force`` and only if chewbot exported it (:func:`chewbot.outputs.atomic_folder`); ``inputs`` (the
+    model files) may not lie inside it.
     """
-    with atomic_folder(Path(out), force) as tmp:
+    from chewbot import __version__
+
+    with atomic_folder(Path(out), force, EXPORT_FOLDER, inputs) as tmp:
+        (tmp / EXPORT_FOLDER.file).write_text(to_json({EXPORT_FOLDER.key: EXPORT_FORMAT, "chewbot": __version__, "model": model_name,
+                                                       "prefix": prefix, "kernels": [k.name for k in kernels]}))
         cg = ca.CodeGenerator(f"{prefix}.c", {"with_header": True})
         for k in kernels:
             cg.add(k.function)

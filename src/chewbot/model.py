@@ -74,12 +74,14 @@ class Friction:
 
 @dataclass(frozen=True, eq=False)
 class Limits:
-    """Actuator limits for the optimal torque distribution (seed 001, Sect. 4.5)."""
+    """Actuator limits for the optimal torque distribution (seed 001, Sect. 4.5) and the validity checks."""
 
     torque: float  # N m
     power: float  # W
     axial_load: float  # N, along the shaft, at G_i
     radial_load: float  # N, across the shaft, at G_i
+    theta_range: np.ndarray | None = None  # rad, (2,): lowest and highest crank angle; None: unbounded
+    speed: float | None = None  # rad/s, largest abs(theta_dot_i); None: unbounded
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,77 +1,332 @@
-"""Writing result folders: all or nothing, and never over an existing result without being asked."""
+"""Writing outputs: whole or not at all, never over what chewbot did not write, never leaving temporary files.
+
+Every command writes through this module (docs/cli.md, "Writing a new command"):
+
+* :func:`atomic_folder` for a folder (a run's results, a study, exported C), :func:`atomic_files` for one or
+  more single files written together (a task and its residuals, a Markdown table). The output is written
+  under a temporary name beside it and renamed into place once complete; an error or a signal removes it.
+* ``--force`` replaces only an output that chewbot wrote, recognised by its :class:`Marker`: a file inside a
+  folder (a results folder's ``run.json``) or the first line of a single file (:func:`marker_line`). Anything
+  else is refused (:class:`OutputExistsError`, exit code 5) and left untouched. :func:`check_output` applies
+  the rule before the work starts; the atomic writers apply it again before they rename.
+* An output may not be the current folder or contain it, nor contain (or be) one of the command's inputs.
+* Temporary names carry the process id (``.NAME.partial-PID-XXXXXXXX``, ``.NAME.replaced-PID-XXXXXXXX``);
+  :func:`remove_stale` (run by each writer in the folder it writes to) removes those whose process no longer
+  exists, and puts back an output that was moved aside and never replaced. Those of a live process stay.
+* Folders and files get the permissions of the user's umask.
+"""
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import re
+import secrets
 import shutil
-import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from chewbot.command import shield
 from chewbot.errors import ChewbotError
 
 
 class OutputError(ChewbotError):
-    """The results folder cannot be written (the file system refused; names the folder and the reason)."""
+    """The output cannot be written (names the path and the reason in plain words)."""
 
 
 class OutputExistsError(OutputError):
-    """The results folder exists and ``force`` was not given."""
+    """The output exists, and ``force`` was not given or chewbot did not write it."""
+
+
+# --- what chewbot wrote ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Marker:
+    """How chewbot recognises an output of one kind that it wrote itself.
+
+    A folder carries a JSON file ``file`` whose top level has the key ``key`` (the format's version); a single
+    file (``file`` None) starts with the line of :func:`marker_line`.
+    """
+
+    kind: str
+    file: str | None = None
+    key: str | None = None
+
+    @property
+    def is_folder(self) -> bool:
+        return self.file is not None
+
+    def present(self, path: Path) -> bool:
+        """True if ``path`` is an output of this kind written by chewbot."""
+        path = Path(path)
+        if path.is_symlink():  # chewbot never writes links: replacing one would replace what it points to
+            return False
+        if not self.is_folder:
+            return path.is_file() and _starts_with_marker(path)
+        try:
+            content = json.loads((path / self.file).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return False
+        return isinstance(content, dict) and isinstance(content.get(self.key), int)
+
+
+RESULTS_FOLDER = Marker("results folder", "run.json", "chewbot_run")
+STUDY_FOLDER = Marker("study folder", "study.json", "chewbot_study")
+EXPORT_FOLDER = Marker("exported C folder", "chewbot-export.json", "chewbot_export")
+WRITTEN_FILE = Marker("file")
+
+_MARKER_TEXT = "written by chewbot"
+_MARKER_LINE = re.compile(r"^\ufeff?\s*(#|<!--|//|;)\s*" + _MARKER_TEXT + r"\b")
+
+
+def marker_line(comment: str = "#", about: str = "") -> str:
+    """The first line of a single file chewbot writes (without the newline): ``# written by chewbot 0.2.0: about``.
+
+    ``comment`` opens a comment in the file's format: ``#`` for CSV (the task reader skips such lines) and
+    TOML, ``<!--`` for Markdown and HTML (closed on the same line).
+    """
+    from chewbot import __version__
+
+    text = f"{comment} {_MARKER_TEXT} {__version__}" + (f": {about}" if about else "")
+    return text + " -->" if comment == "<!--" else text
+
+
+def _starts_with_marker(path: Path) -> bool:
+    try:
+        with open(path, "rb") as f:
+            first = f.readline(400).decode("utf-8", errors="replace")
+    except OSError:
+        return False
+    return bool(_MARKER_LINE.match(first))
+
+
+# --- the rule ----------------------------------------------------------------------------------------------
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    p, f = Path(path).resolve(), Path(folder).resolve()
+    return p == f or f in p.parents
+
+
+def check_output(out: Path, force: bool, marker: Marker = RESULTS_FOLDER, inputs=()) -> None:
+    """Refuse ``out`` (raise :class:`OutputError`, exit code 5) unless it may be written:
+
+    * it is not the current folder and does not contain it, and no input (``inputs``: paths, None skipped)
+      lies inside it (or is it);
+    * it does not exist, or it is an output of ``marker``'s kind that chewbot wrote and ``force`` is given.
+
+    The folder ``out`` is in is tidied first (:func:`remove_stale`): an output of a killed process that was
+    moved aside is back in place before the rule looks at it.
+    """
+    out = Path(out)
+    remove_stale(out.parent)
+    if _inside(Path.cwd(), out):
+        raise OutputError(f"{out}: is the current folder or contains it; chewbot writes a new {marker.kind} of its own, "
+                          "it does not write over the folder it runs in: choose another --out, e.g. runs/NAME")
+    for given in inputs:
+        if given is not None and _inside(Path(given), out):
+            raise OutputError(f"{out}: the input {given} is {'this file' if Path(given).resolve() == out.resolve() else 'inside it'}; "
+                              f"writing the {marker.kind} would replace its own input: choose another --out")
+    if not (out.exists() or out.is_symlink()):
+        return
+    if marker.present(out):
+        if not force:
+            raise OutputExistsError(f"{out}: exists (a {marker.kind} written by chewbot); pass --force to replace it, "
+                                    "or choose another --out")
+        return
+    what = f"has no {marker.file} of chewbot" if marker.is_folder else f"does not start with chewbot's line '{marker_line()}'"
+    if out.is_symlink():
+        what = "is a symbolic link"
+    elif marker.is_folder != out.is_dir():
+        what = f"is a {'folder' if out.is_dir() else 'file'}, not a {marker.kind}"
+    raise OutputExistsError(f"{out}: exists and was not written by chewbot ({what}); chewbot never replaces it, "
+                            "not even with --force: choose another --out")
+
+
+# --- plain reasons -----------------------------------------------------------------------------------------
+
+_REASONS = {
+    errno.EACCES: "permission denied: you may not write there",
+    errno.EPERM: "the operation is not permitted there",
+    errno.EROFS: "the file system is read-only",
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "your disk quota is used up",
+    errno.ENOTDIR: "a part of the path is a file, not a folder",
+    errno.EISDIR: "it is a folder",
+    errno.ENOENT: "a folder on the way does not exist",
+    errno.ENAMETOOLONG: "the name is too long",
+    errno.EEXIST: "a file of that name is in the way",
+    errno.ENOTEMPTY: "a folder of that name is in the way",
+    errno.EXDEV: "it is on another file system than its temporary copy",
+}
+
+
+def plain_reason(exc: OSError) -> str:
+    """The reason of a file-system error in plain words."""
+    return _REASONS.get(exc.errno, exc.strerror or str(exc))
+
+
+def cannot_write(path: Path, exc: OSError, what: str = "write it") -> OutputError:
+    """An :class:`OutputError` naming ``path``, what could not be done and the reason of ``exc`` in plain words."""
+    return OutputError(f"{path}: cannot {what}: {plain_reason(exc)}")
+
+
+# --- temporary names ---------------------------------------------------------------------------------------
+
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(?P<state>partial|replaced)-(?P<pid>\d+)-[0-9a-f]{8}$")
+
+
+def _temporary(path: Path, state: str) -> Path:
+    return path.with_name(f".{path.name}.{state}-{os.getpid()}-{secrets.token_hex(4)}")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale(folder: Path) -> list[Path]:
+    """Remove the temporary outputs in ``folder`` left by chewbot processes that no longer exist (killed, or
+    the machine stopped); an output that such a process had moved aside and not yet replaced is put back.
+    Those of live processes (a concurrent run) are left alone. Returns what was removed or put back."""
+    done = []
+    try:
+        entries = list(Path(folder).iterdir())
+    except OSError:
+        return done
+    for entry in entries:
+        m = _TEMPORARY.match(entry.name)
+        if m is None or int(m["pid"]) == os.getpid() or _alive(int(m["pid"])):
+            continue
+        target = entry.with_name(m["name"])
+        try:
+            with shield():
+                if m["state"] == "replaced" and not (target.exists() or target.is_symlink()):
+                    os.replace(entry, target)
+                elif entry.is_dir() and not entry.is_symlink():
+                    shutil.rmtree(entry)
+                else:
+                    entry.unlink()
+            done.append(entry)
+        except OSError:
+            pass  # not ours to fight over (permissions): it stays
+    return done
+
+
+def _prepare_folder(folder: Path, out: Path) -> None:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise cannot_write(out, exc, f"create the folder {folder} for it") from exc
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+# --- the writers -------------------------------------------------------------------------------------------
 
 
 @contextmanager
-def atomic_folder(out: Path, force: bool = False):
-    """Yield a temporary sibling folder of ``out`` to write into; it becomes ``out`` when the block ends without
-    an error (replacing ``out`` only with ``force``), and is removed otherwise.
+def atomic_folder(out: Path, force: bool = False, marker: Marker = RESULTS_FOLDER, inputs=()):
+    """Yield a new temporary folder beside ``out`` to write into; when the block ends without an error it
+    becomes ``out``, replacing an existing one only as :func:`check_output` allows. On an error or a signal
+    the temporary folder is removed and ``out`` stays as it was.
 
-    The old folder is moved aside, not deleted, until the new one is in place, and restored if that fails:
-    there is no moment without a complete result. File-system errors become :class:`OutputError`.
+    The block must write ``marker``'s file into the folder (a folder chewbot cannot recognise later could never
+    be replaced): its absence is a bug (RuntimeError). The old folder is moved aside, not deleted, until the new
+    one is in place, and put back if that fails: there is no moment without a complete output. File-system
+    errors become :class:`OutputError` naming the path and the reason.
     """
     out = Path(out)
-    check_output(out, force)
+    check_output(out, force, marker, inputs)
+    _prepare_folder(out.parent, out)
+    tmp = _temporary(out, "partial")
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        tmp.mkdir()  # not tempfile.mkdtemp: its mode 0700 would ignore the umask
     except OSError as exc:
-        raise OutputError(f"{out}: cannot create the results folder ({exc.strerror or exc})") from exc
-    old = out.parent / f".{out.name}.replaced-{tmp.name.rsplit('-', 1)[-1]}"
-    try:
+        raise cannot_write(out, exc, "create its temporary folder beside it") from exc
+    with _committed([(tmp, out)], force, marker):
         yield tmp
-        if out.exists():
-            os.replace(out, old)
-        os.replace(tmp, out)
-    except BaseException as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if old.exists() and not out.exists():
-            os.replace(old, out)
-        if isinstance(exc, OSError):
-            raise OutputError(f"{out}: cannot write the results ({exc.strerror or exc}{f': {exc.filename}' if exc.filename else ''})") from exc
-        raise
-    shutil.rmtree(old, ignore_errors=True)
 
 
-def check_output(out: Path, force: bool) -> None:
-    """Refuse an ``out`` that exists and is not a folder, or exists at all without ``force``."""
-    if out.exists() and not out.is_dir():
-        raise OutputExistsError(f"{out}: exists and is not a folder; choose another --out")
-    if out.exists() and not force:
-        raise OutputExistsError(f"{out}: the results folder exists; choose another --out or pass --force to replace it")
+@contextmanager
+def atomic_files(paths, force: bool = False, inputs=()):
+    """Yield one temporary path beside each of ``paths`` (single files written together, e.g. a task and its
+    residuals); when the block ends without an error each becomes its path, all or none. Each file must start
+    with :func:`marker_line` (its absence is a bug); an existing file is replaced only as :func:`check_output`
+    allows. On an error or a signal the temporary files are removed and the paths stay as they were."""
+    paths = [Path(p) for p in paths]
+    for p in paths:
+        check_output(p, force, WRITTEN_FILE, inputs)
+    for p in paths:
+        _prepare_folder(p.parent, p)
+    pairs = [(_temporary(p, "partial"), p) for p in paths]
+    with _committed(pairs, force, WRITTEN_FILE):
+        yield [tmp for tmp, _ in pairs]
 
 
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary sibling: the file is whole or untouched."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+@contextmanager
+def atomic_file(path: Path, force: bool = False, inputs=()):
+    """:func:`atomic_files` for one file: yields its temporary path."""
+    with atomic_files([path], force, inputs) as (tmp,):
+        yield tmp
+
+
+@contextmanager
+def _committed(pairs: list[tuple[Path, Path]], force: bool, marker: Marker):
+    """Run the block, then rename each (temporary, output) pair into place, moving an existing output aside
+    first; on any error or signal remove the temporaries and the outputs placed so far, and put back what was
+    moved aside: all the outputs or none."""
+    aside: dict[Path, Path] = {}
+    placed: list[Path] = []
+    current = pairs[0][1]
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+        yield
+        for tmp, out in pairs:
+            if not marker.present(tmp):
+                raise RuntimeError(f"{out}: the command did not mark its output "
+                                   f"({marker.file or repr(marker_line())}); chewbot could not recognise it later")
+        with shield():
+            for tmp, out in pairs:
+                current = out
+                check_output(out, force, marker)  # again: a concurrent process may have written it meanwhile
+                if out.exists() or out.is_symlink():
+                    aside[out] = _temporary(out, "replaced")
+                    os.replace(out, aside[out])
+            for tmp, out in pairs:
+                current = out
+                os.replace(tmp, out)
+                placed.append(out)
+    except BaseException as exc:
+        with shield():
+            for tmp, _ in pairs:
+                _remove(tmp)
+            for out in placed:
+                _remove(out)
+            for out, old in aside.items():
+                if not (out.exists() or out.is_symlink()):
+                    os.replace(old, out)
+        if isinstance(exc, OSError):
+            raise cannot_write(current, exc) from exc
+        raise
+    with shield():
+        for old in aside.values():
+            _remove(old)
 
 
 def to_json(obj) -> str:

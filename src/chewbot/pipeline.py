@@ -1,7 +1,8 @@
-"""A run: model + task -> kinematics (-> dynamics, coupling ...) -> a results folder.
+"""A run: model + task -> kinematics (-> dynamics, coupling ...) -> validity checks -> a results folder.
 
-The folder is written in a temporary sibling and moved into place at the end: a failed run leaves nothing
-behind, and an existing folder is replaced only when ``force`` is given.
+The folder is written in a temporary sibling and moved into place at the end (:func:`chewbot.outputs.atomic_folder`):
+a failed or interrupted run leaves nothing behind, and an existing folder is replaced only when ``force`` is
+given and chewbot wrote it. The folder is written whatever the checks say; the command decides the exit code.
 """
 
 from __future__ import annotations
@@ -9,54 +10,33 @@ from __future__ import annotations
 import hashlib
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
 
+import numpy as np
+
+from chewbot.command import pause_for_tests
 from chewbot.errors import KinematicsError
-from chewbot.kinematics.motion import Kinematics, solve_kinematics
+from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
+from chewbot.outputs import RESULTS_FOLDER, atomic_folder, to_json
 from chewbot.params import load_model
 from chewbot.report import dynamics_figures, figures
 from chewbot.report.html import write_report
-from chewbot.results import Table, kinematics_table
+from chewbot.results import RESULTS_FORMAT, RunOptions, RunResult, kinematics_table
 from chewbot.task.base import Task
-from chewbot.outputs import atomic_folder, to_json
+
+__all__ = ["RunOptions", "RunResult", "compute", "input_files", "load_task", "run_json", "write"]
 
 
-@dataclass
-class RunOptions:
-    """Everything that defines a run (recorded in run.json)."""
-
-    model: str = "target"
-    task: str = "default"
-    side: str = "left"
-    orientation: str = "euler-angles"
-    method: str | None = None
-    goal: str | None = "min-torque"  # newton-euler on the target only
-    friction: str | None = "on"  # newton-euler only
-
-
-@dataclass
-class RunResult:
-    """What a run computed, in memory (the folder holds the same)."""
-
-    options: RunOptions
-    model: Model
-    task: Task
-    kinematics: Kinematics
-    table: Table
-    figures: list[Path] = field(default_factory=list)
-    info: dict = field(default_factory=dict)
-    dynamics: object | None = None
-
-
-def load_task(spec: str, model: Model, side: str) -> Task:
-    """``"default"`` (the synthetic chewing task) or the path of a CSV file."""
+def load_task(spec: str, model: Model, side: str | None) -> Task:
+    """``"default"`` (the synthetic chewing task) or the path of a CSV file; ``side`` None: left, or the side of
+    the run whose results.csv the file is."""
     from chewbot.task.default import default_task
 
     if spec == "default":
-        return default_task(model, side)
+        return default_task(model, side or "left")
     from chewbot.task.csvio import read_task_csv
 
     return read_task_csv(Path(spec), side=side, mechanism=model.mechanism)
@@ -68,6 +48,7 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     model = load_model(options.model)
     step("task")
     task = load_task(options.task, model, options.side)
+    options = replace(options, side=task.side)  # the side in effect, as run.json records it
     step("kinematics")
     t0 = time.perf_counter()
     try:
@@ -79,9 +60,35 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     timings = {"kinematics_s": time.perf_counter() - t0}
     table = kinematics_table(kin)
     result = RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
+    _singularity_columns(result)
     if options.method:
         _dynamics_stage(result, step)
+    _checks_stage(result, step)
     return result
+
+
+def _singularity_columns(result: RunResult) -> None:
+    """The transmission angles mu1..mu6 and kappa_J of the chains' Jacobian (docs/conventions.md)."""
+    from chewbot.kinematics.conditioning import jacobian_conditioning
+
+    kin = result.kinematics
+    t0 = time.perf_counter()
+    kappa = jacobian_conditioning(result.model, kin.theta, kin.X)
+    result.info["timings"]["conditioning_s"] = time.perf_counter() - t0
+    result.table.add_block([f"mu{i + 1}" for i in range(6)], np.arcsin(np.clip(kin.transmission, 0.0, 1.0)), "rad",
+                           "transmission angle of chain i (90 deg best, 0 at the dead point)")
+    result.table.add("kappa_J", kappa, "1",
+                     "reciprocal condition number of the chains' Jacobian J_theta1, columns scaled (0: singular)")
+
+
+def _checks_stage(result: RunResult, step) -> None:
+    """The validity checks of every sample (chewbot.analysis.checks), on the whole run as one chunk."""
+    from chewbot.analysis.checks import run_checks
+
+    step("validity checks")
+    t0 = time.perf_counter()
+    result.checks = run_checks(result.model, result.table, result.info.get("dynamics"), result.options.contact)
+    result.info["timings"]["checks_s"] = time.perf_counter() - t0
 
 
 def _dynamics_stage(result: RunResult, step) -> None:
@@ -90,6 +97,7 @@ def _dynamics_stage(result: RunResult, step) -> None:
 
     o = result.options
     step(f"inverse dynamics ({o.method})")
+    pause_for_tests("dynamics")
     t0 = time.perf_counter()
     used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {})}
     dyn = inverse_dynamics(result.model, result.kinematics, o.method, **used)
@@ -129,11 +137,19 @@ def _sha256(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def input_files(options: RunOptions) -> list[Path]:
+    """The files a run reads (its task file, its parameter file), which its output must not contain."""
+    from chewbot.params import BUILTIN_MODELS
+
+    return [Path(p) for p in (options.task, options.model) if p not in ("default", *BUILTIN_MODELS)]
+
+
 def run_json(result: RunResult) -> dict:
-    """The run record (run.json): options, model and task identity, versions, platform, column units, info."""
+    """The run record (run.json): format, options, model and task identity, versions, platform, column units,
+    the validity checks, info."""
     m, task = result.model, result.task
     return {
-        "chewbot_run": 1,
+        "chewbot_run": RESULTS_FORMAT,
         "options": vars(result.options),
         "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed)},
         "task": {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
@@ -141,6 +157,7 @@ def run_json(result: RunResult) -> dict:
         "versions": _versions(),
         "platform": platform.platform(),
         "columns": {name: {"unit": result.table.units[name], **({"description": d} if (d := result.table.descriptions.get(name)) else {})} for name in result.table.columns},
+        "checks": [c.as_dict() for c in result.checks],
         **result.info,
     }
 
@@ -148,14 +165,15 @@ def run_json(result: RunResult) -> dict:
 def write(result: RunResult, out: Path, force: bool = False, progress=None) -> Path:
     """Write the results folder ``out`` (results.csv, run.json, figures, report.html) atomically.
 
-    Everything is written in a temporary sibling folder that replaces ``out`` only once complete: a failure
-    at any step (a figure, the report) leaves ``out`` as it was. ``progress(message)`` is told each step.
+    Everything is written in a temporary sibling folder that replaces ``out`` only once complete: a failure or a
+    signal at any step (a figure, the report) leaves ``out`` as it was. ``progress(message)`` is told each step.
     """
     step = progress or (lambda msg: None)
     out = Path(out)
-    with atomic_folder(out, force) as tmp:
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp:
         step("writing results.csv")
         result.table.to_csv(tmp / "results.csv")
+        pause_for_tests("writing")
         step("drawing figures")
         result.figures = [
             figures.task_space(result.table, tmp / "task_space.png"),

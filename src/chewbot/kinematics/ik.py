@@ -55,9 +55,22 @@ def _wrap(a):
 
 
 def transmission(model: Model, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """sin of the angle between crank motion and coupler, per sample and chain (N, 6); 0 at a singularity."""
+    """sin of each chain's transmission angle mu_i at the poses (p (N, 3) m, R (N, 3, 3)): (N, 6), 1 at best, 0 at
+    the singular configuration (docs/conventions.md, "Transmission angle").
+
+    With w_i = z_i x (S_i - G_i) / L_c the direction in which the crank moves its tip S_i and e_i = (M_i - S_i) / L_r
+    the coupler's direction, mu_i is the angle between e_i and the plane normal to w_i (the plane of the crank
+    and its shaft):
+
+        sin mu_i = abs(e_i . w_i) = abs(dh_i/dtheta_i) / (2 L_c L_r) = sqrt(A^2 + B^2 - C^2) / (2 L_c L_r)
+
+    (A, B, C of the module docstring; the last form holds on a closed chain, on either branch). It is the share of
+    the crank tip's motion that goes along the coupler: turning at theta_dot_i, the crank moves M_i along the
+    coupler at L_c theta_dot_i sin mu_i, so a motion of the mandible needs crank rates that grow as 1/sin mu_i
+    (the input transmission index of motion/force transmissibility).
+    """
     A, B, C = _coefficients(model, p, R)
-    return np.sqrt(np.clip(1 - (C / np.hypot(A, B)) ** 2, 0, None))
+    return np.sqrt(np.clip(A**2 + B**2 - C**2, 0, None)) / (2 * model.crank_length * model.coupler_length)
 
 
 def inverse_kinematics(model: Model, p: np.ndarray, R: np.ndarray, times: np.ndarray | None = None) -> np.ndarray:

@@ -83,6 +83,7 @@ def mci_means(means: dict[str, np.ndarray], path: Path) -> Path:
         ax.bar(x + (k - (len(means) - 1) / 2) * width, values, width, label=label)
     ax.set_xticks(x, [f"MCI{i}" for i in JOINTS])
     ax.set_ylabel("mean MCI_i over the task [-]")
+    ax.set_title("Mean inertia coupling index per joint")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="y")
     return _save(fig, path)

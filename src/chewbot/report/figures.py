@@ -16,6 +16,10 @@ LEVELS = (("", "displacement"), ("d", "velocity"), ("dd", "acceleration"))
 
 
 def _save(fig, path: Path) -> Path:
+    """Save a figure (every figure has a title: its own or one of its panels')."""
+    if not fig.get_suptitle() and not any(ax.get_title() for ax in fig.axes):
+        plt.close(fig)
+        raise ValueError(f"{path.name}: a figure without a title")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -66,6 +70,7 @@ def bite_force(table: Table, path: Path) -> Path:
         ax.plot(table["t"], table[name], label=name)
     ax.set_xlabel("time t [s]")
     ax.set_ylabel("bite force F_B [N]")
+    ax.set_title("Bite force F_B on the mandible at the molar, in {S}")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.grid(alpha=0.3)
     return _save(fig, path)

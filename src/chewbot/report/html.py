@@ -19,8 +19,6 @@ import os
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import TYPE_CHECKING
-
 import numpy as np
 import plotly.graph_objects as go
 import plotly.io as pio
@@ -28,12 +26,12 @@ from plotly.offline import get_plotlyjs
 from plotly.subplots import make_subplots
 from scipy.spatial import ConvexHull
 
+from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.analysis.indices import INDEX_UNITS
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.report.summary import (
     INDEX_NAMES,
-    NEAR_SINGULAR_DEG,
     column_stats,
     crank_tips,
     infeasible_samples,
@@ -42,11 +40,8 @@ from chewbot.report.summary import (
     performance_indices,
     solver_notes,
 )
-from chewbot.results import POSE_NAMES, Table
+from chewbot.results import POSE_NAMES, RunResult, Table
 from chewbot.rotation import matrix_from_euler_angles
-
-if TYPE_CHECKING:
-    from chewbot.pipeline import RunResult
 
 MAX_PLOT_POINTS = 1000
 FRAME_STEP_S = 0.04  # 25 frames per second of task: the animation plays in real time
@@ -65,6 +60,7 @@ def write_report(result: RunResult, path: Path, files: list[str] | None = None) 
     figures: dict[str, go.Figure] = {}
     body = [
         _robot_section(result, figures),
+        _checks_section(result),
         _summary_section(result),
         _plots_section(result, figures),
         _run_section(result, files or []),
@@ -73,8 +69,7 @@ def write_report(result: RunResult, path: Path, files: list[str] | None = None) 
     template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
     page = template.substitute(
         title=html.escape(f"chewbot report: {result.model.name}, {result.task.name} ({o.side} side)"),
-        subtitle=html.escape(f"{result.model.description} · {result.table.n} samples · "
-                             f"{o.orientation}" + (f" · inverse dynamics: {o.method}" if o.method else "")),
+        subtitle=html.escape(f"{result.model.description} · {result.table.n} samples · {o.orientation} · {dynamics_label(result)}"),
         plotlyjs=get_plotlyjs(),
         body="\n".join(body),
         # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
@@ -335,7 +330,8 @@ def transmission_figure(kin: Kinematics) -> go.Figure:
 def time_figures(result: RunResult) -> list[tuple[str, go.Figure]]:
     """Every plot of the run, titled: the kinematics first, then each further group of columns."""
     table = result.table
-    known = {"t", "Fx", "Fy", "Fz"} | {p + n for p, _ in LEVELS for n in POSE_NAMES + THETA_NAMES}
+    known = ({"t", "Fx", "Fy", "Fz"} | {p + n for p, _ in LEVELS for n in POSE_NAMES + THETA_NAMES}
+             | {f"mu{i}" for i in range(1, 7)})  # the transmission angles have their figure
     out = [("Motion of the mandible (task space)", task_space_figure(table)),
            ("Motion of the actuators (joint space)", joint_space_figure(table)),
            ("Bite force F_B on the mandible at the molar, in {S}", group_figure(table, ["Fx", "Fy", "Fz"])),
@@ -367,14 +363,45 @@ def _run_section(result: RunResult, files: list[str]) -> str:
         ["parameter file", f"<code>{_e(m.source)}</code> (sha256 {_e(m.sha256[:12])}…)"],
         ["task", f"{_e(task.name)} from <code>{_e(task.source)}</code>: {task.n} samples, "
                  f"{t[-1] - t[0]:.3f} s, {(task.n - 1) / (t[-1] - t[0]):.4g} Hz" if task.n > 1 else _e(task.name)],
-        ["options", f"bite side {_e(o.side)}, orientation {_e(o.orientation)}, inverse dynamics "
-                    + (f"{_e(o.method)} (goal {_e(o.goal)}, friction {_e(o.friction)})" if o.method else "not run")],
+        ["options", f"bite side {_e(o.side)}, orientation {_e(o.orientation)}, {_e(dynamics_label(result))}, "
+                    f"contact model {_e(o.contact)}"],
         ["timings", ", ".join(f"{_e(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items()) or "-"],
         ["assumed values", ", ".join(f"<code>{_e(k)}</code>" for k in m.assumed) + " (not in the papers; <code>chewbot check-model</code> lists their values)"],
     ]
     if files:
         rows.append(["files", ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)])
     return f'<section id="run"><h2>Run</h2>{_table(["", ""], [[r[0], r[1]] for r in rows]).replace("<td>", "<td class=text>")}</section>'
+
+
+def dynamics_label(result: RunResult) -> str:
+    """The inverse dynamics as run, in words: the method with the goal and friction in effect."""
+    o = result.options
+    if not o.method:
+        return "inverse dynamics not run"
+    if o.method != "newton-euler":
+        return f"inverse dynamics: {o.method} (minimum-norm torques, no friction)"
+    goal = o.goal if result.model.has_hkp and o.goal else "no redundancy to distribute (6RSS)"
+    return f"inverse dynamics: newton-euler (goal {goal}, friction {o.friction or 'on'})"
+
+
+def _checks_section(result: RunResult) -> str:
+    """The validity checks of the run (chewbot.analysis.checks), failed ones marked."""
+    if not result.checks:
+        return '<section id="checks"><h2>Validity checks</h2><p class="note">No validity checks were run.</p></section>'
+    rows = []
+    for c in result.checks:
+        verdict = ("not evaluated" if c.samples is None else "passed" if c.passed
+                   else f'<span class="warn">{"FAILED" if c.fails_run else "warning"}</span>')
+        worst = "" if c.worst is None else f"{_fmt(c.worst['value'])} {_e(c.worst['unit'])}"
+        first = "" if c.first_sample is None else f"{c.first_sample['t']:.3f}"
+        rows.append([_e(c.name), verdict, _e(c.severity), "" if c.samples is None else str(c.samples), first, worst, _e(c.message)])
+    failing = [c.name for c in result.checks if c.fails_run]
+    verdict = (f'<p class="warn">Failed: {_e(", ".join(failing))} (the run exits with code 4).</p>' if failing
+               else '<p class="ok">No check that counts as a failure failed.</p>')
+    return ('<section id="checks"><h2>Validity checks</h2>' + verdict
+            + _table(["check", "verdict", "counts as", "samples", "first at t [s]", "worst", "message"], rows).replace("<td>", "<td class=text>")
+            + f'<p class="note">Contact model: {_e(result.options.contact)}. Every sample is checked; docs/cli.md lists the checks and '
+            "their bounds. A failure makes the run exit with code 4 (unless --allow-violations); a warning is reported only.</p></section>")
 
 
 def _robot_section(result: RunResult, figures: dict) -> str:

@@ -14,15 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import inverse_kinematics, transmission
 from chewbot.model import Model
 from chewbot.results import Table
-
-# A chain whose transmission angle (between the crank's motion and the coupler, 90 deg at best, 0 at a
-# singularity) drops below 15 deg is reported as near-singular: its actuator then needs more than
-# 1 / sin(15 deg) = 3.9 times the torque it would need at a right angle for the same force along the coupler,
-# and errors in the geometry are amplified as much. The default task stays above 25 deg.
-NEAR_SINGULAR_DEG = 15.0
 
 # Names of the performance indices of seed 001 (Sect. 5.3), as docs/conventions.md reads them.
 INDEX_NAMES = {
@@ -44,12 +39,18 @@ def crank_tips(model: Model, theta: np.ndarray) -> np.ndarray:
 
 
 def home_pose(model: Model) -> dict[str, np.ndarray]:
-    """The home (occlusal) pose, {M} = {S}: theta (6,) rad and the sin of each transmission angle (6,).
+    """The home (occlusal) pose, {M} = {S}: theta (6,) rad, the sin of each transmission angle (6,), the
+    transmission angles mu (6,) in deg and kappa of the chains' Jacobian (chewbot.kinematics.conditioning).
 
     Raises :class:`~chewbot.errors.KinematicsError` when a chain cannot reach it.
     """
+    from chewbot.kinematics.conditioning import jacobian_conditioning
+
     p, R = np.zeros((1, 3)), np.eye(3)[None]
-    return {"theta": inverse_kinematics(model, p, R)[0], "transmission": transmission(model, p, R)[0]}
+    theta = inverse_kinematics(model, p, R)
+    sin_mu = transmission(model, p, R)[0]
+    return {"theta": theta[0], "transmission": sin_mu, "mu_deg": np.degrees(np.arcsin(np.clip(sin_mu, 0.0, 1.0))),
+            "kappa": float(jacobian_conditioning(model, theta, np.zeros((1, 6)))[0])}
 
 
 def assumed_values(model: Model) -> dict[str, object]:

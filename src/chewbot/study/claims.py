@@ -6,6 +6,10 @@ import csv
 from dataclasses import dataclass
 from pathlib import Path
 
+# Version of study.json, the key "chewbot_study" by which chewbot recognises a study folder it wrote
+# (chewbot.outputs.STUDY_FOLDER).
+STUDY_FORMAT = 1
+
 
 @dataclass(frozen=True)
 class Claim:
@@ -32,3 +36,18 @@ def write_claims(rows: list[Claim], folder: Path) -> None:
         writer = csv.writer(f)
         writer.writerow(["item", "model", "claim", "ours", "reproduced", "reason"])
         writer.writerows([r.item, r.variant, r.claim, r.ours, r.verdict, r.reason] for r in rows)
+
+
+def claims_table(folder: Path):
+    """The claims of a written study folder (its claims.csv) as a rich table, for the terminal."""
+    from rich.markup import escape
+    from rich.table import Table as RichTable
+
+    with open(Path(folder) / "claims.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    table = RichTable(title=f"claims: {escape(str(folder))}", title_justify="left", show_lines=True)
+    for name in rows[0]:
+        table.add_column(name, overflow="fold", justify="right" if name == "item" else "left")
+    for row in rows[1:]:
+        table.add_row(*(escape(cell) for cell in row))
+    return table

@@ -14,7 +14,7 @@ import numpy as np
 
 from chewbot.analysis.coupling import coupling
 from chewbot.bench import TASK_CASES, bench_task, ratios
-from chewbot.study.claims import Claim, write_claims
+from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.dynamics import inverse_dynamics
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.params import load_model
@@ -138,11 +138,11 @@ def _figures(results: dict, folder: Path) -> list[Path]:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import atomic_folder, check_output, to_json
+    from chewbot.outputs import STUDY_FOLDER, atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)
-    check_output(out, force)
+    check_output(out, force, STUDY_FOLDER)
     results = {}
     for names in VARIANTS.values():
         for name in names:
@@ -152,9 +152,9 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
     measured = bench_task(repeats=11, cases=tuple(c for c in TASK_CASES if c.label in ("hessian", "liang")))
     timings = ratios(measured)
     rows = claims(results, timings, {(t.mechanism, t.case): (t.min_s, t.median_s) for t in measured})
-    with atomic_folder(out, force) as tmp:
+    with atomic_folder(out, force, STUDY_FOLDER) as tmp:
         write_claims(rows, tmp)
-        summary = {"timing_ratios": timings,
+        summary = {"chewbot_study": STUDY_FORMAT, "study": "seed000", "timing_ratios": timings,
                    "coupling_means": {name: r[3].means() for name, r in results.items()},
                    "peak_torque_N_m": {name: {s: np.abs(r[2][s, "hessian"]).max(axis=0).tolist() for s in SIDES}
                                        for name, r in results.items()}}

@@ -25,7 +25,7 @@ from chewbot.params import load_model
 from chewbot.report import newton_euler_figures
 from chewbot.report.figures import _save, plt
 from chewbot.results import kinematics_table
-from chewbot.study.claims import Claim, write_claims
+from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.task.default import default_task
 
 GOAL_LABELS = {"min-torque": "G1", "min-coupler-force": "G2", "min-hkp-force": "G3"}
@@ -84,6 +84,7 @@ def _fig14(rows: list[dict], path: Path) -> Path:
         ax.bar(xs + (k - 0.5) * 0.4, times, width=0.4, label=orientation)
     ax.set_xticks(xs, labels)
     ax.set_ylabel("Newton–Euler, whole task (5001 samples) [ms]")
+    ax.set_title("Computation time: Euler parameters against Euler angles (seed 001, Fig. 14)")
     ax.legend()
     ax.grid(alpha=0.3, axis="y")
     return _save(fig, path)
@@ -134,13 +135,13 @@ def claims(rows: list[dict]) -> list[Claim]:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import atomic_folder, check_output, to_json
+    from chewbot.outputs import STUDY_FOLDER, atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)
-    check_output(out, force)
+    check_output(out, force, STUDY_FOLDER)
     rows = _rows(step)
-    with atomic_folder(out, force) as tmp:
+    with atomic_folder(out, force, STUDY_FOLDER) as tmp:
         with open(tmp / "table3.csv", "w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(_header())
@@ -148,7 +149,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
         lines = ["| " + " | ".join(_header()) + " |", "|" + "---|" * len(COLUMNS)]
         lines += ["| " + " | ".join(_cell(r[c]) for c in COLUMNS) + " |" for r in rows]
         (tmp / "table3.md").write_text("\n".join(lines) + "\n")
-        summary = {"rows": [{c: r[c] for c in COLUMNS} for r in rows],
+        summary = {"chewbot_study": STUDY_FORMAT, "study": "seed001", "rows": [{c: r[c] for c in COLUMNS} for r in rows],
                    "notes": "Newton-Euler with friction, default task, left side; time: median of "
                             f"{REPEATS} runs after a warm-up, kinematics excluded"}
         (tmp / "study.json").write_text(to_json(summary))

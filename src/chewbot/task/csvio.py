@@ -10,14 +10,18 @@ One header row of column names, then one row per sample, comma-separated. Column
 * optional bite force ``Fx, Fy, Fz`` on the mandible in {S} (each one absent is zero).
 
 Values are SI (s, m, rad, N and their rates) unless the name carries a unit in brackets: ``X[mm]``,
-``alpha[deg]``, ``dX[mm/s]``, ``ddbeta[deg/s^2]``, ``t[ms]``, ``Fz[kN]`` (see :data:`UNITS`). Blank lines and
+``alpha [deg]``, ``dX[mm/s]``, ``ddbeta[deg/s^2]``, ``t[ms]``, ``Fz[kN]`` (see :data:`UNITS`). Blank lines and
 lines starting with ``#`` are skipped. Every error is a :class:`~chewbot.errors.TaskError` naming the file and
 the line (1-based, as an editor shows it) or the column.
+
+A run's ``results.csv`` is a task too: with chewbot's run.json beside it, the columns that run.json lists and a
+task does not take (theta1, tau1, MCI1, ...) are skipped, and the bite force's side is the run's unless given.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import re
 from pathlib import Path
 
@@ -78,15 +82,21 @@ def _unit_factor(unit: str, kind: str, order: int) -> float:
     raise ValueError(f"unknown unit {unit!r} (known {kind} units: {', '.join(UNITS[kind])})")
 
 
-def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUMNS) -> tuple[list[str], np.ndarray]:
-    names, factors = [], []
+def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUMNS,
+                  outputs: frozenset[str] = frozenset()) -> tuple[list[str], np.ndarray, list[int]]:
+    """Names, factors to SI and the indices of the cells that are read; cells named in ``outputs`` (the output
+    columns of the run that wrote the file) and not in ``columns`` are skipped."""
+    names, factors, kept = [], [], []
     for j, cell in enumerate(cells):
         m = _HEADER.match(cell)
         if m is None:
             raise TaskError(f"{path}: line {line}, column {j + 1}: cannot read the column name {cell!r} (expected NAME or NAME[unit])")
         name, unit = m.group(1), m.group(2)
+        if name in outputs and name not in columns:
+            continue
         if name not in columns:
-            raise TaskError(f"{path}: line {line}: unknown column {name!r} (known: {', '.join(columns)})")
+            raise TaskError(f"{path}: line {line}: unknown column {name!r} (known: {', '.join(columns)}; a run's results.csv "
+                            "is read with the run.json beside it, which names its other columns)")
         if name in names:
             raise TaskError(f"{path}: line {line}: column {name!r} appears twice")
         kind, order = columns[name]
@@ -95,7 +105,8 @@ def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUM
         except ValueError as exc:
             raise TaskError(f"{path}: line {line}: column {cell.strip()!r}: {exc}") from None
         names.append(name)
-    return names, np.array(factors)
+        kept.append(j)
+    return names, np.array(factors), kept
 
 
 def _read_rows(path: Path) -> tuple[int, list[str], list[tuple[int, list[str]]]]:
@@ -127,11 +138,12 @@ def _to_float(path: Path, names: list[str], lines: np.ndarray, cells: np.ndarray
         raise
 
 
-def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str):
+def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str, outputs: frozenset[str] = frozenset()):
     """Parse, check and convert to SI a file of signals over time: (names, header, lines, col) with col the
-    columns by name (SI, (N,) each). Every defect is a TaskError naming the file and the line or column."""
+    columns by name (SI, (N,) each), header the cells of the columns read. Columns in ``outputs`` that are not in
+    ``columns`` are skipped. Every defect is a TaskError naming the file and the line or column."""
     header_line, header, body = _read_rows(path)
-    names, factors = _parse_header(path, header_line, header, columns)
+    names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
     missing = [c for c in required if c not in names]
     if missing:
         raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
@@ -143,9 +155,9 @@ def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: st
         raise TaskError(f"{path}: {len(body)} data row(s); {what} needs at least {MIN_ROWS}")
     lines = np.array([line for line, _ in body])
     for line, cells in body:
-        if len(cells) != len(names):
-            raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(names)} columns")
-    data = _to_float(path, names, lines, np.array([cells for _, cells in body], dtype=object).astype(str))
+        if len(cells) != len(header):
+            raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(header)} columns")
+    data = _to_float(path, names, lines, np.array([cells for _, cells in body], dtype=object).astype(str)[:, kept])
     bad = np.argwhere(~np.isfinite(data))
     if bad.size:
         i, j = bad[0]
@@ -157,7 +169,7 @@ def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: st
     if bad.size:
         i = int(bad[0]) + 1
         raise TaskError(f"{path}: line {lines[i]}, column 't': time {t[i]:.9g} s does not increase (previous row {t[i - 1]:.9g} s)")
-    return names, header, lines, col
+    return names, [header[j] for j in kept], lines, col
 
 
 def _with_rates(path: Path, lines, col: dict, signals: tuple[str, ...]):
@@ -201,18 +213,38 @@ def read_incisor_csv(path: str | Path) -> dict:
     return {"t": col["t"], "p": p, "v": v, "a": a, "force": force, "pinned": pinned}
 
 
-def read_task_csv(path: str | Path, side: str = "left", mechanism: str = "target", name: str | None = None) -> Task:
-    """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at ``side``."""
+def run_beside(path: Path) -> dict | None:
+    """The run.json of the chewbot run whose results.csv ``path`` is (in the same folder), or None."""
+    from chewbot.outputs import RESULTS_FOLDER
+
+    if not RESULTS_FOLDER.present(path.parent):
+        return None
+    run = json.loads((path.parent / RESULTS_FOLDER.file).read_text(encoding="utf-8"))
+    if path.name != "results.csv" or not isinstance(run.get("columns"), dict):
+        return None
+    return run
+
+
+def read_task_csv(path: str | Path, side: str | None = None, mechanism: str = "target", name: str | None = None) -> Task:
+    """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at
+    ``side``: left or right; None takes the side of the run whose results.csv the file is, else left."""
     path = Path(path)
     if mechanism not in ("target", "6rss"):
         raise TaskError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
+    run = run_beside(path)
+    outputs = frozenset(run["columns"]) if run else frozenset()
+    if side is None:
+        side = (run or {}).get("task", {}).get("side") or "left"
     required = ("t",) + (TARGET_COORDS if mechanism == "target" else FULL_COORDS)
-    names, header, lines, col = _read_signals(path, COLUMNS, required, f"a {mechanism} task")
+    names, header, lines, col = _read_signals(path, COLUMNS, required, f"a {mechanism} task", outputs)
     has_full = "Z" in names or "gamma" in names
     if has_full and not ("Z" in names and "gamma" in names):
         raise TaskError(f"{path}: columns Z and gamma come together (the target computes both from its sockets when neither is given)")
     coords = FULL_COORDS if has_full else TARGET_COORDS
     q, dq, ddq, estimated = _with_rates(path, lines, col, coords)
     force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
+    meta = _meta(path, names, header, estimated)
+    if run:
+        meta["results_of_run"] = {"options": run.get("options", {}), "skipped_columns": len(outputs - set(names))}
     return Task(name=name or path.stem, t=col["t"], coords=coords, q=q, dq=dq, ddq=ddq, force=force,
-                side=side, source=str(path), meta=_meta(path, names, header, estimated), lines=lines)
+                side=side, source=str(path), meta=meta, lines=lines)
