@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from chewbot.errors import ChewbotError
+from chewbot.recordings.command import import_motion
 
 app = typer.Typer(
     name="chewbot",
@@ -367,6 +368,9 @@ def track_incisor(
         _fail(exc)
     stdout.print(f"wrote {escape(str(out))} and {escape(str(residuals))}; max |f_D| = {abs(result.f_D).max():.3g} m, "
                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
+
+
+app.command("import-motion")(import_motion)
 
 
 @app.command()

@@ -1,0 +1,143 @@
+"""The fit to the robot: in every frame, the admissible pose nearest to the recorded one.
+
+The target robot moves in 4 DOF (X, Y, alpha, beta; Z and gamma follow from its HKPs), the 6RSS in 6; a
+recorded pose has 6. For each frame, q_EE minimises the weighted pose error of
+:mod:`chewbot.recordings.robotfit` (position of the measure point in mm times ``position_weight_per_mm``,
+rotation angle between the fitted and the recorded orientation in degrees times ``orientation_weight_per_deg``,
+in the least-squares sense) over the admissible poses (condyles inside their sockets, every chain reachable).
+
+1. Without the constraints, frame after frame in time order: a compiled Gauss-Newton kernel (exact Jacobians
+   by CasADi's automatic differentiation) runs over the frames in one loop, each frame starting from the
+   previous frame's result (the first from the recorded pose's own coordinates). Frames whose last step is
+   not yet below :data:`STEP_TOL` get more iterations, all at once.
+2. Where that optimum is not admissible, the nearest admissible pose lies on the boundary: those frames are
+   solved as constrained problems (SQP, CasADi ``sqpmethod``, exact Hessian), all in one mapped call, each
+   starting from its own unconstrained optimum. A frame where the SQP does not end at an admissible,
+   stationary point has no admissible pose near it.
+
+For the 6RSS the fit is exact (zero error) wherever the recorded pose is reachable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from chewbot.casadi_tools import evaluate
+from chewbot.model import Model
+from chewbot.recordings.robotfit import FitFunctions, fit_functions, gauss_newton_sequential, solve_constrained
+from chewbot.rotation import euler_angles_from_matrix
+
+# A frame has converged when the last Gauss-Newton step is below this (mm and deg: 1e-12 m, 2e-11 rad).
+STEP_TOL = 1e-9
+MORE_ROUNDS = 5
+# An admissible pose may break a socket bound by this much (mm; the kinematics' own slack is 1e-12 m = 1e-9 mm).
+BOUND_TOL = 1e-10
+# The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
+# mm or deg; the SQP stops at 1e-10).
+STATIONARITY_TOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class RobotFit:
+    """The fit in every frame (arrays frames first).
+
+    ``q`` (N, n): q_EE in Euler angles (``coords``; m and rad), NaN where no admissible pose was found;
+    ``position_error_mm``, ``orientation_error_deg`` (N,): the errors of the fitted pose (NaN where none);
+    ``admissible`` (N,): an admissible pose was found; ``outside`` (N, n_g): the constraints that the
+    unconstrained optimum breaks (the recorded motion leaves the workspace there), named by ``constraint_names``.
+    """
+
+    coords: tuple[str, ...]
+    q: np.ndarray
+    position_error_mm: np.ndarray
+    orientation_error_deg: np.ndarray
+    admissible: np.ndarray
+    outside: np.ndarray
+    constraint_names: tuple[str, ...]
+
+
+def settings_vector(model: Model, point, position_weight_per_mm: float, orientation_weight_per_deg: float) -> np.ndarray:
+    """[measure point in {M} (m); w_p; w_o] (the point defaults to the model's incisor)."""
+    b = model.incisor if point is None else np.asarray(point, dtype=float)
+    return np.r_[b, position_weight_per_mm, orientation_weight_per_deg]
+
+
+def targets(p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(N, 12) recorded poses as the kernels take them: [p; R column by column]."""
+    return np.hstack([p, np.swapaxes(R, 1, 2).reshape(-1, 9)])
+
+
+def own_coordinates(fns: FitFunctions, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """The recorded poses' own coordinates in the fit's scaled unknowns (X, Y (, Z) and the Euler angles it has)."""
+    angles = euler_angles_from_matrix(R)
+    q = np.hstack([p[:, :2], angles[:, :2]]) if fns.n == 4 else np.hstack([p, angles])
+    return q / fns.scale
+
+
+def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
+                 orientation_weight_per_deg: float = 1.0) -> RobotFit:
+    """The admissible poses of ``model`` nearest to the recorded ones (``p`` (N, 3) m, ``R`` (N, 3, 3) in {S})."""
+    fns = fit_functions(model)
+    settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+    target = targets(p, R)
+    z, last = gauss_newton_sequential(fns, own_coordinates(fns, p[:1], R[:1])[0], target, settings)
+    z, last = _converge(fns, z, last, target, settings)
+    (g,) = evaluate(fns.constraints, z)
+    outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
+    admissible = np.ones(len(z), dtype=bool)
+    if rows.size:
+        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
+    return _result(fns, z, admissible, outside, target, settings)
+
+
+def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
+                       orientation_weight_per_deg: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses q (N, n) of ``model`` (m, rad) moved to the nearest admissible ones where they are not admissible.
+    Returns the poses (the others unchanged), the rows that were moved, and whether each of those is now
+    admissible."""
+    fns = fit_functions(model)
+    (g,) = evaluate(fns.constraints, q / fns.scale)
+    rows = np.flatnonzero(((g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)).any(axis=1))
+    q = q.copy()
+    ok = np.ones(rows.size, dtype=bool)
+    if rows.size:
+        z = q[rows] / fns.scale
+        p, R = evaluate(fns.pose, z)
+        settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+        z, ok = _constrained(fns, z, targets(p, R), settings)
+        q[rows] = z * fns.scale
+    return q, rows, ok
+
+
+def _converge(fns: FitFunctions, z, last, target, settings):
+    """More Gauss-Newton iterations, all at once, on the frames whose last step is still above STEP_TOL."""
+    z, last = z.copy(), last.copy()
+    for _ in range(MORE_ROUNDS):
+        rows = np.flatnonzero(~(last <= STEP_TOL))
+        if rows.size == 0:
+            break
+        z[rows], step = evaluate(fns.gauss_newton, z[rows], target[rows], settings)
+        last[rows] = step[:, 0]
+    return z, last
+
+
+def _constrained(fns: FitFunctions, z0, target, settings):
+    """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found."""
+    z, lam = solve_constrained(fns, z0, target, settings)
+    (g,) = evaluate(fns.constraints, z)
+    feasible = ((g >= fns.lbg - BOUND_TOL) & (g <= fns.ubg + BOUND_TOL)).all(axis=1)
+    (grad,) = evaluate(fns.stationarity, z, lam, target, settings)
+    ok = feasible & (np.abs(grad).max(axis=1) <= STATIONARITY_TOL) & np.isfinite(z).all(axis=1)
+    z[~ok] = np.nan
+    return z, ok
+
+
+def _result(fns: FitFunctions, z, admissible, outside, target, settings) -> RobotFit:
+    pos, ori = np.full(len(z), np.nan), np.full(len(z), np.nan)
+    if admissible.any():
+        e_p, e_o, _ = evaluate(fns.errors, z[admissible], target[admissible], settings)
+        pos[admissible], ori[admissible] = e_p[:, 0], e_o[:, 0]
+    return RobotFit(fns.coords, z * fns.scale, pos, ori, admissible, outside, fns.constraint_names)
