@@ -65,7 +65,7 @@ def import_motion(
     from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, _fail, _progress, console, stdout
     from chewbot.errors import ChewbotError, FitError
     from chewbot.outputs import OutputExistsError
-    from chewbot.recordings.importer import ImportOptions, import_motion as run_import
+    from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
     if side not in ("left", "right"):
@@ -82,9 +82,8 @@ def import_motion(
                 raise OutputExistsError(f"{target}: is one of the command's input files; choose another --out")
             if target.exists() and not force:
                 raise OutputExistsError(f"{target}: exists; choose another --out or pass --force to replace it")
-        with _progress(False, "import-motion") as step:
-            step("reading, fitting, resampling")
-            result = run_import(recording, registration, options)
+        with _progress(False, "import-motion", total=STEPS) as step:
+            result = run_import(recording, registration, options, progress=step)
         header = f"# chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
         table = result.residuals()
         if result.task is None:

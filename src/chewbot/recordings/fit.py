@@ -8,8 +8,11 @@ in the least-squares sense) over the admissible poses (condyles inside their soc
 
 1. Without the constraints, frame after frame in time order: a compiled Gauss-Newton kernel (exact Jacobians
    by CasADi's automatic differentiation) runs over the frames in one loop, each frame starting from the
-   previous frame's result (the first from the recorded pose's own coordinates). Frames whose last step is
-   not yet below :data:`STEP_TOL` get more iterations, all at once.
+   previous frame's result (the first from the recorded pose's own coordinates). The same kernel also runs on
+   every frame from its own recorded coordinates, all at once, and each frame keeps the better answer (a tie
+   goes to the recorded coordinates' branch of the Euler angles), so that a frame after one that went astray
+   does not inherit it. Frames whose last step is not yet below :data:`STEP_TOL` get more iterations, all at
+   once.
 2. Where that optimum is not admissible, the nearest admissible pose lies on the boundary: those frames are
    solved as constrained problems (SQP, CasADi ``sqpmethod``, exact Hessian), all in one mapped call, each
    starting from its own unconstrained optimum. A frame where the SQP does not end at an admissible,
@@ -26,12 +29,14 @@ import numpy as np
 
 from chewbot.casadi_tools import evaluate
 from chewbot.model import Model
-from chewbot.recordings.robotfit import FitFunctions, fit_functions, gauss_newton_sequential, solve_constrained
+from chewbot.recordings.robotfit import DEG, FitFunctions, fit_functions, gauss_newton_sequential, solve_constrained
 from chewbot.rotation import euler_angles_from_matrix
 
 # A frame has converged when the last Gauss-Newton step is below this (mm and deg: 1e-12 m, 2e-11 rad).
 STEP_TOL = 1e-9
 MORE_ROUNDS = 5
+# Two answers whose abs(r)^2 differ by less than this (and 1e-9 relative) tie: (1e-9 mm)^2, far above rounding.
+TIE = 1e-18
 # An admissible pose may break a socket bound by this much (mm; the kinematics' own slack is 1e-12 m = 1e-9 mm).
 BOUND_TOL = 1e-10
 # The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
@@ -82,8 +87,16 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     fns = fit_functions(model)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
-    z, last = gauss_newton_sequential(fns, own_coordinates(fns, p[:1], R[:1])[0], target, settings)
-    z, last = _converge(fns, z, last, target, settings)
+    own = own_coordinates(fns, p, R)
+    z, last = _converge(fns, *gauss_newton_sequential(fns, own[0], target, settings), target, settings)
+    # Each frame again from its own recorded coordinates, all at once: a frame after one that went astray (a
+    # swapped marker, a tracker glitch) must not inherit its answer. The better of the two is kept, a tie going
+    # to the recorded coordinates' Euler angles (beta within +-90 deg: (alpha + pi, pi - beta, gamma + pi) is the
+    # same pose); where the recording is sound the two agree to rounding.
+    z_own, last_own = _converge(fns, *evaluate(fns.gauss_newton, own, target, settings), target, settings)
+    keep = _cost(fns, z, target, settings) < _cost(fns, z_own, target, settings) * (1 - 1e-9) - TIE
+    z[~keep], last[~keep] = z_own[~keep], last_own[~keep]
+    z -= np.round((z - own) * fns.scale / (2 * np.pi)) * (fns.scale == DEG) * 2 * np.pi / fns.scale  # within half a turn
     (g,) = evaluate(fns.constraints, z)
     outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
     rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
@@ -94,27 +107,40 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
 
 
 def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
-                       orientation_weight_per_deg: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       orientation_weight_per_deg: float = 1.0):
     """Poses q (N, n) of ``model`` (m, rad) moved to the nearest admissible ones where they are not admissible.
-    Returns the poses (the others unchanged), the rows that were moved, and whether each of those is now
-    admissible."""
+
+    Returns the poses (the others unchanged), the rows that were moved, whether each of those is admissible now,
+    and a description of the largest violation that was removed (None if nothing moved).
+    """
     fns = fit_functions(model)
     (g,) = evaluate(fns.constraints, q / fns.scale)
-    rows = np.flatnonzero(((g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)).any(axis=1))
+    excess = np.maximum(fns.lbg - g, g - fns.ubg)
+    rows = np.flatnonzero((excess > BOUND_TOL).any(axis=1))
     q = q.copy()
     ok = np.ones(rows.size, dtype=bool)
+    worst = None
     if rows.size:
         z = q[rows] / fns.scale
         p, R = evaluate(fns.pose, z)
         settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
         z, ok = _constrained(fns, z, targets(p, R), settings)
         q[rows] = z * fns.scale
-    return q, rows, ok
+        j = int(np.argmax(excess.max(axis=0)))
+        worst = f"{fns.constraint_names[j]} by {excess[:, j].max():.3g}{' mm' if 'condyle' in fns.constraint_names[j] else ' (sine squared)'}"
+    return q, rows, ok, worst
+
+
+def _cost(fns: FitFunctions, z, target, settings) -> np.ndarray:
+    """abs(r)^2 per frame, infinite where z is not finite."""
+    r = evaluate(fns.errors, z, target, settings)[2]
+    cost = np.sum(r**2, axis=1)
+    return np.where(np.isfinite(cost), cost, np.inf)
 
 
 def _converge(fns: FitFunctions, z, last, target, settings):
     """More Gauss-Newton iterations, all at once, on the frames whose last step is still above STEP_TOL."""
-    z, last = z.copy(), last.copy()
+    z, last = z.copy(), np.ravel(last).copy()
     for _ in range(MORE_ROUNDS):
         rows = np.flatnonzero(~(last <= STEP_TOL))
         if rows.size == 0:

@@ -131,17 +131,21 @@ def read_table(path: Path, kind_of, what: str):
             except ValueError as exc:
                 raise RecordingError(f"{path}: line {header_line}, column {cell.strip()!r}: {exc}") from None
         names.append(m.group(1))
-    data = np.empty((len(body), len(names)))
-    for i, (line, cells) in enumerate(body):
+    for line, cells in body:
         if len(cells) != len(names):
             raise RecordingError(f"{path}: line {line}: {len(cells)} cells, the header has {len(names)} columns")
+    try:  # all at once; cell by cell only to name a bad one
+        data = np.array([[c if c.strip() else "nan" for c in cells] for _, cells in body], dtype=float).reshape(len(body), len(names))
+    except ValueError:
+        data = None
+    for i, (line, cells) in enumerate(body if data is None or np.isinf(data).any() else ()):
         for j, cell in enumerate(cells):
             cell = cell.strip()
             try:
-                data[i, j] = np.nan if cell.lower() in _MISSING else float(cell)
+                value = np.nan if cell.lower() in _MISSING else float(cell)
             except ValueError:
                 raise RecordingError(f"{path}: line {line}, column {names[j]!r}: {cell!r} is not a number") from None
-            if np.isinf(data[i, j]):
+            if np.isinf(value):
                 raise RecordingError(f"{path}: line {line}, column {names[j]!r}: {cell!r} is not a finite number")
     return names, data * np.array(factors), np.array([line for line, _ in body], dtype=int)
 
@@ -268,6 +272,8 @@ def read_c3d(path: Path, units: str) -> Recording:
     for extra in ("LABELS2", "LABELS3"):  # files with more than 255 markers continue the list
         labels += [str(s).strip() for s in point.get(extra, {}).get("value", [])]
     points = np.asarray(c["data"]["points"], dtype=float)  # (4, K, N), NaN where not seen
+    if len(labels) < points.shape[1]:
+        raise RecordingError(f"{path}: POINT:LABELS names {len(labels)} markers, the file has {points.shape[1]}")
     labels = labels[: points.shape[1]]
     if len(set(labels)) != len(labels):
         twice = sorted({s for s in labels if labels.count(s) > 1})

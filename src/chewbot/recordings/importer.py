@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.errors import RecordingError
+from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.params import load_model
@@ -96,15 +96,22 @@ class MotionImport:
         return _failure_messages(self)
 
 
-def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions()) -> MotionImport:
+STEPS = 4  # reading and preparing, rigid fit, fit to the robot, task (the progress callback's calls)
+
+
+def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
+                  progress=None) -> MotionImport:
     """Import a recording as a robot task (see the module docstring). Raises
     :class:`~chewbot.errors.RecordingError` for bad files and :class:`~chewbot.errors.KinematicsError` when the
     resampled task breaks the kinematics; failing frames are reported in the result (``passed``,
-    :meth:`MotionImport.failures`), with ``task`` None."""
+    :meth:`MotionImport.failures`), with ``task`` None. ``progress(message)`` is told each of :data:`STEPS` steps."""
+    step = progress or (lambda message: None)
+    step("reading and preparing the markers")
     reg = registration if isinstance(registration, Registration) else load_registration(registration)
     model = load_model(options.model)
     notes: list[str] = []
     rec = _prepare(read_recording(recording, reg.units), reg, options, notes)
+    step("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if reg.markers is None:
         if collinear(points[0]):
@@ -124,6 +131,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= options.max_orientation_deg)
         return fit, within & rigid_ok
 
+    step("fit to the robot" + (" (searching the scale)" if options.scale == "auto" else ""))
     factor = None
     fit, passed = attempt(1.0)
     if options.scale == "auto" and not passed.all() and rigid_ok.all():
@@ -131,6 +139,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         scale, angle_scale = factor * scale, factor * angle_scale
     elif options.scale == "auto":
         factor = 1.0
+    step("resampling and checking the task")
     task = None
     if passed.all():
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
@@ -183,14 +192,14 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
     out of the workspace moved back onto it, the bite force, and a check by the kinematics."""
     t = output_times(rec.t, options.rate_hz)
     q, dq, ddq = spline_motion(rec.t, fit.q, t)
-    moved, rows, ok = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
     if not ok.all():
         i = int(rows[~ok][0])
         raise RecordingError(f"{rec.source}: between the fitted frames, at t = {t[i]:.6g} s, the spline leaves the "
                              "workspace and no admissible pose is near it; lower --rate or use --rate recording")
     if rows.size:  # the rates then come from a spline through the samples as they are now
-        notes.append(f"moved {rows.size} resampled sample(s) back into the workspace (by at most "
-                     f"{np.abs(moved - q)[rows].max():.3g} m or rad): the spline overshot between frames on its boundary")
+        notes.append(f"moved {rows.size} resampled sample(s) back into the workspace, where the spline overshot its "
+                     f"boundary between frames (at most {worst})")
         q, dq, ddq = spline_motion(t, moved, t)
     if options.force_file is not None:
         force = force_at(*read_force_file(options.force_file), t, options.force_file)
@@ -201,7 +210,10 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
     coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
     task = Task(name=source.stem, t=t, coords=coords, q=q, dq=dq, ddq=ddq, force=force, side=options.side,
                 source=str(source), meta={"generator": "import-motion", "registration": reg.source})
-    solve_kinematics(model, task)  # what chewbot run will check: reachable, in the sockets, not singular
+    try:  # what chewbot run will check: reachable, in the sockets, not singular
+        solve_kinematics(model, task)
+    except KinematicsError as exc:
+        raise exc.located(f"{source}: the resampled task") from None
     return task
 
 
