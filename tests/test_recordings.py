@@ -7,6 +7,8 @@ as SciPy's intrinsic "XYZ", the parasitic gamma and Z of the HKP planes), not fr
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from conftest import model
@@ -428,10 +430,10 @@ def test_scale_auto_finds_the_largest_factor_that_passes(tmp_path):
     reg = registration(tmp_path, markers=False)
     strict = ImportOptions(cutoff_hz=None, rate_hz=None, max_position_mm=0.2, max_orientation_deg=0.5)
     assert not import_motion(path, reg, strict).passed.all()
-    auto = import_motion(path, reg, ImportOptions(**{**strict.__dict__, "scale": "auto"}))
+    auto = import_motion(path, reg, replace(strict, scale="auto"))
     f = auto.factor
     assert 0.2 < f < 1 and auto.passed.all() and auto.scale == f and auto.angle_scale == f
-    above = import_motion(path, reg, ImportOptions(**{**strict.__dict__, "scale": f + 2e-3, "angle_scale": f + 2e-3}))
+    above = import_motion(path, reg, replace(strict, scale=f + 2e-3, angle_scale=f + 2e-3))
     assert not above.passed.all()  # the factor is the largest to the bisection's resolution (6e-5)
 
 

@@ -134,11 +134,11 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     step("fit to the robot" + (" (searching the scale)" if options.scale == "auto" else ""))
     factor = None
     fit, passed = attempt(1.0)
-    if options.scale == "auto" and not passed.all() and rigid_ok.all():
-        factor, fit, passed = _largest_factor(attempt)
-        scale, angle_scale = factor * scale, factor * angle_scale
+    if options.scale == "auto" and not rigid_ok.all():
+        notes.append("--scale auto: no factor was searched, frames where a marker moves relative to the others fail at every scale")
     elif options.scale == "auto":
-        factor = 1.0
+        factor, fit, passed = (1.0, fit, passed) if passed.all() else _largest_factor(attempt)
+        scale, angle_scale = factor * scale, factor * angle_scale
     step("resampling and checking the task")
     task = None
     if passed.all():

@@ -33,9 +33,10 @@ from chewbot.model import Model
 
 MM = 1e-3
 DEG = np.pi / 180
-# Gauss-Newton iterations per frame inside the compiled kernel. Warm-started from the previous frame, the fit
-# converges to rounding in 3 to 5 (quadratically where the robot can follow the recording exactly, linearly
-# with a rate of about the residual over the mandible's size otherwise); the caller checks the last step and
+# Gauss-Newton iterations per frame inside the compiled kernel. From the previous frame's result or from the
+# recorded pose's own coordinates, the fit's last step falls to rounding (1e-14 mm) in 4 iterations on a chewing
+# recording at 100 Hz without noise and in 6 with 0.1 mm of marker noise (quadratic convergence where the robot
+# can follow the recording exactly, linear otherwise); 8 leave a margin, and the caller checks the last step and
 # runs the kernel again on the frames that need it.
 GN_ITERATIONS = 8
 # Frames per call of the sequential pass: the kernel runs over them in one C++ loop, each frame starting from
