@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE, app
 from chewbot.errors import RecordingError
-from chewbot.recordings.formats import read_recording
+from chewbot.recordings.formats import read_artisynth, read_csv, read_recording
 from chewbot.recordings.importer import ImportOptions, import_motion
 from chewbot.recordings.prepare import low_pass
 from chewbot.recordings.registration import registration_from_dict
@@ -454,6 +454,23 @@ def test_registration_errors_name_the_file_and_key(tmp_path):
     ]:
         with pytest.raises(RecordingError, match=r"^reg\.toml: " + pattern):
             registration_from_dict(raw, "reg.toml")
+
+
+def test_the_documented_examples_read(tmp_path):
+    """The registration, CSV and probe examples of docs/recordings.md are valid as printed."""
+    import tomllib
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "recordings.md").read_text()
+    blocks = {kind: text.split(f"```{kind}\n", 1)[1].split("```", 1)[0] for kind in ("toml", "csv", "text")}
+    reg = registration_from_dict(tomllib.loads(blocks["toml"]), "example")
+    assert list(reg.markers) == ["M1", "M2", "M3", "M4"] and reg.scale == 0.8 and reg.point[0] == pytest.approx(0.08)
+    (tmp_path / "example.csv").write_text(blocks["csv"])
+    (tmp_path / "example.txt").write_text(blocks["text"])
+    csv_rec = read_csv(tmp_path / "example.csv", "mm")  # the readers themselves: the examples are 2 or 3 frames long
+    assert np.isnan(csv_rec.positions[2, 0, 2]) and csv_rec.force[2, 2] == -1.5
+    probe = read_artisynth(tmp_path / "example.txt", "mm")
+    assert probe.markers == ("M1", "M2", "M3") and np.allclose(probe.positions[:, 0, 0], [0.09502, 0.09510])
 
 
 @pytest.mark.parametrize("name, text, pattern", [
