@@ -27,9 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate
 from chewbot.model import Model
-from chewbot.recordings.robotfit import DEG, FitFunctions, fit_functions, gauss_newton_sequential, solve_constrained
+from chewbot.recordings.robotfit import DEG, FitFunctions, fit_functions
 from chewbot.rotation import euler_angles_from_matrix
 
 # A frame has converged when the last Gauss-Newton step is below this (mm and deg: 1e-12 m, 2e-11 rad).
@@ -88,16 +87,16 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
     own = own_coordinates(fns, p, R)
-    z, last = _converge(fns, *gauss_newton_sequential(fns, own[0], target, settings), target, settings)
+    z, last = _converge(fns, *fns.sequential(own[0], target, settings), target, settings)
     # Each frame again from its own recorded coordinates, all at once: a frame after one that went astray (a
     # swapped marker, a tracker glitch) must not inherit its answer. The better of the two is kept, a tie going
     # to the recorded coordinates' Euler angles (beta within +-90 deg: (alpha + pi, pi - beta, gamma + pi) is the
     # same pose); where the recording is sound the two agree to rounding.
-    z_own, last_own = _converge(fns, *evaluate(fns.gauss_newton, own, target, settings), target, settings)
+    z_own, last_own = _converge(fns, *fns.gauss_newton(own, target, settings), target, settings)
     keep = _cost(fns, z, target, settings) < _cost(fns, z_own, target, settings) * (1 - 1e-9) - TIE
     z[~keep], last[~keep] = z_own[~keep], last_own[~keep]
     z -= np.round((z - own) * fns.scale / (2 * np.pi)) * (fns.scale == DEG) * 2 * np.pi / fns.scale  # within half a turn
-    (g,) = evaluate(fns.constraints, z)
+    g = fns.constraints(z)
     outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
     rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
     admissible = np.ones(len(z), dtype=bool)
@@ -114,7 +113,7 @@ def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_
     and a description of the largest violation that was removed (None if nothing moved).
     """
     fns = fit_functions(model)
-    (g,) = evaluate(fns.constraints, q / fns.scale)
+    g = fns.constraints(q / fns.scale)
     excess = np.maximum(fns.lbg - g, g - fns.ubg)
     rows = np.flatnonzero((excess > BOUND_TOL).any(axis=1))
     q = q.copy()
@@ -122,7 +121,7 @@ def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_
     worst = None
     if rows.size:
         z = q[rows] / fns.scale
-        p, R = evaluate(fns.pose, z)
+        p, R = fns.pose(z)
         settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
         z, ok = _constrained(fns, z, targets(p, R), settings)
         q[rows] = z * fns.scale
@@ -133,29 +132,28 @@ def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_
 
 def _cost(fns: FitFunctions, z, target, settings) -> np.ndarray:
     """abs(r)^2 per frame, infinite where z is not finite."""
-    r = evaluate(fns.errors, z, target, settings)[2]
+    r = fns.errors(z, target, settings)[2]
     cost = np.sum(r**2, axis=1)
     return np.where(np.isfinite(cost), cost, np.inf)
 
 
 def _converge(fns: FitFunctions, z, last, target, settings):
     """More Gauss-Newton iterations, all at once, on the frames whose last step is still above STEP_TOL."""
-    z, last = z.copy(), np.ravel(last).copy()
+    z, last = z.copy(), last.copy()
     for _ in range(MORE_ROUNDS):
         rows = np.flatnonzero(~(last <= STEP_TOL))
         if rows.size == 0:
             break
-        z[rows], step = evaluate(fns.gauss_newton, z[rows], target[rows], settings)
-        last[rows] = step[:, 0]
+        z[rows], last[rows] = fns.gauss_newton(z[rows], target[rows], settings)
     return z, last
 
 
 def _constrained(fns: FitFunctions, z0, target, settings):
     """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found."""
-    z, lam = solve_constrained(fns, z0, target, settings)
-    (g,) = evaluate(fns.constraints, z)
+    z, lam = fns.constrained(z0, target, settings)
+    g = fns.constraints(z)
     feasible = ((g >= fns.lbg - BOUND_TOL) & (g <= fns.ubg + BOUND_TOL)).all(axis=1)
-    (grad,) = evaluate(fns.stationarity, z, lam, target, settings)
+    grad = fns.stationarity(z, lam, target, settings)
     ok = feasible & (np.abs(grad).max(axis=1) <= STATIONARITY_TOL) & np.isfinite(z).all(axis=1)
     z[~ok] = np.nan
     return z, ok
@@ -164,6 +162,5 @@ def _constrained(fns: FitFunctions, z0, target, settings):
 def _result(fns: FitFunctions, z, admissible, outside, target, settings) -> RobotFit:
     pos, ori = np.full(len(z), np.nan), np.full(len(z), np.nan)
     if admissible.any():
-        e_p, e_o, _ = evaluate(fns.errors, z[admissible], target[admissible], settings)
-        pos[admissible], ori[admissible] = e_p[:, 0], e_o[:, 0]
+        pos[admissible], ori[admissible], _ = fns.errors(z[admissible], target[admissible], settings)
     return RobotFit(fns.coords, z * fns.scale, pos, ori, admissible, outside, fns.constraint_names)

@@ -15,8 +15,8 @@ the fit minimises abs(r)^2 over the admissible poses. Admissible: both condyles 
 and every chain reachable with a transmission angle whose sine is at least :data:`REACH_MARGIN` (so that
 :func:`chewbot.kinematics.ik.inverse_kinematics` accepts it).
 
-Interface (all per sample, for :func:`chewbot.casadi_tools.evaluate`): ``target`` = [p_rec (m); R_rec (9,
-column-major)], ``settings`` = [b (m, in {M}); w_p; w_o].
+Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first: ``z`` (N, n), ``target`` (N, 12)
+= [p_rec (m); R_rec column by column], ``settings`` (5,) = [b (m, in {M}); w_p; w_o].
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, mapped
+from chewbot.casadi_tools import compiled, evaluate, mapped
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
@@ -57,34 +57,80 @@ _SQP = {
 
 @dataclass(frozen=True, eq=False)
 class FitFunctions:
-    """The fit's per-sample functions for one model (built once, cached on the model).
+    """The fit's per-sample functions for one model (built once, cached on the model), called on NumPy arrays
+    (samples first; :func:`chewbot.casadi_tools.evaluate`): the rest of :mod:`chewbot.recordings` never calls a
+    CasADi function itself.
 
     ``coords``: names of q_EE; ``scale``: (n,) SI value of one unit of z (1e-3 for lengths, pi/180 for angles);
-    ``gauss_newton``: (z0, target, settings) -> z after :data:`GN_ITERATIONS` steps, the size of the last step
-    (mm, deg), compiled; ``errors``: (z, target, settings) -> position error (mm), orientation error (deg),
-    residual r; ``constraints``: z -> g, admissible where ``lbg <= g <= ubg`` (condyle x, y in mm; sin^2 of the
-    transmission angles); ``constraint_names``: a label per entry of g; ``pose``: z -> (p, R) in {S};
-    ``nlp``: the constrained problem (CasADi ``sqpmethod``, exact Hessian) with parameters [target; settings];
-    ``stationarity``: (z, lam_g, target, settings) -> gradient of the Lagrangian (its size tells a solution);
-    ``sequential``: ``gauss_newton`` over :data:`CHUNK` frames, each starting from the previous one's result.
+    admissible poses have ``lbg <= g <= ubg`` (condyle x, y in mm; sin^2 of the transmission angles), each entry
+    of g named by ``constraint_names``.
     """
 
     coords: tuple[str, ...]
     scale: np.ndarray
-    gauss_newton: ca.Function
-    errors: ca.Function
-    constraints: ca.Function
     lbg: np.ndarray
     ubg: np.ndarray
     constraint_names: tuple[str, ...]
-    pose: ca.Function
-    nlp: ca.Function
-    stationarity: ca.Function
-    sequential: ca.Function
+    _gauss_newton: ca.Function
+    _errors: ca.Function
+    _constraints: ca.Function
+    _pose: ca.Function
+    _nlp: ca.Function
+    _stationarity: ca.Function
+    _sequential: ca.Function
 
     @property
     def n(self) -> int:
         return self.scale.size
+
+    def gauss_newton(self, z0, target, settings) -> tuple[np.ndarray, np.ndarray]:
+        """z (N, n) after :data:`GN_ITERATIONS` steps from z0 (N, n), and the size of the last step (N,) (mm, deg)."""
+        z, last = evaluate(self._gauss_newton, z0, target, settings)
+        return z, last[:, 0]
+
+    def errors(self, z, target, settings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position error (N,) mm, orientation error (N,) deg and the weighted residual r (N, 6)."""
+        e_p, e_o, r = evaluate(self._errors, z, target, settings)
+        return e_p[:, 0], e_o[:, 0], r
+
+    def constraints(self, z) -> np.ndarray:
+        """g (N, n_g) of the poses z (N, n)."""
+        return evaluate(self._constraints, z)[0]
+
+    def pose(self, z) -> tuple[np.ndarray, np.ndarray]:
+        """p (N, 3) m and R (N, 3, 3) in {S} of the poses z (N, n)."""
+        p, R = evaluate(self._pose, z)
+        return p, R
+
+    def stationarity(self, z, lam_g, target, settings) -> np.ndarray:
+        """The gradient of the constrained problem's Lagrangian (N, n): ~0 at a solution."""
+        return evaluate(self._stationarity, z, lam_g, target, settings)[0]
+
+    def sequential(self, z_first, target, settings) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`gauss_newton` over N frames in time order, each frame starting from the result of the previous
+        one (``z_first`` for the first): one C++ loop per :data:`CHUNK` frames. Returns z (N, n), last step (N,)."""
+        n_frames = target.shape[0]
+        z, last = np.empty((n_frames, self.n)), np.empty(n_frames)
+        start = np.asarray(z_first, dtype=float)
+        st = np.tile(settings[:, None], (1, CHUNK))
+        for lo in range(0, n_frames, CHUNK):
+            hi = min(lo + CHUNK, n_frames)
+            tg = np.empty((12, CHUNK))
+            tg[:, : hi - lo] = target[lo:hi].T
+            tg[:, hi - lo:] = target[hi - 1][:, None]  # the last chunk is padded with its last frame
+            zc, lc = self._sequential(start, tg, st)
+            zc, lc = np.asarray(zc), np.asarray(lc).ravel()
+            z[lo:hi], last[lo:hi] = zc[:, : hi - lo].T, lc[: hi - lo]
+            start = zc[:, hi - lo - 1]
+        return z, last
+
+    def constrained(self, z0, target, settings) -> tuple[np.ndarray, np.ndarray]:
+        """The constrained problem (SQP) for m samples at once, in one mapped call, each from its z0 (m, n).
+        Returns z (m, n) and the multipliers lam_g (m, n_g)."""
+        m = z0.shape[0]
+        params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
+        sol = mapped(self._nlp, m)(x0=z0.T, p=params, lbg=np.tile(self.lbg[:, None], (1, m)), ubg=np.tile(self.ubg[:, None], (1, m)))
+        return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
 
 
 def fit_functions(model: Model) -> FitFunctions:
@@ -171,39 +217,7 @@ def _build(model: Model) -> FitFunctions:
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
     nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
                     {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
-    return FitFunctions(coords, scale, gauss_newton, errors, constraints, np.array(lbg), np.array(ubg), tuple(names),
+    return FitFunctions(coords, scale, np.array(lbg), np.array(ubg), tuple(names), gauss_newton, errors, constraints,
                         ca.Function("fit_pose_z", [z], [p, R], ["z"], ["p", "R"]), nlp, stationarity,
                         gauss_newton.mapaccum("fit_sequential", CHUNK))
-
-
-def solve_constrained(fns: FitFunctions, z0: np.ndarray, target: np.ndarray, settings: np.ndarray):
-    """The constrained problem for m samples at once (one mapped call, no Python loop): z0, target (m, 12),
-    settings (5,). Returns z (m, n) and the multipliers lam_g (m, n_g)."""
-    m = z0.shape[0]
-    params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
-    lbg = np.tile(fns.lbg[:, None], (1, m))
-    ubg = np.tile(fns.ubg[:, None], (1, m))
-    sol = mapped(fns.nlp, m)(x0=z0.T, p=params, lbg=lbg, ubg=ubg)
-    return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
-
-
-
-def gauss_newton_sequential(fns: FitFunctions, z_first: np.ndarray, target: np.ndarray, settings: np.ndarray):
-    """The Gauss-Newton kernel over N frames in time order, each frame warm-started from the result of the
-    previous one (``z_first`` for the first): target (N, 12), settings (5,). Returns z (N, n) and the last step
-    of each frame (N,)."""
-    n_frames = target.shape[0]
-    z, last = np.empty((n_frames, fns.n)), np.empty(n_frames)
-    start = np.asarray(z_first, dtype=float)
-    st = np.tile(settings[:, None], (1, CHUNK))
-    for lo in range(0, n_frames, CHUNK):
-        hi = min(lo + CHUNK, n_frames)
-        tg = np.empty((12, CHUNK))
-        tg[:, : hi - lo] = target[lo:hi].T
-        tg[:, hi - lo:] = target[hi - 1][:, None]  # the last chunk is padded with its last frame
-        zc, lc = fns.sequential(start, tg, st)
-        zc, lc = np.asarray(zc), np.asarray(lc).ravel()
-        z[lo:hi], last[lo:hi] = zc[:, : hi - lo].T, lc[: hi - lo]
-        start = zc[:, hi - lo - 1]
-    return z, last
 
