@@ -265,6 +265,20 @@ def test_where_the_motion_leaves_the_sockets_the_nearest_admissible_pose_is_on_t
     assert checked >= 2
 
 
+def test_frames_with_no_admissible_pose_near_them_fail(tmp_path):
+    """The motion 10 cm above the robot: the SQP finds no admissible pose from most frames' unconstrained optimum
+    (a pose that no chain reaches). Those frames fail and are named; their errors are not numbers."""
+    m = model("target")
+    t, q = chewing()
+    p, R = pose(m, q)
+    result = import_motion(write_csv(tmp_path / "rec.csv", t, seen(p + np.array([0.0, 0.0, 0.1]), R)), registration(tmp_path), EXACT)
+    none = ~result.fit.admissible
+    assert none.sum() > 10 and result.task is None and np.isnan(result.fit.position_error_mm[none]).all()
+    assert any("no admissible pose near it (the motion leaves the workspace: " in line and "reach" in line for line in result.failures())
+    table = result.residuals()
+    assert np.array_equal(table["admissible"], result.fit.admissible)
+
+
 # ------------------------------------------------------------------ preparation
 
 

@@ -125,12 +125,25 @@ class FitFunctions:
         return z, last
 
     def constrained(self, z0, target, settings) -> tuple[np.ndarray, np.ndarray]:
-        """The constrained problem (SQP) for m samples at once, in one mapped call, each from its z0 (m, n).
-        Returns z (m, n) and the multipliers lam_g (m, n_g)."""
+        """The constrained problem (SQP) for m samples at once, in one mapped call, each from its z0 (m, n); a
+        start that is not finite is replaced by the home pose. Returns z (m, n) and the multipliers lam_g
+        (m, n_g), NaN for a sample whose functions could not be evaluated on the SQP's way."""
         m = z0.shape[0]
+        z0 = np.where(np.isfinite(z0).all(axis=1, keepdims=True), z0, 0.0)
         params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
-        sol = mapped(self._nlp, m)(x0=z0.T, p=params, lbg=np.tile(self.lbg[:, None], (1, m)), ubg=np.tile(self.ubg[:, None], (1, m)))
-        return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
+        bounds = {"lbg": np.tile(self.lbg[:, None], (1, m)), "ubg": np.tile(self.ubg[:, None], (1, m))}
+        try:
+            sol = mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
+            return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
+        except RuntimeError:  # an evaluation failed (a pose where a chain's closure is undefined): find which, alone
+            z, lam = np.full((m, self.n), np.nan), np.full((m, self.lbg.size), np.nan)
+            for k in range(m):
+                try:
+                    sol = self._nlp(x0=z0[k], p=params[:, k], lbg=self.lbg, ubg=self.ubg)
+                    z[k], lam[k] = np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel()
+                except RuntimeError:
+                    pass
+            return z, lam
 
 
 def fit_functions(model: Model) -> FitFunctions:
