@@ -242,7 +242,7 @@ def test_where_the_motion_leaves_the_sockets_the_nearest_admissible_pose_is_on_t
 
     b = m.incisor
     checked = 0
-    for i in np.flatnonzero(out)[::5]:
+    for i in np.flatnonzero(out):
         def cost(x, i=i):
             pp, RR = pose(m, x[None])
             e = (pp[0] + RR[0] @ b - p[i] - R[i] @ b) / MM
@@ -262,7 +262,9 @@ def test_where_the_motion_leaves_the_sockets_the_nearest_admissible_pose_is_on_t
         if ref.status == 0 and inside(ref.x).min() > -1e-9:
             assert cost(result.fit.q[i]) == pytest.approx(ref.fun, rel=1e-8)
             checked += 1
-    assert checked >= 2
+            if checked == 3:
+                break
+    assert checked == 3
 
 
 def test_frames_with_no_admissible_pose_near_them_fail(tmp_path):
