@@ -64,6 +64,14 @@ def _g1_kernel(model, kin):
     return g1_distribution(model, kin)
 
 
+def _recording_fit(model, kin):
+    """chewbot import-motion's fit to the robot, on the task's poses as if recorded (unconstrained, exact)."""
+    from chewbot.recordings.fit import fit_to_robot
+    from chewbot.rotation import matrix_from_euler_angles
+
+    return fit_to_robot(model, kin.X[:, :3], matrix_from_euler_angles(kin.X[:, 3:]))
+
+
 TASK_CASES: tuple[Case, ...] = (
     Case("hessian", partial(inverse_dynamics, method="hessian")),
     Case("liang", partial(inverse_dynamics, method="liang")),
@@ -78,6 +86,7 @@ TASK_CASES: tuple[Case, ...] = (
     Case("newton-euler G3 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",)),
     Case("newton-euler G3 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",), EP),
     Case("G1 kernel, friction (EP)", _g1_kernel, ("target",), EP),
+    Case("import-motion: fit to the robot", _recording_fit),
     Case(f"reference: SciPy SLSQP G1 (timed on {SLSQP_SAMPLES} samples, scaled)", _slsqp, ("target",), EA, SLSQP_SAMPLES),
 )
 

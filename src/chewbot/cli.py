@@ -27,6 +27,7 @@ from chewbot.command import (  # noqa: F401  (the exit codes, for the commands a
     check_interrupted,
 )
 from chewbot.errors import ChewbotError
+from chewbot.recordings.command import import_motion
 
 app = typer.Typer(
     name="chewbot",
@@ -431,6 +432,9 @@ def track_incisor(
                 table.to_csv(tmp, first_line=marker_line("#", f"{what}; from {path.name}"))
     stdout.print(f"wrote {escape(str(out))} and {escape(str(residuals))}; max |f_D| = {abs(result.f_D).max():.3g} m, "
                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")
+
+
+app.command("import-motion")(import_motion)
 
 
 @app.command()

@@ -46,3 +46,12 @@ class KinematicsError(ChewbotError):
 
 class InfeasibleError(ChewbotError):
     """No admissible torque distribution exists at a sample (names the sample and the limit)."""
+
+
+class RecordingError(ChewbotError):
+    """A recording, its registration file or a force file is malformed or cannot be used: names the file and the
+    key, line, column, marker or frame."""
+
+
+class FitError(KinematicsError):
+    """Frames of a recording that the robot cannot follow within the tolerances (names the frames and why)."""

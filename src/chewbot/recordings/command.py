@@ -1,0 +1,188 @@
+"""``chewbot import-motion``: a jaw-tracking recording in, a robot task and its residuals out.
+
+The command's options and files; the work is :func:`chewbot.recordings.importer.import_motion`. Both files are
+written through temporary siblings (``.NAME.partial-PID``) renamed into place, each beginning with a comment
+line that names the command; an existing file is replaced only with ``--force``.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+from pathlib import Path
+
+import typer
+
+DEFAULT_MAX_RESIDUAL = (1.0, 1.0)  # mm, deg
+
+
+def _number_or(word: str, what: str):
+    """A typer callback: a positive number, or ``word`` (returned as None)."""
+
+    def parse(value: str | None):
+        if value is None or value == word:
+            return value
+        try:
+            number = float(value)
+        except ValueError:
+            raise typer.BadParameter(f"{value!r} is neither a number nor '{word}'") from None
+        if not number > 0:
+            raise typer.BadParameter(f"{what} must be positive, not {value}")
+        return value
+
+    return parse
+
+
+def import_motion(
+    recording: Path = typer.Argument(..., help="The recording: CSV (.csv: t, NAME_x, NAME_y, NAME_z, ...), C3D (.c3d) or ArtiSynth numeric probe text (any other suffix)."),
+    registration: Path = typer.Option(..., "--registration", help="TOML file: units, the markers in {M} (or rest = \"first\"), the tracker's placement, scales and fit weights (docs/recordings.md)."),
+    out: Path = typer.Option(..., "--out", help="Task CSV to write (chewbot run --task reads it); the per-frame residuals go beside it, *.residuals.csv."),
+    model: str = typer.Option("target", "--model", help="The robot: a built-in model (target, 6rss, ...) or a TOML parameter file."),
+    side: str = typer.Option("left", "--side", help="Molar where the bite force acts (left or right): recorded in the task's header; run the task with the same --side."),
+    max_gap: float = typer.Option(0.1, "--max-gap", min=0.0, help="Longest gap (s) of a marker that is filled by a spline; longer ones are an error."),
+    cutoff: str = typer.Option("6", "--cutoff", callback=_number_or("none", "--cutoff"), help="Zero-phase low-pass cutoff (Hz) of the marker paths, or 'none'."),
+    rate: str = typer.Option("1000", "--rate", callback=_number_or("recording", "--rate"), help="Sampling rate (Hz) of the task, or 'recording' for the recording's own times."),
+    scale: str | None = typer.Option(None, "--scale", callback=_number_or("auto", "--scale"), show_default=False, help="Factor on the displacement of O_M relative to the first frame (default: the registration's), or 'auto': the largest factor <= 1 on both scales at which every frame passes."),
+    angle_scale: float | None = typer.Option(None, "--angle-scale", min=0.0, show_default=False, help="Factor on the rotation angle relative to the first frame (default: the registration's)."),
+    max_residual: tuple[float, float] = typer.Option(DEFAULT_MAX_RESIDUAL, "--max-residual", help="MM DEG: a frame fails when the fitted pose is farther than MM (at the measure point) or DEG (rotation angle) from the recorded one."),
+    max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),
+    force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
+    force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
+) -> None:
+    """Turn a jaw-tracking recording (markers on the mandible) into a task for the robot.
+
+    Prepares the marker paths (gaps filled, zero-phase low-pass), fits the mandible's pose per frame, scales the
+    motion, finds the robot's nearest admissible pose in each frame, resamples it and writes the task and, beside
+    it, the per-frame residuals; prints their maxima. Frames beyond --max-residual or --max-rigid, or with no
+    admissible pose near them, are named and the command exits with 3 (the residuals are written, the task is not).
+
+    Examples:
+
+      chewbot import-motion chewing.c3d --registration subject3.toml --out task.csv && chewbot run --task task.csv
+
+      chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
+    """
+    from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, _fail, _progress, console, stdout
+    from chewbot.errors import ChewbotError, FitError
+    from chewbot.outputs import OutputExistsError
+    from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
+
+    residuals = out.with_name(out.stem + ".residuals.csv")
+    if side not in ("left", "right"):
+        _fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+    options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
+                            rate_hz=None if rate == "recording" else float(rate),
+                            scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
+                            max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
+                            force_file=None if force_file is None else str(force_file))
+    try:
+        inputs = {recording.resolve(), registration.resolve()} | ({force_file.resolve()} if force_file else set())
+        for target in (out, residuals):
+            if target.resolve() in inputs:
+                raise OutputExistsError(f"{target}: is one of the command's input files; choose another --out")
+            if target.exists() and not force:
+                raise OutputExistsError(f"{target}: exists; choose another --out or pass --force to replace it")
+        with _progress(False, "import-motion", total=STEPS) as step:
+            result = run_import(recording, registration, options, progress=step)
+        header = f"# chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
+        table = result.residuals()
+        if result.task is None:
+            _write(header, [(residuals, table)])
+        else:
+            _write(header, [(out, _task_table(result.task)), (residuals, table)])
+    except ChewbotError as exc:
+        _fail(exc)
+    for note in result.notes:
+        console.print(f"note: {note}", highlight=False, markup=False)
+    _print_maxima(stdout, result)
+    if result.task is None:
+        lines = result.failures()
+        shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
+        _fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
+                       f"residuals in {residuals}:\n" + "\n".join(shown)), EXIT_UNREACHABLE)
+    stdout.print(f"wrote {out} ({result.task.n} samples) and {residuals}; run it with: "
+                 f"chewbot run --task {shlex.quote(str(out))} --model {shlex.quote(model)} --side {side}", highlight=False, markup=False)
+
+
+def _arguments(recording, registration, out, options, force: bool) -> list[str]:
+    """The command's effective arguments, defaults included: the header line of both files."""
+    o = options
+    args = [str(recording), "--registration", str(registration), "--out", str(out), "--model", o.model, "--side", o.side,
+            "--max-gap", f"{o.max_gap_s:g}", "--cutoff", "none" if o.cutoff_hz is None else f"{o.cutoff_hz:g}",
+            "--rate", "recording" if o.rate_hz is None else f"{o.rate_hz:g}"]
+    if o.scale is not None:
+        args += ["--scale", str(o.scale)]
+    if o.angle_scale is not None:
+        args += ["--angle-scale", f"{o.angle_scale:g}"]
+    args += ["--max-residual", f"{o.max_position_mm:g}", f"{o.max_orientation_deg:g}", "--max-rigid", f"{o.max_rigid_mm:g}"]
+    if o.force_file is not None:
+        args += ["--force-file", o.force_file]
+    return args + (["--force"] if force else [])
+
+
+def _task_table(task):
+    """The task as ``chewbot run --task`` reads it: t, coordinates, their rates, the bite force; SI units named."""
+    from chewbot.results import Table
+
+    table = Table()
+    table.add("t", task.t, "s")
+    units = {"X": "m", "Y": "m", "Z": "m", "alpha": "rad", "beta": "rad", "gamma": "rad"}
+    for prefix, values, per in (("", task.q, ""), ("d", task.dq, "/s"), ("dd", task.ddq, "/s^2")):
+        for j, c in enumerate(task.coords):
+            table.add(prefix + c, values[:, j], units[c] + per)
+    table.add_block(["Fx", "Fy", "Fz"], task.force, "N")
+    return table
+
+
+def _csv_text(header: str, table) -> str:
+    """A comment line, a row of NAME[unit], then the rows: floats in their shortest exact form, counts and flags
+    (unit 1, whole numbers) as integers."""
+    import numpy as np
+
+    cells = []
+    for name, values in table.columns.items():
+        whole = table.units[name] == "1" and np.all(values == np.round(values))
+        cells.append([str(int(v)) for v in values] if whole else [repr(v) for v in values.tolist()])
+    head = ",".join(f"{n}[{table.units[n]}]" for n in table.columns)
+    return "\n".join([header, head] + [",".join(row) for row in zip(*cells)]) + "\n"
+
+
+def _write(header: str, files) -> None:
+    """Write every (path, table) through a temporary sibling, then rename them all into place."""
+    from chewbot.outputs import OutputError
+
+    partial = [path.with_name(f".{path.name}.partial-{os.getpid()}") for path, _ in files]
+    try:
+        for (path, table), tmp in zip(files, partial):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(_csv_text(header, table))
+        for (path, _), tmp in zip(files, partial):
+            os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(f"{exc.filename or files[0][0]}: cannot write ({exc.strerror or exc})") from exc
+    finally:
+        for tmp in partial:
+            tmp.unlink(missing_ok=True)
+
+
+def _print_maxima(stdout, result) -> None:
+    """The largest residuals, with where they occur, and the scale that was used."""
+    import numpy as np
+
+    rec, fit, rigid = result.recording, result.fit, result.rigid
+    k = int(np.argmax(rigid.max_mm))
+    marker = rigid.markers[int(np.argmax(rigid.distances[k]))]
+    lines = [f"markers' rigid fit: RMS up to {rigid.rms_mm.max():.3g} mm; largest {rigid.max_mm[k]:.3g} mm (marker {marker}, {rec.where(k)})"]
+    if fit.admissible.any():
+        i, j = int(np.nanargmax(fit.position_error_mm)), int(np.nanargmax(fit.orientation_error_deg))
+        lines.append(f"robot fit: position error up to {fit.position_error_mm[i]:.3g} mm ({rec.where(i)}), "
+                     f"orientation error up to {fit.orientation_error_deg[j]:.3g} deg ({rec.where(j)})")
+    outside = fit.outside.any(axis=1)
+    if outside.any():
+        names = [n for n, b in zip(fit.constraint_names, fit.outside.any(axis=0)) if b]
+        lines.append(f"the recorded motion leaves the workspace in {outside.sum()} frame(s) ({', '.join(names)}); there the "
+                     "nearest pose on its boundary is used")
+    if result.factor is not None:
+        lines.append(f"--scale auto: factor {result.factor:.4f} (scale {result.scale:.4g}, angle_scale {result.angle_scale:.4g})")
+    for line in lines:
+        stdout.print(line, highlight=False, markup=False)

@@ -1,0 +1,166 @@
+"""The fit to the robot: in every frame, the admissible pose nearest to the recorded one.
+
+The target robot moves in 4 DOF (X, Y, alpha, beta; Z and gamma follow from its HKPs), the 6RSS in 6; a
+recorded pose has 6. For each frame, q_EE minimises the weighted pose error of
+:mod:`chewbot.recordings.robotfit` (position of the measure point in mm times ``position_weight_per_mm``,
+rotation angle between the fitted and the recorded orientation in degrees times ``orientation_weight_per_deg``,
+in the least-squares sense) over the admissible poses (condyles inside their sockets, every chain reachable).
+
+1. Without the constraints, frame after frame in time order: a compiled Gauss-Newton kernel (exact Jacobians
+   by CasADi's automatic differentiation) runs over the frames in one loop, each frame starting from the
+   previous frame's result (the first from the recorded pose's own coordinates). The same kernel also runs on
+   every frame from its own recorded coordinates, all at once, and each frame keeps the better answer (a tie
+   goes to the recorded coordinates' branch of the Euler angles), so that a frame after one that went astray
+   does not inherit it. Frames whose last step is not yet below :data:`STEP_TOL` get more iterations, all at
+   once.
+2. Where that optimum is not admissible, the nearest admissible pose lies on the boundary: those frames are
+   solved as constrained problems (SQP, CasADi ``sqpmethod``, exact Hessian), all in one mapped call, each
+   starting from its own unconstrained optimum. A frame where the SQP does not end at an admissible,
+   stationary point has no admissible pose near it.
+
+For the 6RSS the fit is exact (zero error) wherever the recorded pose is reachable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from chewbot.model import Model
+from chewbot.recordings.robotfit import DEG, FitFunctions, fit_functions
+from chewbot.rotation import euler_angles_from_matrix
+
+# A frame has converged when the last Gauss-Newton step is below this (mm and deg: 1e-12 m, 2e-11 rad).
+STEP_TOL = 1e-9
+MORE_ROUNDS = 5
+# Two answers whose abs(r)^2 differ by less than this (and 1e-9 relative) tie: (1e-9 mm)^2, far above rounding.
+TIE = 1e-18
+# An admissible pose may break a socket bound by this much (mm; the kinematics' own slack is 1e-12 m = 1e-9 mm).
+BOUND_TOL = 1e-10
+# The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
+# mm or deg; the SQP stops at 1e-10).
+STATIONARITY_TOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class RobotFit:
+    """The fit in every frame (arrays frames first).
+
+    ``q`` (N, n): q_EE in Euler angles (``coords``; m and rad), NaN where no admissible pose was found;
+    ``position_error_mm``, ``orientation_error_deg`` (N,): the errors of the fitted pose (NaN where none);
+    ``admissible`` (N,): an admissible pose was found; ``outside`` (N, n_g): the constraints that the
+    unconstrained optimum breaks (the recorded motion leaves the workspace there), named by ``constraint_names``.
+    """
+
+    coords: tuple[str, ...]
+    q: np.ndarray
+    position_error_mm: np.ndarray
+    orientation_error_deg: np.ndarray
+    admissible: np.ndarray
+    outside: np.ndarray
+    constraint_names: tuple[str, ...]
+
+
+def settings_vector(model: Model, point, position_weight_per_mm: float, orientation_weight_per_deg: float) -> np.ndarray:
+    """[measure point in {M} (m); w_p; w_o] (the point defaults to the model's incisor)."""
+    b = model.incisor if point is None else np.asarray(point, dtype=float)
+    return np.r_[b, position_weight_per_mm, orientation_weight_per_deg]
+
+
+def targets(p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(N, 12) recorded poses as the kernels take them: [p; R column by column]."""
+    return np.hstack([p, np.swapaxes(R, 1, 2).reshape(-1, 9)])
+
+
+def own_coordinates(fns: FitFunctions, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """The recorded poses' own coordinates in the fit's scaled unknowns (X, Y (, Z) and the Euler angles it has)."""
+    angles = euler_angles_from_matrix(R)
+    q = np.hstack([p[:, :2], angles[:, :2]]) if fns.n == 4 else np.hstack([p, angles])
+    return q / fns.scale
+
+
+def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
+                 orientation_weight_per_deg: float = 1.0) -> RobotFit:
+    """The admissible poses of ``model`` nearest to the recorded ones (``p`` (N, 3) m, ``R`` (N, 3, 3) in {S})."""
+    fns = fit_functions(model)
+    settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+    target = targets(p, R)
+    own = own_coordinates(fns, p, R)
+    z, last = _converge(fns, *fns.sequential(own[0], target, settings), target, settings)
+    # Each frame again from its own recorded coordinates, all at once: a frame after one that went astray (a
+    # swapped marker, a tracker glitch) must not inherit its answer. The better of the two is kept, a tie going
+    # to the recorded coordinates' Euler angles (beta within +-90 deg: (alpha + pi, pi - beta, gamma + pi) is the
+    # same pose); where the recording is sound the two agree to rounding.
+    z_own, last_own = _converge(fns, *fns.gauss_newton(own, target, settings), target, settings)
+    keep = _cost(fns, z, target, settings) < _cost(fns, z_own, target, settings) * (1 - 1e-9) - TIE
+    z[~keep], last[~keep] = z_own[~keep], last_own[~keep]
+    z -= np.round((z - own) * fns.scale / (2 * np.pi)) * (fns.scale == DEG) * 2 * np.pi / fns.scale  # within half a turn
+    g = fns.constraints(z)
+    outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
+    admissible = np.ones(len(z), dtype=bool)
+    if rows.size:
+        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
+    return _result(fns, z, admissible, outside, target, settings)
+
+
+def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
+                       orientation_weight_per_deg: float = 1.0):
+    """Poses q (N, n) of ``model`` (m, rad) moved to the nearest admissible ones where they are not admissible.
+
+    Returns the poses (the others unchanged), the rows that were moved, whether each of those is admissible now,
+    and a description of the largest violation that was removed (None if nothing moved).
+    """
+    fns = fit_functions(model)
+    g = fns.constraints(q / fns.scale)
+    excess = np.maximum(fns.lbg - g, g - fns.ubg)
+    rows = np.flatnonzero((excess > BOUND_TOL).any(axis=1))
+    q = q.copy()
+    ok = np.ones(rows.size, dtype=bool)
+    worst = None
+    if rows.size:
+        z = q[rows] / fns.scale
+        p, R = fns.pose(z)
+        settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+        z, ok = _constrained(fns, z, targets(p, R), settings)
+        q[rows] = z * fns.scale
+        j = int(np.argmax(excess.max(axis=0)))
+        worst = f"{fns.constraint_names[j]} by {excess[:, j].max():.3g}{' mm' if 'condyle' in fns.constraint_names[j] else ' (sine squared)'}"
+    return q, rows, ok, worst
+
+
+def _cost(fns: FitFunctions, z, target, settings) -> np.ndarray:
+    """abs(r)^2 per frame, infinite where z is not finite."""
+    r = fns.errors(z, target, settings)[2]
+    cost = np.sum(r**2, axis=1)
+    return np.where(np.isfinite(cost), cost, np.inf)
+
+
+def _converge(fns: FitFunctions, z, last, target, settings):
+    """More Gauss-Newton iterations, all at once, on the frames whose last step is still above STEP_TOL."""
+    z, last = z.copy(), last.copy()
+    for _ in range(MORE_ROUNDS):
+        rows = np.flatnonzero(~(last <= STEP_TOL))
+        if rows.size == 0:
+            break
+        z[rows], last[rows] = fns.gauss_newton(z[rows], target[rows], settings)
+    return z, last
+
+
+def _constrained(fns: FitFunctions, z0, target, settings):
+    """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found."""
+    z, lam = fns.constrained(z0, target, settings)
+    g = fns.constraints(z)
+    feasible = ((g >= fns.lbg - BOUND_TOL) & (g <= fns.ubg + BOUND_TOL)).all(axis=1)
+    grad = fns.stationarity(z, lam, target, settings)
+    ok = feasible & (np.abs(grad).max(axis=1) <= STATIONARITY_TOL) & np.isfinite(z).all(axis=1)
+    z[~ok] = np.nan
+    return z, ok
+
+
+def _result(fns: FitFunctions, z, admissible, outside, target, settings) -> RobotFit:
+    pos, ori = np.full(len(z), np.nan), np.full(len(z), np.nan)
+    if admissible.any():
+        pos[admissible], ori[admissible], _ = fns.errors(z[admissible], target[admissible], settings)
+    return RobotFit(fns.coords, z * fns.scale, pos, ori, admissible, outside, fns.constraint_names)

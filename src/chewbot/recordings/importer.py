@@ -1,0 +1,248 @@
+"""A recording in, a robot task and its verdict out: :func:`import_motion` runs every stage in order.
+
+read (:mod:`~chewbot.recordings.formats`) -> markers of the registration -> trim, fill gaps, low-pass
+(:mod:`~chewbot.recordings.prepare`) -> tracker to {S}, rigid fit per frame, scaling relative to the first frame
+(:mod:`~chewbot.recordings.rigid`) -> fit to the robot (:mod:`~chewbot.recordings.fit`) -> verdict -> spline
+resampling and bite force (:mod:`~chewbot.recordings.resample`) -> the task, checked by the kinematics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.errors import KinematicsError, RecordingError
+from chewbot.kinematics.motion import solve_kinematics
+from chewbot.model import Model
+from chewbot.params import load_model
+from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
+from chewbot.recordings.formats import Recording, read_recording
+from chewbot.recordings.prepare import fill_gaps, low_pass, trim
+from chewbot.recordings.registration import Registration, collinear, load_registration
+from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
+from chewbot.recordings.rigid import RigidFit, rigid_fit, scale_motion, to_base
+from chewbot.results import Table
+from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+
+# --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
+BISECTIONS = 14
+
+
+@dataclass(frozen=True)
+class ImportOptions:
+    """The choices of an import (the command's options; SI where no unit is named).
+
+    ``cutoff_hz`` None: no low-pass; ``rate_hz`` None: the recording's own times; ``scale``: a number, None (the
+    registration's) or ``"auto"``; ``angle_scale``: a number or None (the registration's).
+    """
+
+    model: str = "target"
+    side: str = "left"
+    max_gap_s: float = 0.1
+    cutoff_hz: float | None = 6.0
+    rate_hz: float | None = 1000.0
+    scale: float | str | None = None
+    angle_scale: float | None = None
+    max_position_mm: float = 1.0
+    max_orientation_deg: float = 1.0
+    max_rigid_mm: float = 1.0
+    force_file: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MotionImport:
+    """What an import found (arrays frames first).
+
+    ``recording``: the prepared marker paths; ``rigid``: the pose of {M} per frame; ``fit``: the robot's
+    nearest admissible poses; ``scale``, ``angle_scale``: the factors applied (``factor``: what ``--scale auto``
+    found, else None); ``passed`` (N,): the frames within every tolerance; ``task``: the resampled task (None
+    when a frame fails); ``notes``: what the preparation did (trimmed frames, filled gaps, moved samples).
+    """
+
+    options: ImportOptions
+    model: Model
+    registration: Registration
+    recording: Recording
+    rigid: RigidFit
+    fit: RobotFit
+    scale: float
+    angle_scale: float
+    factor: float | None
+    passed: np.ndarray
+    task: Task | None
+    notes: list[str] = field(default_factory=list)
+
+    def residuals(self) -> Table:
+        """One row per frame: its number in the file, time, the markers' rigid-fit residual (RMS and largest),
+        the robot fit's errors, and flags (1/0): an admissible pose found, the recorded motion outside the
+        workspace (the unconstrained optimum breaks a constraint), every tolerance met."""
+        rec, fit = self.recording, self.fit
+        table = Table()
+        table.add("frame", rec.first_frame + np.arange(rec.n), "1", "frame number in the recording (from 1)")
+        table.add("t", rec.t, "s", "time")
+        table.add("rigid_rms", self.rigid.rms_mm, "mm", "RMS distance of the markers from the fitted rigid body")
+        table.add("rigid_max", self.rigid.max_mm, "mm", "largest distance of a marker from the fitted rigid body")
+        table.add("position_error", fit.position_error_mm, "mm", "distance of the measure point from where it was recorded")
+        table.add("orientation_error", fit.orientation_error_deg, "deg", "rotation angle between the fitted and the recorded orientation")
+        table.add("admissible", fit.admissible, "1", "1 where an admissible pose was found")
+        table.add("leaves_workspace", fit.outside.any(axis=1), "1", "1 where the nearest pose without the constraints is not admissible")
+        table.add("passed", self.passed, "1", "1 where every tolerance is met")
+        return table
+
+    def failures(self) -> list[str]:
+        """The failing frames, as stretches of consecutive frames with the reasons."""
+        return _failure_messages(self)
+
+
+STEPS = 4  # reading and preparing, rigid fit, fit to the robot, task (the progress callback's calls)
+
+
+def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
+                  progress=None) -> MotionImport:
+    """Import a recording as a robot task (see the module docstring). Raises
+    :class:`~chewbot.errors.RecordingError` for bad files and :class:`~chewbot.errors.KinematicsError` when the
+    resampled task breaks the kinematics; failing frames are reported in the result (``passed``,
+    :meth:`MotionImport.failures`), with ``task`` None. ``progress(message)`` is told each of :data:`STEPS` steps."""
+    step = progress or (lambda message: None)
+    step("reading and preparing the markers")
+    reg = registration if isinstance(registration, Registration) else load_registration(registration)
+    model = load_model(options.model)
+    notes: list[str] = []
+    rec = _prepare(read_recording(recording, reg.units), reg, options, notes)
+    step("rigid fit")
+    points = to_base(rec.positions, reg.rotation, reg.origin)
+    if reg.markers is None:
+        if collinear(points[0]):
+            raise RecordingError(f"{rec.source}: {rec.where(0)}: the markers lie on one line (or nearly) and do not "
+                                 "fix the mandible's rotation (rest = \"first\")")
+        body = points[0]
+    else:
+        body = np.array([reg.markers[name] for name in rec.markers])
+    rigid = rigid_fit(body, points, rec.markers)
+    rigid_ok = rigid.max_mm <= options.max_rigid_mm
+    scale = reg.scale if options.scale in (None, "auto") else float(options.scale)
+    angle_scale = reg.angle_scale if options.angle_scale is None else float(options.angle_scale)
+
+    def attempt(factor: float):
+        p, R = scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
+        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+        within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= options.max_orientation_deg)
+        return fit, within & rigid_ok
+
+    step("fit to the robot" + (" (searching the scale)" if options.scale == "auto" else ""))
+    factor = None
+    fit, passed = attempt(1.0)
+    if options.scale == "auto" and not rigid_ok.all():
+        notes.append("--scale auto: no factor was searched, frames where a marker moves relative to the others fail at every scale")
+    elif options.scale == "auto":
+        factor, fit, passed = (1.0, fit, passed) if passed.all() else _largest_factor(attempt)
+        scale, angle_scale = factor * scale, factor * angle_scale
+    step("resampling and checking the task")
+    task = None
+    if passed.all():
+        task = _task(model, rec, reg, fit, options, Path(recording), notes)
+    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes)
+
+
+def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: list[str]) -> Recording:
+    """The registration's markers, trimmed, gaps filled and low-passed (:mod:`chewbot.recordings.prepare`)."""
+    if reg.markers is not None:
+        absent = [name for name in reg.markers if name not in rec.markers]
+        if absent:
+            raise RecordingError(f"{rec.source}: marker(s) {', '.join(absent)} of the registration {reg.source} are not in the "
+                                 f"recording (it has {', '.join(rec.markers)})")
+        columns = [rec.markers.index(name) for name in reg.markers]
+        rec = replace(rec, markers=tuple(reg.markers), positions=rec.positions[:, columns])
+    if options.force_file is not None and rec.force is not None:
+        raise RecordingError(f"{rec.source}: the recording has bite force columns and --force-file {options.force_file} "
+                             "gives another: give one of them")
+    rec, head, tail = trim(rec)
+    if head or tail:
+        notes.append(f"dropped {head} frame(s) at the start and {tail} at the end where a marker was not seen")
+    rec, found = fill_gaps(rec, options.max_gap_s)
+    if found:
+        notes.append(f"filled {len(found)} gap(s) by splines (longest {max(g[3] for g in found):.4g} s, marker {max(found, key=lambda g: g[3])[0]})")
+    if options.cutoff_hz is not None:
+        rec = low_pass(rec, options.cutoff_hz)
+    return rec
+
+
+def _largest_factor(attempt):
+    """The largest factor in [0, 1] at which every frame passes, by bisection (the first frame held still, factor
+    0, must pass)."""
+    lo_fit, lo_passed = attempt(0.0)
+    if not lo_passed.all():
+        return 0.0, lo_fit, lo_passed
+    lo, hi = 0.0, 1.0
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        fit, passed = attempt(mid)
+        if passed.all():
+            lo, lo_fit, lo_passed = mid, fit, passed
+        else:
+            hi = mid
+    return lo, lo_fit, lo_passed
+
+
+def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, options: ImportOptions, source: Path,
+          notes: list[str]) -> Task:
+    """The task: the fitted coordinates resampled (spline rates), samples between frames that a spline carries
+    out of the workspace moved back onto it, the bite force, and a check by the kinematics."""
+    t = output_times(rec.t, options.rate_hz)
+    q, dq, ddq = spline_motion(rec.t, fit.q, t)
+    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+    if not ok.all():
+        i = int(rows[~ok][0])
+        raise RecordingError(f"{rec.source}: between the fitted frames, at t = {t[i]:.6g} s, the spline leaves the "
+                             "workspace and no admissible pose is near it; lower --rate or use --rate recording")
+    if rows.size:  # the rates then come from a spline through the samples as they are now
+        notes.append(f"moved {rows.size} resampled sample(s) back into the workspace, where the spline overshot its "
+                     f"boundary between frames (at most {worst})")
+        q, dq, ddq = spline_motion(t, moved, t)
+    if options.force_file is not None:
+        force = force_at(*read_force_file(options.force_file), t, options.force_file)
+    elif rec.force is not None:
+        force = force_at(rec.t, rec.force, t, rec.source)
+    else:
+        force = np.zeros((len(t), 3))
+    coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
+    task = Task(name=source.stem, t=t, coords=coords, q=q, dq=dq, ddq=ddq, force=force, side=options.side,
+                source=str(source), meta={"generator": "import-motion", "registration": reg.source})
+    try:  # what chewbot run will check: reachable, in the sockets, not singular
+        solve_kinematics(model, task)
+    except KinematicsError as exc:
+        raise exc.located(f"{source}: the resampled task") from None
+    return task
+
+
+def _failure_messages(result: MotionImport) -> list[str]:
+    """Stretches of consecutive frames failing for the same reasons, each with its worst values."""
+    o, fit, rec, rigid = result.options, result.fit, result.recording, result.rigid
+    worst_marker = np.argmax(rigid.distances, axis=1)
+    rigid_bad = rigid.max_mm > o.max_rigid_mm
+    kinds = np.column_stack([np.where(rigid_bad, worst_marker, -1), ~fit.admissible,
+                             fit.admissible & (fit.position_error_mm > o.max_position_mm),
+                             fit.admissible & (fit.orientation_error_deg > o.max_orientation_deg)])
+    failing = rigid_bad | kinds[:, 1:].any(axis=1)
+    change = np.flatnonzero(np.any(np.diff(kinds, axis=0) != 0, axis=1) | np.diff(failing.astype(int)) != 0) + 1
+    out = []
+    for lo, hi in zip(np.r_[0, change], np.r_[change, rec.n]):
+        if not failing[lo]:
+            continue
+        span, why = slice(lo, hi), []
+        marker, none, position, orientation = kinds[lo]
+        if marker >= 0:
+            why.append(f"marker {rigid.markers[marker]} moves relative to the others (up to {rigid.max_mm[span].max():.3g} mm "
+                       f"> --max-rigid {o.max_rigid_mm:g} mm)")
+        if none:
+            broken = [n for n, b in zip(fit.constraint_names, fit.outside[span].any(axis=0)) if b]
+            why.append("no admissible pose near it" + (f" (the motion leaves the workspace: {', '.join(broken)})" if broken else ""))
+        if position:
+            why.append(f"position error up to {fit.position_error_mm[span].max():.3g} mm > {o.max_position_mm:g} mm")
+        if orientation:
+            why.append(f"orientation error up to {fit.orientation_error_deg[span].max():.3g} deg > {o.max_orientation_deg:g} deg")
+        where = rec.where(lo) if hi - lo == 1 else f"{rec.where(lo)} to {rec.where(hi - 1)}"
+        out.append(f"{where}: {'; '.join(why)}")
+    return out

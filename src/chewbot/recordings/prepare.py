@@ -1,0 +1,113 @@
+"""Preparing marker paths for the fit: dropped frames at the ends, gaps, and a zero-phase low-pass filter.
+
+In this order (:func:`chewbot.recordings.importer.import_motion`):
+
+1. :func:`trim` drops the frames at the start and the end where a marker is missing: there is nothing on one
+   side to interpolate from.
+2. :func:`fill_gaps` fills each gap of each marker (frames where it was not seen) by a cubic spline through all
+   the frames where that marker was seen (``scipy.interpolate.CubicSpline``, not-a-knot ends), if the gap lasts
+   at most ``max_gap``; a longer gap is an error naming the marker and the times.
+3. :func:`low_pass` filters every marker coordinate with a Butterworth low-pass of order 2 run forward and
+   backward (``scipy.signal.sosfiltfilt``): zero phase, so the filtered path is not delayed against the bite
+   force or the other markers, and an overall response of order 4. Order 2 twice is the usual choice for jaw
+   and limb motion (Winter, Biomechanics and Motor Control of Human Movement): steep enough to remove tracker
+   noise a few times above the chewing band, with little overshoot on fast closing strokes, which higher
+   orders ring on. The design frequency is the cutoff divided by 0.802, so that the two passes together
+   attenuate to 1/sqrt(2) (-3 dB) at the cutoff itself. Uniform sampling is required.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import butter, sosfiltfilt
+
+from chewbot.errors import RecordingError
+from chewbot.recordings.formats import Recording
+
+FILTER_ORDER = 2
+# (sqrt(2) - 1)^(1 / (2 n)) for n = FILTER_ORDER: the forward-backward response 1 / (1 + (f / f0)^(2n)) is
+# 1/sqrt(2) at f = f0 times this.
+TWO_PASS_CORRECTION = (np.sqrt(2) - 1) ** (1 / (2 * FILTER_ORDER))
+# Time steps may differ from their median by this fraction and still count as uniform (files print times rounded).
+UNIFORM_TOLERANCE = 1e-3
+
+
+def missing(positions: np.ndarray) -> np.ndarray:
+    """(N, K) True where a marker was not seen (any of its coordinates is NaN)."""
+    return np.isnan(positions).any(axis=2)
+
+
+def trim(rec: Recording) -> tuple[Recording, int, int]:
+    """The recording without the frames at its start and end where a marker is missing, and how many went from
+    each end. A marker never seen is an error."""
+    gone = missing(rec.positions)
+    never = [rec.markers[k] for k in np.flatnonzero(gone.all(axis=0))]
+    if never:
+        raise RecordingError(f"{rec.source}: marker(s) {', '.join(never)} never seen")
+    complete = np.flatnonzero(~gone.any(axis=1))
+    if complete.size == 0:
+        raise RecordingError(f"{rec.source}: no frame sees every marker")
+    first, last = int(complete[0]), int(complete[-1])
+    return rec.frames(first, last + 1), first, rec.n - 1 - last
+
+
+def gaps(rec: Recording) -> list[tuple[str, int, int, float]]:
+    """Every gap inside the recording: (marker, first missing frame, last missing frame, duration in s). The
+    duration runs from the first missing frame to the frame that sees the marker again (k missing frames at a
+    rate f last k / f)."""
+    out = []
+    gone = missing(rec.positions)
+    for k, name in enumerate(rec.markers):
+        edges = np.diff(np.r_[0, gone[:, k].astype(int), 0])
+        for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
+            out.append((name, int(i0), int(i1), float(rec.t[i1 + 1] - rec.t[i0])))
+    return out
+
+
+def fill_gaps(rec: Recording, max_gap: float) -> tuple[Recording, list[tuple[str, int, int, float]]]:
+    """Fill every gap of at most ``max_gap`` seconds by a spline per marker (the recording must start and end
+    with every marker seen: :func:`trim`). Returns the filled recording and the gaps; a longer gap raises
+    :class:`RecordingError` naming the marker and its frames and times."""
+    found = gaps(rec)
+    long = [g for g in found if g[3] > max_gap * (1 + 1e-9)]
+    if long:
+        text = "; ".join(f"marker {name} missing from {rec.where(i0)} to {rec.where(i1)} ({d:.4g} s)" for name, i0, i1, d in long[:5])
+        more = f"; and {len(long) - 5} more" if len(long) > 5 else ""
+        raise RecordingError(f"{rec.source}: gap(s) longer than --max-gap {max_gap:g} s: {text}{more}")
+    if not found:
+        return rec, found
+    positions = rec.positions.copy()
+    gone = missing(positions)
+    for k in sorted({rec.markers.index(g[0]) for g in found}):  # a loop over markers, each filled at once
+        seen = ~gone[:, k]
+        spline = CubicSpline(rec.t[seen], positions[seen, k, :], axis=0)
+        positions[~seen, k, :] = spline(rec.t[~seen])
+    return replace(rec, positions=positions), found
+
+
+def check_uniform(rec: Recording, why: str) -> float:
+    """The frame period (median time step), after checking that the times are uniform; RecordingError naming the
+    first irregular frame otherwise (``why`` says what needs uniform times)."""
+    dt = np.diff(rec.t)
+    period = float(np.median(dt))
+    bad = np.flatnonzero(np.abs(dt - period) > UNIFORM_TOLERANCE * period)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise RecordingError(f"{rec.source}: {rec.where(i)}: time step {dt[i - 1]:.6g} s differs from the median "
+                             f"{period:.6g} s; {why} needs uniform sampling")
+    return period
+
+
+def low_pass(rec: Recording, cutoff_hz: float) -> Recording:
+    """Zero-phase Butterworth low-pass of every marker coordinate at ``cutoff_hz`` (-3 dB; see the module)."""
+    period = check_uniform(rec, f"the low-pass filter (--cutoff {cutoff_hz:g}; or --cutoff none)")
+    nyquist = 0.5 / period
+    design = cutoff_hz / TWO_PASS_CORRECTION
+    if not 0 < design < nyquist:
+        raise RecordingError(f"{rec.source}: --cutoff {cutoff_hz:g} Hz is too high for a recording at {1 / period:.6g} Hz "
+                             f"(it must stay below {nyquist * TWO_PASS_CORRECTION:.6g} Hz); lower it or use --cutoff none")
+    sos = butter(FILTER_ORDER, design / nyquist, output="sos")
+    return replace(rec, positions=sosfiltfilt(sos, rec.positions, axis=0))

@@ -1,0 +1,145 @@
+"""The registration file: how a recording's markers sit on the mandible, where the tracker is, and how the
+motion is scaled and weighed for the robot (TOML, validated like the parameter files).
+
+```toml
+units = "mm"                   # length unit of the markers, the origin, and of files that carry none
+rest = "first"                 # or a [markers] table: NAME = [x, y, z] in {M}
+scale = 1.0                    # displacement of O_M relative to the first frame (optional, default 1)
+angle_scale = 1.0              # rotation angle relative to the first frame (optional, default 1)
+
+[tracker]                      # optional: p_S = rotation . p_T + origin
+rotation = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+origin = [0, 0, 0]
+
+[fit]                          # optional
+position_weight_per_mm = 1.0
+orientation_weight_per_deg = 1.0
+point_mm = [80, 0, -25]        # default: the model's incisal point
+```
+
+Every error is a :class:`~chewbot.errors.RecordingError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from chewbot.errors import RecordingError
+from chewbot.params import ROTATION_TOLERANCE, _format_validation_error
+from chewbot.recordings.formats import known_length_units, length_factor
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
+# Markers closer to a line than this (second singular value of their centred positions over the first) do not
+# fix a rotation about that line.
+COLLINEAR_TOLERANCE = 1e-3
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+
+class TrackerSection(_Strict):
+    rotation: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    origin: Vec3 = [0.0, 0.0, 0.0]
+
+
+class FitSection(_Strict):
+    position_weight_per_mm: float = Field(1.0, gt=0)
+    orientation_weight_per_deg: float = Field(1.0, gt=0)
+    point_mm: Vec3 | None = None
+
+
+class RegistrationFile(_Strict):
+    """The TOML file as written."""
+
+    units: str
+    markers: dict[str, Vec3] | None = None
+    rest: Literal["first"] | None = None
+    tracker: TrackerSection = TrackerSection()
+    scale: float = Field(1.0, gt=0)
+    angle_scale: float = Field(1.0, gt=0)
+    fit: FitSection = FitSection()
+
+    @field_validator("units")
+    @classmethod
+    def _length_unit(cls, v: str) -> str:
+        if v not in known_length_units():
+            raise ValueError(f"{v!r} is not a length unit (known: {', '.join(known_length_units())})")
+        return v
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """A validated registration, SI: ``markers`` {name: position in {M} (m)} or None for ``rest = "first"``;
+    ``rotation`` (3, 3) and ``origin`` (3,) m with p_S = rotation p_T + origin; ``point`` (3,) m in {M} or None
+    (the model's incisal point); weights per mm and per degree."""
+
+    source: str
+    units: str
+    markers: dict[str, np.ndarray] | None
+    rotation: np.ndarray
+    origin: np.ndarray
+    scale: float
+    angle_scale: float
+    position_weight_per_mm: float
+    orientation_weight_per_deg: float
+    point: np.ndarray | None
+
+
+def load_registration(path: str | Path) -> Registration:
+    """Read and validate a registration file."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such registration file") from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise RecordingError(f"{path}: not valid TOML ({exc})") from None
+    return registration_from_dict(raw, str(path))
+
+
+def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
+    """Validate a parsed registration file and convert it to SI."""
+    try:
+        f = RegistrationFile.model_validate(raw)
+    except ValidationError as exc:
+        raise RecordingError(_format_validation_error(source, exc)) from None
+
+    def fail(key: str, reason: str):
+        raise RecordingError(f"{source}: key '{key}': {reason}")
+
+    if (f.markers is None) == (f.rest is None):
+        fail("markers" if f.markers is None else "rest", "give either a [markers] table (each marker's position in {M}) "
+             "or rest = \"first\" (the first frame defines the markers and is the home pose), not both or neither")
+    unit = length_factor(f.units, f"{source}: key 'units'")
+    markers = None
+    if f.markers is not None:
+        if len(f.markers) < 3:
+            fail("markers", f"{len(f.markers)} marker(s); the pose of {{M}} needs at least 3 that are not on one line")
+        markers = {name: np.array(v) * unit for name, v in f.markers.items()}
+        if collinear(np.array(list(markers.values()))):
+            fail("markers", "the markers lie on one line (or nearly): they do not fix a rotation about it")
+    rotation = np.array(f.tracker.rotation)
+    dev = np.abs(rotation.T @ rotation - np.eye(3)).max()
+    if dev > ROTATION_TOLERANCE or np.linalg.det(rotation) <= 0:
+        fail("tracker.rotation", f"not a rotation matrix (max |R^T R - I| = {dev:.3g}, det = {np.linalg.det(rotation):.4g}); "
+             "its columns are the tracker's axes in {S}")
+    u, _, vt = np.linalg.svd(rotation)  # nearest rotation: the rows are typically rounded
+    return Registration(source, f.units, markers, u @ vt, np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
+                        f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3)
+
+
+def collinear(points: np.ndarray) -> bool:
+    """True when the points (K, 3) lie on one line (or nearly: :data:`COLLINEAR_TOLERANCE`)."""
+    sv = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    return len(sv) < 2 or sv[1] <= COLLINEAR_TOLERANCE * sv[0]
