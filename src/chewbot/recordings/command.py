@@ -1,13 +1,12 @@
 """``chewbot import-motion``: a jaw-tracking recording in, a robot task and its residuals out.
 
 The command's options and files; the work is :func:`chewbot.recordings.importer.import_motion`. Both files are
-written through temporary siblings (``.NAME.partial-PID``) renamed into place, each beginning with a comment
-line that names the command; an existing file is replaced only with ``--force``.
+written together through :func:`chewbot.outputs.atomic_files` (all or none), each beginning with chewbot's marker
+line, which names the command; an existing file is replaced only with ``--force`` and only if chewbot wrote it.
 """
 
 from __future__ import annotations
 
-import os
 import shlex
 from pathlib import Path
 
@@ -62,43 +61,39 @@ def import_motion(
 
       chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
     """
-    from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, _fail, _progress, console, stdout
+    from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
-    from chewbot.outputs import OutputExistsError
+    from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
     if side not in ("left", "right"):
-        _fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+        fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
     options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
                             rate_hz=None if rate == "recording" else float(rate),
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
                             force_file=None if force_file is None else str(force_file))
-    try:
-        inputs = {recording.resolve(), registration.resolve()} | ({force_file.resolve()} if force_file else set())
-        for target in (out, residuals):
-            if target.resolve() in inputs:
-                raise OutputExistsError(f"{target}: is one of the command's input files; choose another --out")
-            if target.exists() and not force:
-                raise OutputExistsError(f"{target}: exists; choose another --out or pass --force to replace it")
-        with _progress(False, "import-motion", total=STEPS) as step:
+    with errors_reported():
+        inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
+        for target in (out, residuals):  # before the work, not after it
+            check_output(target, force, WRITTEN_FILE, inputs)
+        with progress(False, "import-motion", total=STEPS) as step:
             result = run_import(recording, registration, options, progress=step)
-        header = f"# chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
-        table = result.residuals()
-        if result.task is None:
-            _write(header, [(residuals, table)])
-        else:
-            _write(header, [(out, _task_table(result.task)), (residuals, table)])
-    except ChewbotError as exc:
-        _fail(exc)
+        about = f"chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
+        files = [(residuals, result.residuals(), "residuals of " + about)]
+        if result.task is not None:
+            files.insert(0, (out, _task_table(result.task), "a task, read it with chewbot run --task; from " + about))
+        with atomic_files([path for path, _, _ in files], force, inputs) as temporaries:
+            for (_, table, what), tmp in zip(files, temporaries):
+                table.to_csv(tmp, first_line=marker_line("#", what))
     for note in result.notes:
         console.print(f"note: {note}", highlight=False, markup=False)
     _print_maxima(stdout, result)
     if result.task is None:
         lines = result.failures()
         shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
-        _fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
+        fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
                        f"residuals in {residuals}:\n" + "\n".join(shown)), EXIT_UNREACHABLE)
     stdout.print(f"wrote {out} ({result.task.n} samples) and {residuals}; run it with: "
                  f"chewbot run --task {shlex.quote(str(out))} --model {shlex.quote(model)} --side {side}", highlight=False, markup=False)
@@ -132,37 +127,6 @@ def _task_table(task):
             table.add(prefix + c, values[:, j], units[c] + per)
     table.add_block(["Fx", "Fy", "Fz"], task.force, "N")
     return table
-
-
-def _csv_text(header: str, table) -> str:
-    """A comment line, a row of NAME[unit], then the rows: floats in their shortest exact form, counts and flags
-    (unit 1, whole numbers) as integers."""
-    import numpy as np
-
-    cells = []
-    for name, values in table.columns.items():
-        whole = table.units[name] == "1" and np.all(values == np.round(values))
-        cells.append([str(int(v)) for v in values] if whole else [repr(v) for v in values.tolist()])
-    head = ",".join(f"{n}[{table.units[n]}]" for n in table.columns)
-    return "\n".join([header, head] + [",".join(row) for row in zip(*cells)]) + "\n"
-
-
-def _write(header: str, files) -> None:
-    """Write every (path, table) through a temporary sibling, then rename them all into place."""
-    from chewbot.outputs import OutputError
-
-    partial = [path.with_name(f".{path.name}.partial-{os.getpid()}") for path, _ in files]
-    try:
-        for (path, table), tmp in zip(files, partial):
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(_csv_text(header, table))
-        for (path, _), tmp in zip(files, partial):
-            os.replace(tmp, path)
-    except OSError as exc:
-        raise OutputError(f"{exc.filename or files[0][0]}: cannot write ({exc.strerror or exc})") from exc
-    finally:
-        for tmp in partial:
-            tmp.unlink(missing_ok=True)
 
 
 def _print_maxima(stdout, result) -> None:
