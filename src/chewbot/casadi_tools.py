@@ -25,7 +25,6 @@ import os
 import re
 import shutil
 import subprocess
-import tempfile
 import threading
 import warnings
 from dataclasses import dataclass, field
@@ -258,6 +257,17 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
         except OSError:
             pass
     return libs
+
+
+def prepare_kernels(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FLAGS) -> None:
+    """Compile the kernels missing from the cache side by side (:func:`prepare`), before they are loaded one
+    by one; nothing where they run in CasADi's virtual machine (no compiler, or the cache is unusable)."""
+    if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
+        return
+    try:
+        prepare(kernels, flags)
+    except OSError as exc:
+        _cache_unusable(exc)
 
 
 def _pid_alive(pid: int) -> bool:

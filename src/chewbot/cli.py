@@ -104,6 +104,21 @@ def _check_method(name: str | None) -> str | None:
     return name
 
 
+SET_HELP = ("Override one number of the model (a parameter-file key in the file's units, 1-based indices: "
+            "friction.hkp_coulomb=0.2, chains.crank_length_mm[3]=12, chains.G_mm[2][1]=24) or of the default task "
+            "(task.force_z_N=-100); repeatable. Values that follow from it stay consistent (docs/models.md).")
+
+
+def _overrides(arguments: list[str]) -> dict[str, float]:
+    """``--set KEY=VALUE`` arguments as a dict, in order (a key given twice: the last value); exit 2 on a bad one."""
+    from chewbot.params import parse_override
+
+    try:
+        return dict(parse_override(a) for a in arguments)
+    except ChewbotError as exc:
+        _fail(exc)
+
+
 @app.command()
 def run(
     model: str = typer.Option("target", "--model", help="Built-in model (target, 6rss, target-as-printed, 6rss-as-printed) or a TOML parameter file."),
@@ -116,6 +131,7 @@ def run(
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
     force: bool = typer.Option(False, "--force", help="Replace the results folder if it exists."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+    set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP),
 ) -> None:
     """Compute the kinematics and inverse dynamics of a task and write a results folder.
 
@@ -131,10 +147,13 @@ def run(
       chewbot run --task my_chewing.csv --orientation euler-parameters --out runs/mine
 
       chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
+
+      chewbot run --set chains.crank_length_mm[3]=12 --set task.force_z_N=-100 --out runs/longer-crank
     """
     from chewbot.outputs import check_output
     from chewbot.pipeline import RunOptions, compute, write
 
+    overrides = _overrides(set_)
     if method is None:
         method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
     if method != "newton-euler" and (goal is not None or friction is not None):
@@ -150,7 +169,7 @@ def run(
             _fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
         goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
     options = RunOptions(model=model, task=task, side=side.value, orientation=orientation.value, method=method,
-                         goal=goal and goal.value, friction=friction and friction.value)
+                         goal=goal and goal.value, friction=friction and friction.value, overrides=overrides)
     try:
         check_output(out, force)  # before the work, not after it
         with _progress(quiet, "run", total=RUN_STEPS) as step:
@@ -396,6 +415,7 @@ def models() -> None:
 @app.command("check-model")
 def check_model(
     model: str = typer.Argument(..., help="A TOML parameter file, or the name of a built-in model."),
+    set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP.replace(" or of the default task (task.force_z_N=-100)", "")),
 ) -> None:
     """Validate a parameter file and print what follows from it.
 
@@ -409,11 +429,16 @@ def check_model(
       chewbot check-model target
 
       chewbot check-model my_robot.toml
+
+      chewbot check-model target --set chains.crank_length_mm[3]=12
     """
     from chewbot.params import load_model
 
+    overrides = _overrides(set_)
     try:
-        m = load_model(model)
+        if any(k.startswith("task.") for k in overrides):
+            raise ChewbotError("--set task.NAME applies to chewbot run with --task default, not to a model")
+        m = load_model(model, overrides)
         stdout.print(_model_report(m))
     except ChewbotError as exc:
         _fail(exc)
@@ -456,7 +481,57 @@ def _model_report(m):
         facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
     assumed = assumed_values(m)
     facts.add_row("assumed", "\n".join(f"{k} = {v}" for k, v in assumed.items()) or "none")
+    if m.overrides:
+        facts.add_row("overrides", "\n".join(f"{k} = {v:g}" for k, v in m.overrides.items()))
     return Group(chains, facts, f"[green]valid:[/] {escape(m.source)}")
+
+
+cache_app = typer.Typer(help="The kernel cache: where the compiled kernels are kept.", no_args_is_help=False,
+                        add_completion=False, pretty_exceptions_enable=False)
+app.add_typer(cache_app, name="cache")
+
+
+@cache_app.callback(invoke_without_command=True)
+def cache(context: typer.Context) -> None:
+    """Print the kernel cache's location, its number of libraries and their size; `chewbot cache clear` empties it.
+
+    The cache is $CHEWBOT_CACHE, else $XDG_CACHE_HOME/chewbot, else ~/.cache/chewbot; its size is capped at
+    $CHEWBOT_CACHE_MAX_MB megabytes (default 200), the least recently used libraries removed first.
+
+    Examples:
+
+      chewbot cache
+
+      chewbot cache clear
+    """
+    if context.invoked_subcommand is not None:
+        return
+    from chewbot.casadi_tools import cache_info
+
+    try:
+        info = cache_info()
+    except (OSError, ValueError) as exc:
+        _fail(ChewbotError(f"the kernel cache cannot be read: {exc}"), EXIT_OUTPUT)
+    stdout.print(f"location: {info['location']}\nlibraries: {info['libraries']}\n"
+                 f"size: {info['bytes'] / 1e6:.1f} MB (cap {info['max_bytes'] / 1e6:.0f} MB)", highlight=False, markup=False)
+
+
+@cache_app.command("clear")
+def cache_clear() -> None:
+    """Remove chewbot's compiled kernels from the cache (nothing else in the folder); they are compiled again when
+    next needed.
+
+    Example:
+
+      chewbot cache clear
+    """
+    from chewbot.casadi_tools import cache_root, clear_cache
+
+    try:
+        count, size = clear_cache()
+    except OSError as exc:
+        _fail(ChewbotError(f"{cache_root()}: cannot clear the kernel cache ({exc.strerror or exc})"), EXIT_OUTPUT)
+    stdout.print(f"removed {count} libraries ({size / 1e6:.1f} MB) from {cache_root()}", highlight=False, markup=False)
 
 
 def main() -> None:  # pragma: no cover

@@ -387,6 +387,13 @@ def parse_override(argument: str) -> tuple[str, float]:
     return key, number
 
 
+def split_overrides(overrides: dict[str, float]) -> tuple[dict[str, float], dict[str, float]]:
+    """(the model's overrides, the default task's overrides without their ``task.`` prefix)."""
+    model = {k: v for k, v in overrides.items() if not k.startswith("task.")}
+    task = {k.removeprefix("task."): v for k, v in overrides.items() if k.startswith("task.")}
+    return model, task
+
+
 def _set_arguments(overrides: dict[str, float]) -> str:
     return ", ".join(f"--set {k}={v:g}" for k, v in overrides.items())
 

@@ -13,10 +13,12 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
-from chewbot.errors import KinematicsError
+from chewbot.casadi_tools import prepare_kernels
+from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
-from chewbot.params import load_model
+from chewbot.model_vector import vector_digest
+from chewbot.params import load_model, split_overrides
 from chewbot.report import dynamics_figures, figures
 from chewbot.report.html import write_report
 from chewbot.results import Table, kinematics_table
@@ -35,6 +37,7 @@ class RunOptions:
     method: str | None = None
     goal: str | None = "min-torque"  # newton-euler on the target only
     friction: str | None = "on"  # newton-euler only
+    overrides: dict[str, float] = field(default_factory=dict)  # --set KEY=VALUE: model keys and task.NAME
 
 
 @dataclass
@@ -51,12 +54,15 @@ class RunResult:
     dynamics: object | None = None
 
 
-def load_task(spec: str, model: Model, side: str) -> Task:
-    """``"default"`` (the synthetic chewing task) or the path of a CSV file."""
-    from chewbot.task.default import default_task
+def load_task(spec: str, model: Model, side: str, overrides: dict[str, float] | None = None) -> Task:
+    """``"default"`` (the synthetic chewing task, with ``overrides`` of its parameters) or the path of a CSV file."""
+    from chewbot.task.default import default_task, parameters_with
 
     if spec == "default":
-        return default_task(model, side)
+        return default_task(model, side, parameters_with(overrides) if overrides else None)
+    if overrides:
+        raise TaskError(f"{', '.join(f'--set task.{k}={v:g}' for k, v in overrides.items())}: the default task's "
+                        f"parameters apply to --task default, not to {spec}")
     from chewbot.task.csvio import read_task_csv
 
     return read_task_csv(Path(spec), side=side, mechanism=model.mechanism)
@@ -65,11 +71,13 @@ def load_task(spec: str, model: Model, side: str) -> Task:
 def compute(options: RunOptions, progress=None) -> RunResult:
     """Compute a run in memory (no files)."""
     step = progress or (lambda msg: None)
-    model = load_model(options.model)
+    model_overrides, task_overrides = split_overrides(options.overrides)
+    model = load_model(options.model, model_overrides)
     step("task")
-    task = load_task(options.task, model, options.side)
+    task = load_task(options.task, model, options.side, task_overrides)
     step("kinematics")
     t0 = time.perf_counter()
+    prepare_kernels(run_kernels(model, options))
     try:
         kin = solve_kinematics(model, task, options.orientation)
     except KinematicsError as exc:  # name the task file's line of the sample
@@ -82,6 +90,19 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     if options.method:
         _dynamics_stage(result, step)
     return result
+
+
+def run_kernels(model: Model, options: RunOptions) -> list:
+    """The compiled kernels a run uses: the kinematics, the formulation's, and the inertia coupling's."""
+    from chewbot.analysis.coupling import coupling_kernel
+    from chewbot.dynamics import formulation_kernels
+    from chewbot.kinematics.functions import kinematics_kernel
+
+    kernels = [kinematics_kernel(model.mechanism, options.orientation)]
+    if options.method:
+        kernels += formulation_kernels(model.mechanism, options.orientation, options.method, goal=options.goal)
+        kernels.append(coupling_kernel(model.mechanism))
+    return kernels
 
 
 def _dynamics_stage(result: RunResult, step) -> None:
@@ -135,7 +156,9 @@ def run_json(result: RunResult) -> dict:
     return {
         "chewbot_run": 1,
         "options": vars(result.options),
-        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed)},
+        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed),
+                  "parameters_sha256": vector_digest(m)},
+        "overrides": dict(result.options.overrides),
         "task": {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
                  "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
         "versions": _versions(),

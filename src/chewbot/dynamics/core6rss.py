@@ -236,7 +236,7 @@ def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices:
     return dict(zip(outputs, out))
 
 
-@register("6rss-core")
+@register("6rss-core", lambda mechanism, orientation, **options: [torque_kernel(mechanism)])
 def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring).
     ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""

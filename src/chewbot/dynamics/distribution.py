@@ -88,21 +88,13 @@ class Problem:
         return self._nlp
 
 
-def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_names, has_start: bool,
-                  key: tuple | None = None) -> Problem:
-    """The compiled :class:`Problem` of the expressions ``graph()`` returns: ``name`` prefixes the kernels'
-    names, ``nx`` is the number of unknowns. ``key``: what determines the graph besides chewbot's source (see
-    :class:`~chewbot.casadi_tools.KernelSpec`; the graph is then built only for kernels missing from the cache),
-    or None for a graph defined outside chewbot (built, and its kernels keyed by their serialised form)."""
+PROBLEM_KERNELS = ("objective", "value", "limits", "start")
 
-    def kernel(suffix: str, outputs: Callable[[ProblemGraph], list], out_names: list[str], data_only: bool = False) -> ca.Function:
-        def build():
-            g = graph()
-            ins, names = ([g.D], ["D"]) if data_only else ([g.D, g.x, g.friction], ["D", "x", "friction"])
-            return ca.Function(f"{name}_{suffix}", ins + g.params, [ca.densify(o) for o in outputs(g)],
-                               names + ["p"] * len(g.params), out_names, {"cse": True})
 
-        return compiled(KernelSpec(f"{name}_{suffix}", build, key) if key is not None else build())
+def problem_kernels(name: str, graph: Callable[[], ProblemGraph], key: tuple, has_start: bool = True) -> list[KernelSpec]:
+    """The kernels of a :class:`Problem` (objective, value, limits and start, see there) named ``name_...``, of the
+    expressions ``graph()`` returns; ``key``: what determines the graph besides chewbot's source (see
+    :class:`~chewbot.casadi_tools.KernelSpec`)."""
 
     def objective(g: ProblemGraph) -> list:
         J = ca.sumsqr(g.residual)
@@ -110,10 +102,29 @@ def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_n
         H, grad = ca.hessian(J, g.x)
         return [J, grad, H, 2 * ca.mtimes(Jr.T, Jr)]
 
-    return Problem(kernel("objective", objective, ["J", "grad", "H", "H_gn"]),
-                   kernel("value", lambda g: [ca.sumsqr(g.residual)], ["J"]),
-                   kernel("limits", lambda g: [g.limits], ["c"]), list(limit_names), nx,
-                   kernel("start", lambda g: [g.start], ["x"], data_only=True) if has_start else None, graph)
+    def spec(suffix: str, outputs: Callable[[ProblemGraph], list], out_names: list[str]) -> KernelSpec:
+        def build():
+            g = graph()
+            ins, names = ([g.D], ["D"]) if suffix == "start" else ([g.D, g.x, g.friction], ["D", "x", "friction"])
+            return ca.Function(f"{name}_{suffix}", ins + g.params, [ca.densify(o) for o in outputs(g)],
+                               names + ["p"] * len(g.params), out_names, {"cse": True})
+
+        return KernelSpec(f"{name}_{suffix}", build, key)
+
+    kernels = [spec("objective", objective, ["J", "grad", "H", "H_gn"]), spec("value", lambda g: [ca.sumsqr(g.residual)], ["J"]),
+               spec("limits", lambda g: [g.limits], ["c"])]
+    return kernels + [spec("start", lambda g: [g.start], ["x"])] if has_start else kernels
+
+
+def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_names, has_start: bool,
+                  key: tuple | None = None) -> Problem:
+    """The compiled :class:`Problem` of the expressions ``graph()`` returns: ``name`` prefixes the kernels'
+    names, ``nx`` is the number of unknowns. ``key``: what determines the graph besides chewbot's source (see
+    :func:`problem_kernels`; the graph is then built only for kernels missing from the cache), or None for a
+    graph defined outside chewbot (built, and its kernels keyed by their serialised form)."""
+    kernels = problem_kernels(name, graph, () if key is None else key, has_start)
+    loaded = [compiled(k if key is not None else k.build()) for k in kernels]
+    return Problem(*loaded[:3], list(limit_names), nx, loaded[3] if has_start else None, graph)
 
 
 @dataclass

@@ -83,7 +83,7 @@ def solve_multipliers(terms: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndar
     return z[:, :6], z[:, 6:12]
 
 
-@register("lagrange")
+@register("lagrange", lambda mechanism, orientation, **options: [lagrange_kernel(mechanism)])
 def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm torques and the closure multipliers lambda1..6 (N/m: h_i is in m^2) by Lagrange's equations of
     the first kind. ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options)

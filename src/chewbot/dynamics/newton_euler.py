@@ -38,7 +38,7 @@ import numpy as np
 from chewbot.analysis.indices import friction_share, performance_indices
 from chewbot.casadi_tools import KernelSpec, compiled, mapped
 from chewbot.dynamics.base import Dynamics, register
-from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, solve
+from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.model import Model
@@ -242,23 +242,38 @@ def problem(mechanism: str, goal: str) -> Problem:
     |F_G,i . z_i| <= axial load, |F_G,i x z_i| <= radial load (bounds: :func:`limit_bounds` of a model).
     """
     check_goal(goal)
-    nN = n_unknowns(mechanism)
-
-    def graph() -> ProblemGraph:
-        def build():
-            m = symbols(mechanism)
-            D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
-            out = forces_sx(m, D, N, fl)
-            dth = _unpack(D, nN)["dtheta"]
-            limits = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
-            return ProblemGraph(D, N, fl, [m.p], goal_residual(m, goal, D, N, fl), limits,
-                                start_sx(m, goal, D) if nN else ca.SX(0, 1))
-
-        return cached_graph(mechanism, ("ne-problem", goal), build)
-
     names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
     return cached_graph(mechanism, ("ne-problem-kernels", goal), lambda: build_problem(
-        f"ne_{c_name(mechanism)}_{goal.replace('-', '_')}", graph, nN, names, has_start=True, key=graph_key(mechanism, goal)))
+        _problem_name(mechanism, goal), _problem_graph(mechanism, goal), n_unknowns(mechanism), names, has_start=True,
+        key=graph_key(mechanism, goal)))
+
+
+def _problem_name(mechanism: str, goal: str) -> str:
+    return f"ne_{c_name(mechanism)}_{goal.replace('-', '_')}"
+
+
+def _problem_graph(mechanism: str, goal: str):
+    """A function that builds (once) the expressions of the distribution problem of ``goal``."""
+    nN = n_unknowns(mechanism)
+
+    def build():
+        m = symbols(mechanism)
+        D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
+        out = forces_sx(m, D, N, fl)
+        dth = _unpack(D, nN)["dtheta"]
+        limits = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
+        return ProblemGraph(D, N, fl, [m.p], goal_residual(m, goal, D, N, fl), limits,
+                            start_sx(m, goal, D) if nN else ca.SX(0, 1))
+
+    return lambda: cached_graph(mechanism, ("ne-problem", goal), build)
+
+
+def newton_euler_kernels(mechanism: str, orientation: str, goal: str | None = None, **ignored) -> list[KernelSpec]:
+    """The compiled kernels of a Newton–Euler run: the sample's coefficients, the forces and the distribution
+    problem of ``goal`` (default min-torque)."""
+    goal = goal or "min-torque"
+    return [coefficients_kernel(mechanism, orientation), forces_kernel(mechanism),
+            *problem_kernels(_problem_name(mechanism, goal), _problem_graph(mechanism, goal), graph_key(mechanism, goal))]
 
 
 GOAL_RESIDUALS = {"min-torque": "tau", "min-coupler-force": "f"}
@@ -308,7 +323,7 @@ def check_goal(goal: str) -> None:
         raise ValueError(f"goal must be one of {', '.join(GOALS)}, not {goal!r}")
 
 
-@register("newton-euler")
+@register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
                  friction: bool = True, strict: bool = False, **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
