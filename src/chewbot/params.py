@@ -463,12 +463,13 @@ def apply_overrides(raw: dict, overrides: dict[str, float]) -> dict:
     """A copy of the parsed parameter file ``raw`` (papers' units) with ``overrides`` applied and the values that
     follow from them kept consistent (docs/models.md):
 
-    * chains.G_mm, chains.S0_mm, chains.M_mm of chain i: the crank stays perpendicular to its shaft (the shaft
-      axis, third column of R_C0,i, is kept): moving G_i along the shaft moves S0_i with it, moving S0_i along
-      the shaft moves G_i with it; then the crank and coupler lengths are |S0_i - G_i| and |M_i - S0_i| and
-      the first two columns of R_C0,i the new crank direction and shaft x crank;
-    * chains.crank_length_mm[i] moves S0_i along its crank, and the coupler length follows (|M_i - S0_i|);
-      chains.coupler_length_mm[i] moves M_i along the coupler;
+    * chains.G_mm, chains.S0_mm of chain i: the crank stays perpendicular to its shaft (the shaft axis, third
+      column of R_C0,i, is kept): moving G_i along the shaft moves S0_i with it, moving S0_i along the shaft
+      moves G_i with it; the crank length is the distance of S0_i from G_i across the shaft, the first two columns
+      of R_C0,i the new crank direction and shaft x crank;
+    * chains.crank_length_mm[i] moves S0_i along its crank; chains.coupler_length_mm[i] moves M_i along the
+      coupler; otherwise the coupler length follows, |M_i - S0_i| (also when M_i moves). A chain touched by an
+      override closes exactly at home: S0_i is rewritten as G_i + L_c,i times the crank direction of R_C0,i;
     * hkp.T_L_mm sets hkp.T_R_mm (its mirror in y); the condyles stay on their plane at home: hkp.p1,
       hkp.p2_mm or hkp.T_L_mm[1] move the condyles' z onto it, hkp.T_L_mm[3] moves the plane (p2);
     * an off-diagonal entry of mandible.inertia_g_mm2 sets its symmetric entry too.
@@ -499,7 +500,11 @@ def apply_overrides(raw: dict, overrides: dict[str, float]) -> dict:
 
 
 def _chains_follow(raw: dict, before: dict, given: dict[str, list]) -> None:
-    """The chain rules of :func:`apply_overrides` on ``raw`` (overridden); ``before``: the file as read."""
+    """The chain rules of :func:`apply_overrides` on ``raw`` (overridden); ``before``: the file as read.
+
+    A chain touched by an override is written so that it closes exactly at home: S0_i = G_i + L_c,i x_i with x_i
+    the crank direction of R_C0,i (the printed coordinates agree with the lengths and matrices to 4 digits only).
+    """
     def chains(key: str) -> set[int]:
         return {idx[0] for idx in given.get(f"chains.{key}", [])}
 
@@ -510,31 +515,34 @@ def _chains_follow(raw: dict, before: dict, given: dict[str, list]) -> None:
         G, S0, M = (np.array(ch[k], dtype=float).reshape(6, 3) for k in _CHAIN_POINTS)
         G_before, S0_before = (np.array(before["chains"][k], dtype=float).reshape(6, 3) for k in ("G_mm", "S0_mm"))
         Lc, Lr = (np.array(ch[k], dtype=float).reshape(6) for k in ("crank_length_mm", "coupler_length_mm"))
-        R = np.array(ch["R_C0"], dtype=float).reshape(6, 3, 3)
-    except (KeyError, ValueError, TypeError):
+        R = np.array([_nearest_rotation(r) for r in np.array(ch["R_C0"], dtype=float).reshape(6, 3, 3)])
+    except (KeyError, ValueError, TypeError, np.linalg.LinAlgError):
         return  # a malformed chains section: validation reports it, naming the key
-    for i in sorted(chains("G_mm") | chains("S0_mm") | chains("M_mm")):
-        z = _nearest_rotation(R[i])[:, 2]  # the shaft, kept
-        if i in chains("G_mm") and i not in chains("S0_mm"):
+    touched = chains("G_mm") | chains("S0_mm") | chains("M_mm") | chains("crank_length_mm") | chains("coupler_length_mm")
+    for i in sorted(chains("G_mm") | chains("S0_mm")):
+        z = R[i][:, 2]  # the shaft, kept
+        if i not in chains("S0_mm"):
             S0[i] += np.dot(G[i] - G_before[i], z) * z
-        if i in chains("S0_mm") and i not in chains("G_mm"):
+        if i not in chains("G_mm"):
             G[i] += np.dot(S0[i] - S0_before[i], z) * z
         arm = S0[i] - G[i]
-        x = arm - np.dot(arm, z) * z
-        if i not in chains("R_C0") and np.linalg.norm(x) > 0:
-            x /= np.linalg.norm(x)
-            R[i] = np.column_stack([x, np.cross(z, x), z])
-        Lc[i], Lr[i] = np.linalg.norm(arm), np.linalg.norm(M[i] - S0[i])
-    for i in sorted(chains("crank_length_mm")):
-        arm = S0[i] - G[i]
-        S0[i] = G[i] + Lc[i] * arm / np.linalg.norm(arm)
-        if i not in chains("coupler_length_mm"):
+        arm -= np.dot(arm, z) * z  # the crank's plane through G_i
+        Lc[i] = np.linalg.norm(arm)
+        if Lc[i] > 0:
+            R[i] = np.column_stack([arm / Lc[i], np.cross(z, arm / Lc[i]), z])
+    for i in sorted(touched):
+        S0[i] = G[i] + Lc[i] * R[i][:, 0]
+        if i in chains("coupler_length_mm"):
+            rod = M[i] - S0[i]
+            M[i] = S0[i] + Lr[i] * rod / np.linalg.norm(rod)
+        else:
             Lr[i] = np.linalg.norm(M[i] - S0[i])
-    for i in sorted(chains("coupler_length_mm")):
-        rod = M[i] - S0[i]
-        M[i] = S0[i] + Lr[i] * rod / np.linalg.norm(rod)
+    rotations = np.array(ch["R_C0"], dtype=float).reshape(6, 3, 3)
+    for i in sorted(chains("G_mm") | chains("S0_mm")):
+        if i not in chains("R_C0"):
+            rotations[i] = R[i]
     ch.update(G_mm=G.tolist(), S0_mm=S0.tolist(), M_mm=M.tolist(), crank_length_mm=Lc.tolist(),
-              coupler_length_mm=Lr.tolist(), R_C0=R.tolist())
+              coupler_length_mm=Lr.tolist(), R_C0=rotations.tolist())
 
 
 def _hkp_follows(raw: dict, given: dict[str, list]) -> None:
