@@ -121,9 +121,10 @@ def max_cache_bytes() -> int:
 
 
 @functools.cache
-def source_digest() -> str:
-    """SHA-256 of the package's Python source, without the modules of :data:`NOT_IN_KEY`."""
-    root = Path(__file__).resolve().parent
+def source_digest(root: Path | None = None) -> str:
+    """SHA-256 of the package's Python source (``root``: the package folder, by default this one's), without the
+    modules of :data:`NOT_IN_KEY`."""
+    root = root or Path(__file__).resolve().parent
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(root)

@@ -32,9 +32,9 @@ def _fn(model_or_mechanism: Model | str, orientation: str, name: str, inputs, ou
 
 
 def pose_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
-    """q -> (pose, p, R): X_EE in the orientation's parametrisation, O_M (m) and R (3x3) in {S}."""
+    """q -> (pose, position, R): X_EE in the orientation's parametrisation, O_M (m) and R (3x3) in {S}."""
 
-    return _fn(model_or_mechanism, orientation, "pose", lambda s: {"q": s.q}, lambda s: {"pose": s.pose, "p": s.p, "R": s.R})
+    return _fn(model_or_mechanism, orientation, "pose", lambda s: {"q": s.q}, lambda s: {"pose": s.pose, "position": s.p, "R": s.R})
 
 
 def points_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
