@@ -106,3 +106,35 @@ def test_undefined_parasitic_e3_is_reported():
         solve_kinematics(model("target"), task, "euler-parameters")
     with pytest.raises(KinematicsError, match="condyle leaves its socket"):
         solve_kinematics(model("target"), task, "euler-angles")
+
+
+def test_parallel_singularity_screen_misses_nothing():
+    """The determinant bound only skips samples whose singular-value ratio is certainly above the tolerance: on
+    matrices built with ratios on both sides of it (after the column normalisation), the check names the first
+    sample below, with the ratio the SVD gives."""
+    from chewbot.kinematics.motion import PARALLEL_SINGULAR_TOLERANCE, check_parallel_singularity
+
+    rng = np.random.default_rng(3)
+    U, _ = np.linalg.qr(rng.normal(size=(40, 6, 4)))
+    V, _ = np.linalg.qr(rng.normal(size=(40, 4, 4)))
+    sv = np.tile([1.0, 0.7, 0.4, 0.2], (40, 1))
+    sv[[7, 11, 23], 3] = [3e-6, 4e-7, 1e-9]  # 7 stays above the tolerance once normalised, 11 and 23 do not
+    J = U @ (sv[:, :, None] * V)
+    normalised = J / np.linalg.norm(J, axis=1, keepdims=True)
+    ratio = (lambda s: s[:, -1] / s[:, 0])(np.linalg.svd(normalised, compute_uv=False))
+    below = np.flatnonzero(ratio < PARALLEL_SINGULAR_TOLERANCE)
+    assert below.tolist() == [11, 23]
+    with pytest.raises(KinematicsError, match=rf"sample 11, .*ratio {ratio[11]:.2e} < 1e-06.*2 sample\(s\)"):
+        check_parallel_singularity(J, None, np.arange(40) * 1e-3)
+    check_parallel_singularity(np.delete(J, below, axis=0), None, np.arange(38) * 1e-3)
+
+
+def test_unit_norm_tangent_is_an_orthonormal_basis():
+    from chewbot.kinematics.motion import _unit_norm_tangent
+
+    g = np.random.default_rng(4).normal(size=(50, 1, 5))
+    g[:10, 0, 2] *= -30  # the largest entry negative
+    B = _unit_norm_tangent(g)
+    assert B.shape == (50, 5, 4)
+    assert np.abs(np.swapaxes(B, 1, 2) @ B - np.eye(4)).max() < 1e-14
+    assert np.abs(g @ B).max() < 1e-14 * np.abs(g).max()

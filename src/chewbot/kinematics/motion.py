@@ -152,26 +152,40 @@ def check_parallel_singularity(J_theta1: np.ndarray, J_unit: np.ndarray | None, 
 
     The columns are normalised first, so the test does not depend on the units of q_EE; for Euler parameters
     (``J_unit``: the gradient of abs(e)^2 - 1, (N, 1, n)) the direction that changes abs(e) is not a motion and is
-    left out (J_theta1 restricted to abs(e) = 1).
+    left out (J_theta1 restricted to an orthonormal basis of abs(e) = 1's tangent space). The test is on the ratio
+    of the smallest to the largest singular value; it is computed only where a cheap bound cannot exclude it: with
+    G = J' J (columns of unit length, so trace G = n), sigma_min / sigma_max < tol implies
+    det G < tol^2 sigma_max^(2 n) <= tol^2 n^n.
     """
-    J1 = J_theta1
-    if J_unit is not None:
-        J1 = J1 @ _unit_norm_tangent(J_unit)
+    J1 = J_theta1 if J_unit is None else J_theta1 @ _unit_norm_tangent(J_unit)
     J1 = J1 / np.linalg.norm(J1, axis=1, keepdims=True)
-    sv = np.linalg.svd(J1, compute_uv=False)
+    n = J1.shape[2]
+    gram = np.einsum("nki,nkj->nij", J1, J1)
+    candidates = np.flatnonzero(np.linalg.det(gram) < PARALLEL_SINGULAR_TOLERANCE**2 * float(n) ** n)
+    if not candidates.size:
+        return
+    sv = np.linalg.svd(J1[candidates], compute_uv=False)
     ratio = sv[:, -1] / sv[:, 0]
-    bad = np.flatnonzero(ratio < PARALLEL_SINGULAR_TOLERANCE)
+    bad = candidates[ratio < PARALLEL_SINGULAR_TOLERANCE]
     if bad.size:
         i = int(bad[0])
         raise KinematicsError(f"parallel (type II) singularity: J_theta1 loses rank (singular-value ratio "
-                              f"{ratio[i]:.2e} < {PARALLEL_SINGULAR_TOLERANCE:g}), the actuators do not fix the "
-                              f"mandible's motion; {bad.size} sample(s) affected", sample=i, time=float(t[i]))
+                              f"{ratio[np.searchsorted(candidates, i)]:.2e} < {PARALLEL_SINGULAR_TOLERANCE:g}), the "
+                              f"actuators do not fix the mandible's motion; {bad.size} sample(s) affected",
+                              sample=i, time=float(t[i]))
 
 
 def _unit_norm_tangent(J_unit: np.ndarray) -> np.ndarray:
-    """Orthonormal bases (N, n, n - 1) of the q_EE directions that keep abs(e) = 1 (normal to J_unit)."""
-    _, _, vt = np.linalg.svd(J_unit.reshape(J_unit.shape[0], 1, -1))
-    return np.swapaxes(vt[:, 1:, :], 1, 2)
+    """Orthonormal bases (N, n, n - 1) of the q_EE directions that keep abs(e) = 1 (normal to J_unit): the
+    Householder reflection that maps the gradient g onto a coordinate axis k (its largest entry), without column k."""
+    g = J_unit.reshape(J_unit.shape[0], -1)
+    N, n = g.shape
+    k = np.argmax(np.abs(g), axis=1)
+    v = g / np.linalg.norm(g, axis=1, keepdims=True)
+    v[np.arange(N), k] += np.where(g[np.arange(N), k] < 0, -1.0, 1.0)
+    H = np.eye(n) - 2 * v[:, :, None] * v[:, None, :] / np.einsum("ni,ni->n", v, v)[:, None, None]
+    keep = np.argsort(np.arange(n)[None, :] == k[:, None], axis=1, kind="stable")[:, :n - 1]
+    return np.take_along_axis(H, keep[:, None, :], axis=2)
 
 
 def check_e3_denominator(denominator: np.ndarray, t: np.ndarray) -> None:
