@@ -36,7 +36,7 @@ import numpy as np
 
 _MAPPED: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
 
-DEFAULT_MAX_MB = 200  # cap of the kernel cache; a full set of chewbot's kernels takes about 10 MB
+DEFAULT_MAX_MB = 200  # cap of the kernel cache; a full set of chewbot's kernels takes about 4 MB
 # Compiler flags of every kernel library. The kernels are long straight-line code: -O1 runs them as fast as -O2
 # and -O3 (within 3 %) and compiles them about 35 % faster (docs/realtime.md).
 FLAGS = ("-O1",)
