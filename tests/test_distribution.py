@@ -7,19 +7,19 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from chewbot.dynamics.distribution import SampleData, build_problem, solve
+from chewbot.dynamics.distribution import ProblemGraph, SampleData, build_problem, solve
 from chewbot.errors import InfeasibleError
 
 RNG = np.random.default_rng(7)
 N_SAMPLES = 64
 
 
-def _problem(nonlinear: float, bound: float):
-    """r = A x + b + nonlinear * friction * [sqrt(x0^2 + 1e-6); 0; x1^2] (A, b from D), limit |x0| <= bound."""
+def _problem(nonlinear: float):
+    """r = A x + b + nonlinear * friction * [sqrt(x0^2 + 1e-6); 0; x1^2] (A, b from D), limit c = x0."""
     D, x, fl = ca.SX.sym("D", 9), ca.SX.sym("x", 2), ca.SX.sym("friction")
     A, b = ca.reshape(D[:6], 3, 2), D[6:9]
     r = ca.mtimes(A, x) + b + nonlinear * fl * ca.vertcat(ca.sqrt(x[0] ** 2 + 1e-6), 0, x[1] ** 2)
-    return build_problem(f"test_{int(nonlinear * 10)}_{int(bound * 10)}", D, x, fl, r, x[0], [bound], ["x0"])
+    return build_problem(f"test_{int(nonlinear * 10)}", lambda: ProblemGraph(D, x, fl, [], r, x[0]), 2, ["x0"], has_start=False)
 
 
 def _data():
@@ -29,7 +29,7 @@ def _data():
 
 def test_without_friction_the_solution_is_the_least_squares_solution():
     D, data = _data()
-    sol = solve(_problem(0.3, 1e9), data, 0.0, np.arange(N_SAMPLES))
+    sol = solve(_problem(0.3), data, 0.0, np.arange(N_SAMPLES), [1e9])
     for k in range(N_SAMPLES):
         A, b = D[k, :6].reshape(2, 3).T, D[k, 6:]
         expected = np.linalg.lstsq(A, -b, rcond=None)[0]
@@ -39,8 +39,8 @@ def test_without_friction_the_solution_is_the_least_squares_solution():
 
 def test_nonlinear_optimum_matches_scipy():
     D, data = _data()
-    prob = _problem(0.3, 1e9)
-    sol = solve(prob, data, 1.0, np.arange(N_SAMPLES))
+    prob = _problem(0.3)
+    sol = solve(prob, data, 1.0, np.arange(N_SAMPLES), [1e9])
     assert not sol.unconverged
     for k in range(N_SAMPLES):
         A, b = D[k, :6].reshape(2, 3).T, D[k, 6:]
@@ -56,9 +56,9 @@ def test_nonlinear_optimum_matches_scipy():
 
 def test_active_limit_is_met_by_sqp():
     D, data = _data()
-    free = solve(_problem(0.0, 1e9), data, 0.0, np.arange(N_SAMPLES)).x
+    free = solve(_problem(0.0), data, 0.0, np.arange(N_SAMPLES), [1e9]).x
     bound = 0.5 * np.abs(free[:, 0]).max()
-    sol = solve(_problem(0.0, bound), data, 0.0, np.arange(N_SAMPLES))
+    sol = solve(_problem(0.0), data, 0.0, np.arange(N_SAMPLES), [bound])
     assert sol.constrained and not sol.infeasible
     assert np.abs(sol.x[:, 0]).max() <= bound * (1 + 1e-6)
     for k in sol.constrained:
@@ -72,13 +72,14 @@ def test_active_limit_is_met_by_sqp():
 
 def test_infeasible_limit_is_recorded_or_raised():
     D, x, fl = ca.SX.sym("D", 9), ca.SX.sym("x", 2), ca.SX.sym("friction")
-    prob = build_problem("test_infeasible", D, x, fl, x - D[:2], ca.vertcat(D[2] + 0 * x[0]), [0.5], ["fixed load"])
+    prob = build_problem("test_infeasible", lambda: ProblemGraph(D, x, fl, [], x - D[:2], ca.vertcat(D[2] + 0 * x[0])), 2,
+                         ["fixed load"], has_start=False)
     Dv = np.zeros((4, 9))
     Dv[2, 2] = 1.0  # sample 2 carries a load of 1 > 0.5 whatever x is
-    sol = solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1)
+    sol = solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1, [0.5])
     assert len(sol.infeasible) == 1
     entry = sol.infeasible[0]
     assert entry["sample"] == 2 and entry["t"] == pytest.approx(0.2) and entry["limits"] == ["fixed load"]
     assert entry["solver"]  # the SQP's return status, which the report shows beside the sample
     with pytest.raises(InfeasibleError, match=r"sample 2 \(t = 0.2 s\).*fixed load"):
-        solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1, strict=True)
+        solve(prob, SampleData(ca.DM(Dv.T)), 0.0, np.arange(4) * 0.1, [0.5], strict=True)

@@ -90,7 +90,7 @@ def test_core_coriolis_matrix_is_passive(mechanism):
     differences of the kernel's M_f along q_dot, M_f(q + h q_dot) - M_f(q - h q_dot) over 2h with h = 1e-6 s:
     truncation O(h^2) and rounding ~eps/h, both far below the 1e-8 relative bound."""
     m, kin = model(mechanism), default_kinematics(mechanism)
-    fn = dynamics_kernel(m)
+    fn = dynamics_kernel(m).graph()
     k = np.arange(1200, 4800, 97)  # inside the chewing cycles
     q, dq, ddq = generalised_state(kin)
     q, dq, ddq = q[k, 6:], dq[k, 6:], ddq[k, 6:]
@@ -174,27 +174,28 @@ def test_native_calls_equal_casadi():
     if c_compiler() is None:
         pytest.skip("no C compiler: kernels run in CasADi's virtual machine")
     m, kin = model("target"), default_kinematics("target")
-    fn = torque_kernel(m)
-    nf = NativeFunction(fn)
+    p = m.vector()  # the kernels the formulations use: the model's parameters as the last input
+    fn = torque_kernel("target").graph()
+    nf = NativeFunction(torque_kernel("target"))
     q, dq, ddq = kin.X[:, [0, 1, 3, 4]], kin.dX[:, [0, 1, 3, 4]], kin.ddX[:, [0, 1, 3, 4]]
-    ref = evaluate(fn, q, dq, ddq, m.molar_left, kin.force)
-    got = nf.batch(q, dq, ddq, m.molar_left, kin.force)
+    ref = evaluate(fn, q, dq, ddq, m.molar_left, kin.force, p)
+    got = nf.batch(q, dq, ddq, m.molar_left, kin.force, p)
     for a, b in zip(got, ref):
         assert _rel(a, b) <= 1e-13
-    one = nf(q[2100], dq[2100], ddq[2100], m.molar_left, kin.force[2100])
+    one = nf(q[2100], dq[2100], ddq[2100], m.molar_left, kin.force[2100], p)
     for a, b in zip(one, ref):
         assert _rel(a, b[2100]) <= 1e-13
     # matrix outputs, and results that stay valid after the next call reuses the buffers
-    full = NativeFunction(dynamics_kernel(m))
+    full = NativeFunction(dynamics_kernel("target"))
     k = 2440  # inside a bite: every output is non-zero
-    first = full(q[k], dq[k], ddq[k], m.molar_left, kin.force[k])
-    full(q[900], dq[900], ddq[900], m.molar_left, kin.force[900])
-    for a, b in zip(first, evaluate(dynamics_kernel(m), q[k:k + 1], dq[k:k + 1], ddq[k:k + 1], m.molar_left, kin.force[k:k + 1])):
+    first = full(q[k], dq[k], ddq[k], m.molar_left, kin.force[k], p)
+    full(q[900], dq[900], ddq[900], m.molar_left, kin.force[900], p)
+    for a, b in zip(first, evaluate(dynamics_kernel("target").graph(), q[k:k + 1], dq[k:k + 1], ddq[k:k + 1], m.molar_left, kin.force[k:k + 1], p)):
         assert _rel(np.asarray(a).reshape(b[0].shape), b[0]) <= 1e-13
-    with pytest.raises(ValueError, match="5 inputs|takes 5"):
+    with pytest.raises(ValueError, match="6 inputs|takes 6"):
         full(q[2100], dq[2100])
     with pytest.raises(ValueError, match="entries, expected"):
-        full(q[2100], dq[2100], ddq[2100], m.molar_left, 3.0)
+        full(q[2100], dq[2100], ddq[2100], m.molar_left, 3.0, p)
 
 
 @pytest.fixture(scope="module")

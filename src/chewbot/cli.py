@@ -177,6 +177,19 @@ def _check_method(name: str | None) -> str | None:
     return name
 
 
+SET_HELP = ("Override one number of the model (a parameter-file key in the file's units, 1-based indices: "
+            "friction.hkp_coulomb=0.2, chains.crank_length_mm[3]=12, chains.G_mm[2][1]=24) or of the default task "
+            "(task.force_z_N=-100); repeatable. Values that follow from it stay consistent (docs/models.md).")
+
+
+def _overrides(arguments: list[str]) -> dict[str, float]:
+    """``--set KEY=VALUE`` arguments as a dict, in order (a key given twice: the last value); exit 2 on a bad one."""
+    from chewbot.params import parse_override
+
+    with errors_reported():
+        return dict(parse_override(a) for a in arguments)
+
+
 @app.command()
 def run(
     model: str = typer.Option("target", "--model", help="Built-in model (target, 6rss, target-as-printed, 6rss-as-printed) or a TOML parameter file."),
@@ -190,6 +203,7 @@ def run(
     force: bool = flag("--force", help=FORCE_HELP),
     allow_violations: bool = flag("--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
     quiet: bool = flag("--quiet", "-q", help="Print nothing but errors."),
+    set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP),
 ) -> None:
     """Compute the kinematics and inverse dynamics of a task, check every sample, and write a results folder.
 
@@ -209,10 +223,13 @@ def run(
       chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
 
       chewbot run --task runs/left/results.csv --method liang --out runs/left-liang
+
+      chewbot run --set chains.crank_length_mm[3]=12 --set task.force_z_N=-100 --out runs/longer-crank
     """
     from chewbot.outputs import RESULTS_FOLDER, check_output
     from chewbot.pipeline import RunOptions, compute, input_files, write
 
+    overrides = _overrides(set_)
     if method is None:
         method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
     if method != "newton-euler" and (goal is not None or friction is not None):
@@ -226,7 +243,7 @@ def run(
             fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
         goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
     options = RunOptions(model=model, task=task, side=side and side.value, orientation=orientation.value, method=method,
-                         goal=goal and goal.value, friction=friction and friction.value)
+                         goal=goal and goal.value, friction=friction and friction.value, overrides=overrides)
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", total=RUN_STEPS) as step:
@@ -464,6 +481,7 @@ def models() -> None:
 @app.command("check-model")
 def check_model(
     model: str = typer.Argument(..., help="A TOML parameter file, or the name of a built-in model."),
+    set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP.replace(" or of the default task (task.force_z_N=-100)", "")),
 ) -> None:
     """Validate a parameter file and print what follows from it.
 
@@ -478,13 +496,18 @@ def check_model(
       chewbot check-model target
 
       chewbot check-model my_robot.toml
+
+      chewbot check-model target --set chains.crank_length_mm[3]=12
     """
     from chewbot.analysis.checks import KAPPA_MIN, NEAR_SINGULAR_DEG
     from chewbot.params import load_model
     from chewbot.report.summary import home_pose
 
+    overrides = _overrides(set_)
     with errors_reported():
-        m = load_model(model)
+        if any(k.startswith("task.") for k in overrides):
+            raise ChewbotError("--set task.NAME applies to chewbot run with --task default, not to a model")
+        m = load_model(model, overrides)
         home = home_pose(m)
         stdout.print(_model_report(m, home))
     for i, mu in enumerate(home["mu_deg"]):
@@ -533,4 +556,55 @@ def _model_report(m, home: dict):
         facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
     assumed = assumed_values(m)
     facts.add_row("assumed", escape("\n".join(f"{k} = {v}" for k, v in assumed.items())) or "none")
+    if m.overrides:
+        facts.add_row("overrides", escape("\n".join(f"{k} = {v:g}" for k, v in m.overrides.items())))
     return Group(chains, facts, f"[green]valid:[/] {escape(m.source)}")
+
+
+cache_app = typer.Typer(help="The kernel cache: where the compiled kernels are kept.", no_args_is_help=False,
+                        add_completion=False, pretty_exceptions_enable=False)
+app.add_typer(cache_app, name="cache")
+
+
+@cache_app.callback(invoke_without_command=True)
+def cache(context: typer.Context) -> None:
+    """Print the kernel cache's location, its number of libraries and their size; `chewbot cache clear` empties it.
+
+    The cache is $CHEWBOT_CACHE, else $XDG_CACHE_HOME/chewbot, else ~/.cache/chewbot; its size is capped at
+    $CHEWBOT_CACHE_MAX_MB megabytes (default 200), the least recently used libraries removed first.
+
+    Examples:
+
+      chewbot cache
+
+      chewbot cache clear
+    """
+    if context.invoked_subcommand is not None:
+        return
+    from chewbot.casadi_tools import cache_info
+
+    try:
+        info = cache_info()
+    except (OSError, ValueError) as exc:
+        fail(ChewbotError(f"the kernel cache cannot be read: {exc}"), EXIT_OUTPUT)
+    stdout.print(f"location: {info['location']}\nlibraries: {info['libraries']}\n"
+                 f"size: {info['bytes'] / 1e6:.1f} MB (cap {info['max_bytes'] / 1e6:.0f} MB)", highlight=False, markup=False)
+
+
+@cache_app.command("clear")
+def cache_clear() -> None:
+    """Remove chewbot's compiled kernels from the cache (nothing else in the folder); they are compiled again when
+    next needed.
+
+    Example:
+
+      chewbot cache clear
+    """
+    from chewbot.casadi_tools import cache_root, clear_cache
+
+    try:
+        count, size = clear_cache()
+    except OSError as exc:
+        fail(ChewbotError(f"{cache_root()}: cannot clear the kernel cache ({exc.strerror or exc})"), EXIT_OUTPUT)
+    stdout.print(f"removed {count} libraries ({size / 1e6:.1f} MB) from {cache_root()}", highlight=False, markup=False)
+

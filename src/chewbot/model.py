@@ -18,6 +18,11 @@ TOML file). Arrays are read-only; a model is hashable by identity and safe to sh
 | ``mandible_inertia`` | (3, 3) | kg m^2 | inertia about O_M in {M} |
 | ``incisor``, ``molar_left``, ``molar_right`` | (3,) | m | points I, B_L, B_R in {M} |
 | ``g`` | () | m/s^2 | gravity, along -Z_S |
+| ``hkp`` | | | the HKP planes, sockets and condyle centres (:class:`HKPGeometry`) |
+| ``friction``, ``limits``, ``contact`` | | | :class:`Friction`, :class:`Limits`, :class:`Contact` |
+
+:meth:`Model.vector` gives the numbers the CasADi graphs take as their input ``p``, in the fixed layout of
+:mod:`chewbot.model_vector`.
 """
 
 from __future__ import annotations
@@ -74,18 +79,54 @@ class Friction:
 
 @dataclass(frozen=True, eq=False)
 class Limits:
-    """Actuator limits for the optimal torque distribution (seed 001, Sect. 4.5) and the validity checks."""
+    """Actuator limits (seed 001, Sect. 4.5), SI units; ``theta_range`` and ``speed`` are unbounded
+    (-inf, inf and inf) unless the parameter file gives them."""
 
     torque: float  # N m
     power: float  # W
     axial_load: float  # N, along the shaft, at G_i
     radial_load: float  # N, across the shaft, at G_i
-    theta_range: np.ndarray | None = None  # rad, (2,): lowest and highest crank angle; None: unbounded
-    speed: float | None = None  # rad/s, largest abs(theta_dot_i); None: unbounded
+    theta_range: np.ndarray = field(default_factory=lambda: np.array([-np.inf, np.inf]))  # rad, crank angle [low, high]
+    speed: float = np.inf  # rad/s, crank speed abs(theta_dot)
+
+    def __post_init__(self):
+        _freeze(self)
 
 
 @dataclass(frozen=True, eq=False)
-class Model:
+class Contact:
+    """The HKP contact: ``preload`` (N) is the smallest normal force a unilateral contact model admits."""
+
+    preload: float = 0.0
+
+
+class MechanismMixin:
+    """What follows from the mechanism's name, shared by :class:`Model` and its symbolic counterpart
+    (:class:`chewbot.model_vector.SymbolicModel`)."""
+
+    mechanism: str
+
+    @property
+    def has_hkp(self) -> bool:
+        """True for the target robot: the two HKPs constrain the mandible."""
+        return self.mechanism == "target"
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom: 4 for the target, 6 for the 6RSS."""
+        return 4 if self.has_hkp else 6
+
+    def molar(self, side: str):
+        """The bite point B in {M} for ``side`` = ``"left"`` or ``"right"``."""
+        if side == "left":
+            return self.molar_left
+        if side == "right":
+            return self.molar_right
+        raise ValueError(f"side must be 'left' or 'right', not {side!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Model(MechanismMixin):
     """An immutable robot model in SI units (see the module docstring for the table of fields)."""
 
     name: str
@@ -114,28 +155,19 @@ class Model:
     molar_right: np.ndarray
     friction: Friction
     limits: Limits
+    contact: Contact = field(default_factory=Contact)
+    overrides: dict = field(default_factory=dict)  # the --set values applied to the file, as given
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
         _freeze(self)
 
-    @property
-    def has_hkp(self) -> bool:
-        """True for the target robot: the two HKPs constrain the mandible."""
-        return self.mechanism == "target"
+    def vector(self) -> np.ndarray:
+        """The model's numbers as one read-only vector (n_p,) in SI, the input ``p`` of every kernel
+        (layout: :mod:`chewbot.model_vector`)."""
+        from chewbot.model_vector import model_vector
 
-    @property
-    def dof(self) -> int:
-        """Degrees of freedom: 4 for the target, 6 for the 6RSS."""
-        return 4 if self.has_hkp else 6
-
-    def molar(self, side: str) -> np.ndarray:
-        """The bite point B in {M} for ``side`` = ``"left"`` or ``"right"``."""
-        if side == "left":
-            return self.molar_left
-        if side == "right":
-            return self.molar_right
-        raise ValueError(f"side must be 'left' or 'right', not {side!r}")
+        return self.cached("vector", lambda: model_vector(self))
 
     def cached(self, key, build):
         """Per-model cache of derived objects (symbolic graphs, compiled functions)."""

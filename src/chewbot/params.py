@@ -4,11 +4,19 @@ A parameter file keeps the papers' units, written at the end of every key (``G_m
 ``inertia_g_mm2`` ...). The loader validates it with pydantic (unknown and missing keys, shapes, signs),
 checks the physics (rotations, positive masses, positive-definite inertia, lengths that agree with the
 printed coordinates) and converts everything to SI. Every error names the file and the key.
+
+Overrides (``chewbot run --set KEY=VALUE``, ``load_model(..., overrides=...)``) change single numbers of a
+parsed file before it is validated; the values that follow from them are kept consistent by the rules of
+docs/models.md (:func:`apply_overrides`).
 """
 
 from __future__ import annotations
 
+import copy
+import difflib
 import hashlib
+import math
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -18,7 +26,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from chewbot.errors import ParameterError
-from chewbot.model import Friction, HKPGeometry, Limits, Model
+from chewbot.model import Contact, Friction, HKPGeometry, Limits, Model
 
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
 
@@ -35,6 +43,8 @@ Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 Six3 = Annotated[list[Vec3], Field(min_length=6, max_length=6)]
 Range = Annotated[list[float], Field(min_length=2, max_length=2)]
+# Limits that may be unbounded: +/-inf allowed (TOML writes them inf, -inf), NaN refused by their checks.
+MaybeInfinite = Annotated[float, Field(allow_inf_nan=True)]
 
 
 class _Strict(BaseModel):
@@ -95,9 +105,13 @@ class HKPSection(_Strict):
     @field_validator("x_range_mm", "y_left_mm", "y_right_mm")
     @classmethod
     def _ordered(cls, v: list[float]) -> list[float]:
-        if not v[0] < v[1]:
-            raise ValueError(f"[{v[0]}, {v[1]}] is not an interval [low, high] with low < high")
-        return v
+        return _interval(v)
+
+
+def _interval(v: list[float]) -> list[float]:
+    if not v[0] < v[1]:  # false for NaN as well
+        raise ValueError(f"[{v[0]}, {v[1]}] is not an interval [low, high] with low < high")
+    return v
 
 
 class PointsSection(_Strict):
@@ -119,6 +133,18 @@ class LimitsSection(_Strict):
     power_W: float = Field(gt=0)
     axial_load_N: float = Field(gt=0)
     radial_load_N: float = Field(gt=0)
+    # optional: the crank angle range and speed limit; unbounded when absent
+    theta_range_deg: Annotated[list[MaybeInfinite], Field(min_length=2, max_length=2)] = [-math.inf, math.inf]
+    speed_rad_per_s: MaybeInfinite = Field(default=math.inf, gt=0)
+
+    @field_validator("theta_range_deg")
+    @classmethod
+    def _ordered(cls, v: list[float]) -> list[float]:
+        return _interval(v)
+
+
+class ContactSection(_Strict):
+    preload_N: float = Field(default=0.0, ge=0)
 
 
 class ParameterFile(_Strict):
@@ -138,6 +164,7 @@ class ParameterFile(_Strict):
     points: PointsSection
     friction: FrictionSection
     limits: LimitsSection
+    contact: ContactSection = ContactSection()
 
 
 def builtin_model_path(name: str) -> Path:
@@ -158,9 +185,23 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     return p
 
 
-def load_model(name_or_path: str | Path = "target") -> Model:
-    """Load a built-in model by name or a parameter file by path, validated and converted to SI."""
+def load_model(name_or_path: str | Path = "target", overrides: dict[str, float] | None = None) -> Model:
+    """Load a built-in model by name or a parameter file by path, validated and converted to SI.
+
+    ``overrides``: parameter-file keys (file units, 1-based indices, e.g. ``{"chains.crank_length_mm[3]": 12.0}``)
+    applied by :func:`apply_overrides` before validation; the model records them (``Model.overrides``).
+    """
     path = resolve_model_path(name_or_path)
+    raw = read_parameter_file(path)
+    sha256 = raw.pop("__sha256__")
+    if overrides:
+        return model_from_dict(apply_overrides(raw, overrides), source=str(path), sha256=sha256,
+                               label=f"{path} (with {_set_arguments(overrides)})", overrides=overrides)
+    return model_from_dict(raw, source=str(path), sha256=sha256)
+
+
+def read_parameter_file(path: Path) -> dict:
+    """The parsed TOML of a parameter file (not validated), with its SHA-256 under ``"__sha256__"``."""
     try:
         raw_bytes = path.read_bytes()
     except FileNotFoundError:
@@ -171,7 +212,8 @@ def load_model(name_or_path: str | Path = "target") -> Model:
         raw = tomllib.loads(raw_bytes.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ParameterError(f"{path}: not valid TOML ({exc})") from None
-    return model_from_dict(raw, source=str(path), sha256=hashlib.sha256(raw_bytes).hexdigest())
+    raw["__sha256__"] = hashlib.sha256(raw_bytes).hexdigest()
+    return raw
 
 
 def _format_validation_error(source: str, exc: ValidationError) -> str:
@@ -206,15 +248,20 @@ def _known_keys(f: ParameterFile) -> set[str]:
     return keys
 
 
-def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "") -> Model:
-    """Validate a parsed parameter file (papers' units) and build the SI :class:`Model`."""
+def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: str | None = None,
+                    overrides: dict[str, float] | None = None) -> Model:
+    """Validate a parsed parameter file (papers' units) and build the SI :class:`Model`.
+
+    ``label`` names the input in error messages (default ``source``); ``overrides`` are recorded on the model.
+    """
+    label = label or source
     try:
         f = ParameterFile.model_validate(raw)
     except ValidationError as exc:
-        raise ParameterError(_format_validation_error(source, exc)) from None
+        raise ParameterError(_format_validation_error(label, exc)) from None
 
     def fail(key: str, reason: str) -> None:
-        raise ParameterError(f"{source}: key '{key}': {reason}")
+        raise ParameterError(f"{label}: key '{key}': {reason}")
 
     mm = 1e-3
     ch = f.chains
@@ -313,5 +360,205 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "") -> Mode
             actuator_coulomb=fr.actuator_coulomb,
             actuator_viscous=fr.actuator_viscous_Nms_per_rad,
         ),
-        limits=Limits(torque=lim.torque_Nm, power=lim.power_W, axial_load=lim.axial_load_N, radial_load=lim.radial_load_N),
+        limits=Limits(torque=lim.torque_Nm, power=lim.power_W, axial_load=lim.axial_load_N, radial_load=lim.radial_load_N,
+                      theta_range=np.radians(lim.theta_range_deg), speed=lim.speed_rad_per_s),
+        contact=Contact(preload=f.contact.preload_N),
+        overrides=dict(overrides or {}),
     )
+
+
+# ------------------------------------------------------------------------------------------ overrides
+
+_KEY = re.compile(r"^(?P<path>[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)?)(?P<index>(\[\s*-?\d+\s*\])*)$")
+# Per chain, the keys whose change moves the chain's geometry, and the lengths that follow from it.
+_CHAIN_POINTS = ("G_mm", "S0_mm", "M_mm")
+
+
+def parse_override(argument: str) -> tuple[str, float]:
+    """``"KEY=VALUE"`` (a ``--set`` argument) -> (KEY, float VALUE); a ParameterError names the argument."""
+    key, sep, value = argument.partition("=")
+    key, value = key.strip(), value.strip()
+    if not sep or not key:
+        raise ParameterError(f"--set {argument!r}: expected KEY=VALUE, e.g. --set friction.hkp_coulomb=0.2")
+    try:
+        number = float(value)
+    except ValueError:
+        raise ParameterError(f"--set {argument}: {value!r} is not a number") from None
+    return key, number
+
+
+def split_overrides(overrides: dict[str, float]) -> tuple[dict[str, float], dict[str, float]]:
+    """(the model's overrides, the default task's overrides without their ``task.`` prefix)."""
+    model = {k: v for k, v in overrides.items() if not k.startswith("task.")}
+    task = {k.removeprefix("task."): v for k, v in overrides.items() if k.startswith("task.")}
+    return model, task
+
+
+def _set_arguments(overrides: dict[str, float]) -> str:
+    return ", ".join(f"--set {k}={v:g}" for k, v in overrides.items())
+
+
+def _numeric_keys() -> dict[str, object]:
+    """Every numeric key of the schema ("section.key" or a top-level key) with its default (None: required)."""
+    out = {}
+    for name, info in ParameterFile.model_fields.items():
+        ann = info.annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            for sub, sub_info in ann.model_fields.items():
+                out[f"{name}.{sub}"] = None if sub_info.is_required() else sub_info.default
+        elif name == "gravity_m_per_s2":
+            out[name] = None
+    return out
+
+
+def _locate(raw: dict, key: str, argument: str):
+    """(container, leaf name, indices) of ``key`` in the parsed file ``raw``; errors name ``argument``."""
+    m = _KEY.match(key.replace(" ", ""))
+    known = _numeric_keys()
+    if m is None:
+        raise ParameterError(f"{argument}: {key!r} is not a key (write section.key, with 1-based [i] for array entries)")
+    path = m.group("path")
+    if path not in known:
+        close = difflib.get_close_matches(path, list(known), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ParameterError(f"{argument}: unknown key {path!r}{hint} (numeric keys of the parameter file, see docs/models.md)")
+    indices = [int(i) for i in re.findall(r"-?\d+", m.group("index"))]
+    *sections, leaf = path.split(".")
+    container = raw
+    for section in sections:
+        container = container.setdefault(section, {})
+        if not isinstance(container, dict):
+            raise ParameterError(f"{argument}: {section!r} is not a section of the file")
+    if leaf not in container:
+        if known[path] is None:
+            raise ParameterError(f"{argument}: key {path!r} is missing from the file")
+        container[leaf] = copy.deepcopy(known[path])  # an optional key the file leaves out: start from its default
+    value = container[leaf]
+    shape = []
+    probe = value
+    while isinstance(probe, list):
+        shape.append(len(probe))
+        probe = probe[0] if probe else None
+    if len(indices) != len(shape):
+        what = "a number" if not shape else f"an array of shape {'x'.join(map(str, shape))}"
+        raise ParameterError(f"{argument}: {path} is {what}: give {len(shape)} index(es) (1-based), e.g. "
+                             f"{path}{''.join('[1]' for _ in shape)}")
+    for depth, (i, n) in enumerate(zip(indices, shape)):
+        if not 1 <= i <= n:
+            raise ParameterError(f"{argument}: index {i} of {path} is out of range: it has {n} entries at level {depth + 1} (1-based)")
+    return container, leaf, [i - 1 for i in indices]
+
+
+def _put(container: dict, leaf: str, indices: list[int], value: float) -> None:
+    if not indices:
+        container[leaf] = value
+        return
+    target = container[leaf]
+    for i in indices[:-1]:
+        target = target[i]
+    target[indices[-1]] = value
+
+
+def apply_overrides(raw: dict, overrides: dict[str, float]) -> dict:
+    """A copy of the parsed parameter file ``raw`` (papers' units) with ``overrides`` applied and the values that
+    follow from them kept consistent (docs/models.md):
+
+    * chains.G_mm, chains.S0_mm of chain i: the crank stays perpendicular to its shaft (the shaft axis, third
+      column of R_C0,i, is kept): moving G_i along the shaft moves S0_i with it, moving S0_i along the shaft
+      moves G_i with it; the crank length is the distance of S0_i from G_i across the shaft, the first two columns
+      of R_C0,i the new crank direction and shaft x crank;
+    * chains.crank_length_mm[i] moves S0_i along its crank; chains.coupler_length_mm[i] moves M_i along the
+      coupler; otherwise the coupler length follows, |M_i - S0_i| (also when M_i moves). A chain touched by an
+      override closes exactly at home: S0_i is rewritten as G_i + L_c,i times the crank direction of R_C0,i;
+    * hkp.T_L_mm sets hkp.T_R_mm (its mirror in y); the condyles stay on their plane at home: hkp.p1,
+      hkp.p2_mm or hkp.T_L_mm[1] move the condyles' z onto it, hkp.T_L_mm[3] moves the plane (p2);
+    * an off-diagonal entry of mandible.inertia_g_mm2 sets its symmetric entry too.
+
+    The result is validated by :func:`model_from_dict` like a file. Errors name the ``--set`` argument. Cheap
+    (no graph is built): a sweep calls it once per parameter set.
+    """
+    before = raw
+    raw = copy.deepcopy(raw)
+    raw.pop("__sha256__", None)
+    given: dict[str, list] = {}  # path -> list of indices set
+    for key, value in overrides.items():
+        argument = f"--set {key}={value:g}"
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ParameterError(f"{argument}: the value must be a number, not {type(value).__name__}")
+        container, leaf, indices = _locate(raw, key, argument)
+        path = _KEY.match(key.replace(" ", "")).group("path")
+        if path == "hkp.T_R_mm":
+            raise ParameterError(f"{argument}: hkp.T_R_mm mirrors hkp.T_L_mm (the parasitic motions assume left-right "
+                                 "symmetry): set hkp.T_L_mm instead")
+        _put(container, leaf, indices, float(value))
+        if path == "mandible.inertia_g_mm2" and indices[0] != indices[1]:
+            _put(container, leaf, indices[::-1], float(value))
+        given.setdefault(path, []).append(indices)
+    _chains_follow(raw, before, given)
+    _hkp_follows(raw, given)
+    return raw
+
+
+def _chains_follow(raw: dict, before: dict, given: dict[str, list]) -> None:
+    """The chain rules of :func:`apply_overrides` on ``raw`` (overridden); ``before``: the file as read.
+
+    A chain touched by an override is written so that it closes exactly at home: S0_i = G_i + L_c,i x_i with x_i
+    the crank direction of R_C0,i (the printed coordinates agree with the lengths and matrices to 4 digits only).
+    """
+    def chains(key: str) -> set[int]:
+        return {idx[0] for idx in given.get(f"chains.{key}", [])}
+
+    if not any(path.startswith("chains.") for path in given):
+        return
+    try:
+        ch = raw["chains"]
+        G, S0, M = (np.array(ch[k], dtype=float).reshape(6, 3) for k in _CHAIN_POINTS)
+        G_before, S0_before = (np.array(before["chains"][k], dtype=float).reshape(6, 3) for k in ("G_mm", "S0_mm"))
+        Lc, Lr = (np.array(ch[k], dtype=float).reshape(6) for k in ("crank_length_mm", "coupler_length_mm"))
+        R = np.array([_nearest_rotation(r) for r in np.array(ch["R_C0"], dtype=float).reshape(6, 3, 3)])
+    except (KeyError, ValueError, TypeError, np.linalg.LinAlgError):
+        return  # a malformed chains section: validation reports it, naming the key
+    touched = chains("G_mm") | chains("S0_mm") | chains("M_mm") | chains("crank_length_mm") | chains("coupler_length_mm")
+    for i in sorted(chains("G_mm") | chains("S0_mm")):
+        z = R[i][:, 2]  # the shaft, kept
+        if i not in chains("S0_mm"):
+            S0[i] += np.dot(G[i] - G_before[i], z) * z
+        if i not in chains("G_mm"):
+            G[i] += np.dot(S0[i] - S0_before[i], z) * z
+        arm = S0[i] - G[i]
+        arm -= np.dot(arm, z) * z  # the crank's plane through G_i
+        Lc[i] = np.linalg.norm(arm)
+        if Lc[i] > 0:
+            R[i] = np.column_stack([arm / Lc[i], np.cross(z, arm / Lc[i]), z])
+    for i in sorted(touched):
+        S0[i] = G[i] + Lc[i] * R[i][:, 0]
+        if i in chains("coupler_length_mm"):
+            rod = M[i] - S0[i]
+            M[i] = S0[i] + Lr[i] * rod / np.linalg.norm(rod)
+        else:
+            Lr[i] = np.linalg.norm(M[i] - S0[i])
+    rotations = np.array(ch["R_C0"], dtype=float).reshape(6, 3, 3)
+    for i in sorted(chains("G_mm") | chains("S0_mm")):
+        if i not in chains("R_C0"):
+            rotations[i] = R[i]
+    ch.update(G_mm=G.tolist(), S0_mm=S0.tolist(), M_mm=M.tolist(), crank_length_mm=Lc.tolist(),
+              coupler_length_mm=Lr.tolist(), R_C0=rotations.tolist())
+
+
+def _hkp_follows(raw: dict, given: dict[str, list]) -> None:
+    """The condyle rules of :func:`apply_overrides`: T_R mirrors T_L, both on the plane at home."""
+    if not any(path.startswith("hkp.") for path in given):
+        return
+    h = raw.get("hkp")
+    try:
+        p1, p2 = float(h["p1"]), float(h["p2_mm"])
+        T = [float(v) for v in h["T_L_mm"]]
+        assert len(T) == 3
+    except (KeyError, ValueError, TypeError, AssertionError):
+        return
+    z_given = [2] in given.get("hkp.T_L_mm", [])
+    if z_given and "hkp.p2_mm" not in given:
+        p2 = -(p1 * T[0] + T[2])  # the plane moves to the condyle
+    elif not z_given and ("hkp.p1" in given or "hkp.p2_mm" in given or [0] in given.get("hkp.T_L_mm", [])):
+        T[2] = -(p1 * T[0] + p2)  # the condyle moves onto the plane
+    h.update(p2_mm=p2, T_L_mm=T, T_R_mm=[T[0], -T[1], T[2]])

@@ -16,12 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from chewbot.casadi_tools import prepare_kernels
 from chewbot.command import pause_for_tests
-from chewbot.errors import KinematicsError
+from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
+from chewbot.model_vector import vector_digest
 from chewbot.outputs import RESULTS_FOLDER, atomic_folder, to_json
-from chewbot.params import load_model
+from chewbot.params import load_model, split_overrides
 from chewbot.report import dynamics_figures, figures
 from chewbot.report.html import write_report
 from chewbot.results import RESULTS_FORMAT, RunOptions, RunResult, kinematics_table
@@ -30,13 +32,16 @@ from chewbot.task.base import Task
 __all__ = ["RunOptions", "RunResult", "compute", "input_files", "load_task", "run_json", "write"]
 
 
-def load_task(spec: str, model: Model, side: str | None) -> Task:
-    """``"default"`` (the synthetic chewing task) or the path of a CSV file; ``side`` None: left, or the side of
-    the run whose results.csv the file is."""
-    from chewbot.task.default import default_task
+def load_task(spec: str, model: Model, side: str | None, overrides: dict[str, float] | None = None) -> Task:
+    """``"default"`` (the synthetic chewing task, with ``overrides`` of its parameters) or the path of a CSV file;
+    ``side`` None: left, or the side of the run whose results.csv the file is."""
+    from chewbot.task.default import default_task, parameters_with
 
     if spec == "default":
-        return default_task(model, side or "left")
+        return default_task(model, side or "left", parameters_with(overrides) if overrides else None)
+    if overrides:
+        raise TaskError(f"{', '.join(f'--set task.{k}={v:g}' for k, v in overrides.items())}: the default task's "
+                        f"parameters apply to --task default, not to {spec}")
     from chewbot.task.csvio import read_task_csv
 
     return read_task_csv(Path(spec), side=side, mechanism=model.mechanism)
@@ -45,12 +50,14 @@ def load_task(spec: str, model: Model, side: str | None) -> Task:
 def compute(options: RunOptions, progress=None) -> RunResult:
     """Compute a run in memory (no files)."""
     step = progress or (lambda msg: None)
-    model = load_model(options.model)
+    model_overrides, task_overrides = split_overrides(options.overrides)
+    model = load_model(options.model, model_overrides)
     step("task")
-    task = load_task(options.task, model, options.side)
+    task = load_task(options.task, model, options.side, task_overrides)
     options = replace(options, side=task.side)  # the side in effect, as run.json records it
     step("kinematics")
     t0 = time.perf_counter()
+    prepare_kernels(run_kernels(model, options))
     try:
         kin = solve_kinematics(model, task, options.orientation)
     except KinematicsError as exc:  # name the task file's line of the sample
@@ -89,6 +96,17 @@ def _checks_stage(result: RunResult, step) -> None:
     t0 = time.perf_counter()
     result.checks = run_checks(result.model, result.table, result.info.get("dynamics"), result.options.contact)
     result.info["timings"]["checks_s"] = time.perf_counter() - t0
+def run_kernels(model: Model, options: RunOptions) -> list:
+    """The compiled kernels a run uses: the kinematics, the formulation's, and the inertia coupling's."""
+    from chewbot.analysis.coupling import coupling_kernel
+    from chewbot.dynamics import formulation_kernels
+    from chewbot.kinematics.functions import kinematics_kernel
+
+    kernels = [kinematics_kernel(model.mechanism, options.orientation)]
+    if options.method:
+        kernels += formulation_kernels(model.mechanism, options.orientation, options.method, goal=options.goal)
+        kernels.append(coupling_kernel(model.mechanism))
+    return kernels
 
 
 def _dynamics_stage(result: RunResult, step) -> None:
@@ -151,7 +169,9 @@ def run_json(result: RunResult) -> dict:
     return {
         "chewbot_run": RESULTS_FORMAT,
         "options": vars(result.options),
-        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed)},
+        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed),
+                  "parameters_sha256": vector_digest(m)},
+        "overrides": dict(result.options.overrides),
         "task": {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
                  "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
         "versions": _versions(),

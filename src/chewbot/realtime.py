@@ -7,6 +7,10 @@
 | ``coupling_target``, ``coupling_sixrss`` | theta, q_EE | M_A, MCI |
 | ``g1_target`` | theta, q_EE, rates, F_B, B | friction-aware minimum torques (goal G1), N_L/N_R, the gradient and last step, the limit values |
 
+Every kernel takes the model's parameter vector p last (:meth:`chewbot.model.Model.vector`), so one compiled
+kernel serves every model of its mechanism; :func:`kernels` gives them with one model's numbers folded in (no p),
+as ``chewbot export-c`` writes them for a robot's controller.
+
 The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
 :func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction
 (:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel on its two unknowns: the
@@ -27,13 +31,14 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.coupling import coupling_kernel
-from chewbot.casadi_tools import evaluate, native
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
 from chewbot.dynamics.distribution import MEASURABLE
-from chewbot.dynamics.newton_euler import coefficients_sx_function, forces_sx, n_unknowns, start_sx
+from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns, start_sx
 from chewbot.export import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
+from chewbot.model_vector import graph_key, mechanism_of, parameter_input, symbols
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
 # least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
@@ -47,8 +52,9 @@ G1_ORIENTATION = "euler-parameters"
 EXAMPLE_T = 2.44
 
 
-def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int = G1_ITERATIONS) -> ca.Function:
-    """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B) ->
+def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_ORIENTATION,
+              iterations: int = G1_ITERATIONS) -> KernelSpec:
+    """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B, p) ->
     tau (N m), N (N_L, N_R in N), grad: gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), step: the size
     of the Newton step proposed at the answer (N; tiny only at the optimum), limits (24: tau, power, axial,
     radial load per actuator, in N m, W, N, N). q_EE in ``orientation``.
@@ -56,18 +62,20 @@ def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int =
     It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.newton_euler.start_sx`)
     and takes ``iterations`` safeguarded Newton steps: the exact Hessian where it is positive definite, else
     Gauss-Newton's, and the longest of the steps 1, 1/2, ..., 1/2^(HALVINGS-1) that satisfies Armijo's
-    condition (none: stay). Fixed cost, no branches in the C code.
+    condition (none: stay). Fixed cost, no branches in the C code. No p for a model (its numbers folded in).
     """
-    if not model.has_hkp:
+    if mechanism_of(model_or_mechanism) != "target":
         raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
     if iterations < 1:
         raise ValueError(f"iterations must be at least 1, not {iterations}")
 
     def build():
-        coeff = coefficients_sx_function(model, orientation)
+        coeff = coefficients_kernel(model_or_mechanism, orientation).graph()
+        model = symbols(model_or_mechanism)
+        extra, extra_names = parameter_input(model)
         theta, q, dq, ddq = (ca.SX.sym(name, coeff.size1_in(i)) for i, name in enumerate(("theta", "q", "dq", "ddq")))
         F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
-        D = coeff(theta, q, dq, ddq, F, B)[0]
+        D = coeff(theta, q, dq, ddq, F, B, *extra)[0]
         Dsym, N = ca.SX.sym("D", D.numel()), ca.SX.sym("N", n_unknowns(model))
         out = forces_sx(model, Dsym, N, 1.0)
         J = ca.sumsqr(out["tau"])
@@ -77,36 +85,36 @@ def g1_kernel(model: Model, orientation: str = G1_ORIENTATION, iterations: int =
         convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
         p = -ca.solve(ca.if_else(convex, H, H_gn), g)
         slope = ca.dot(g, p)
-        value = ca.Function("g1_value", [Dsym, N], [J])
+        value = ca.Function("g1_value", [Dsym, N, *extra], [J])
         Np = N  # no acceptable step: stay
         for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
             alpha = 0.5**k
             trial = N + alpha * p
-            Np = ca.if_else(value(Dsym, trial) <= J + ARMIJO * alpha * slope, trial, Np)
+            Np = ca.if_else(value(Dsym, trial, *extra) <= J + ARMIJO * alpha * slope, trial, Np)
         # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
         # is taken (the quadratic-convergence region), as the distribution solver does
         Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
-        step = ca.Function("g1_step", [Dsym, N], [Np])
-        start = ca.Function("g1_start", [Dsym], [start_sx(model, "min-torque", Dsym)])
+        step = ca.Function("g1_step", [Dsym, N, *extra], [Np])
+        start = ca.Function("g1_start", [Dsym, *extra], [start_sx(model, "min-torque", Dsym)])
         dth = Dsym[-6:]
         lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
         # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
-        final = ca.Function("g1_final", [Dsym, N], [out["tau"], g, ca.norm_2(p), lim])
-        Nk = start(D)
+        final = ca.Function("g1_final", [Dsym, N, *extra], [out["tau"], g, ca.norm_2(p), lim])
+        Nk = start(D, *extra)
         for _ in range(iterations):
-            Nk = step(D, Nk)
-        tau, grad, newton_step, limits = final(D, Nk)
-        return ca.Function("g1_target", [theta, q, dq, ddq, F, B], [tau, Nk, grad, newton_step, limits],
-                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["tau", "N", "grad", "step", "limits"], {"cse": True})
+            Nk = step(D, Nk, *extra)
+        tau, grad, newton_step, limits = final(D, Nk, *extra)
+        return ca.Function("g1_target", [theta, q, dq, ddq, F, B, *extra], [tau, Nk, grad, newton_step, limits],
+                           ["theta", "q", "dq", "ddq", "F_B", "B", *extra_names], ["tau", "N", "grad", "step", "limits"], {"cse": True})
 
-    return model.cached(("fn", "g1_kernel", orientation, iterations), build)
+    return KernelSpec("g1_target", build, graph_key(model_or_mechanism, orientation, iterations))
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
     """Friction-aware goal-G1 distribution along a whole task with the compiled :func:`g1_kernel` (one C loop):
     tau (N, 6), N (N, 2), grad (N, 2), step (N, 1), limits (N, 24), in ``kin.orientation``."""
-    fn = model.cached(("fn", "g1_kernel", kin.orientation, "native"), lambda: native(g1_kernel(model, kin.orientation)))
-    out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side))
+    fn = native(g1_kernel(model.mechanism, kin.orientation))
+    out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side), model.vector())
     return dict(zip(("tau", "N", "grad", "step", "limits"), out))
 
 

@@ -142,6 +142,7 @@ class RunOptions:
     goal: str | None = "min-torque"  # newton-euler on the target only
     friction: str | None = "on"  # newton-euler only
     contact: str = "bilateral"  # contact model of the HKPs: whether contact-pull fails a run (chewbot.analysis.checks)
+    overrides: dict[str, float] = field(default_factory=dict)  # --set KEY=VALUE: model keys and task.NAME
 
 
 @dataclass

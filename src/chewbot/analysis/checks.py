@@ -194,7 +194,9 @@ class JointLimit(Check):
     key = ""
 
     def limit(self) -> float | None:
-        return getattr(self.ctx.limits, self.field)
+        """The model's limit; None where it sets none (an optional key left out is infinite: unbounded)."""
+        value = getattr(self.ctx.limits, self.field)
+        return value if np.isfinite(value) else None
 
     def bound(self):
         return f"the limit of {self.limit():g} {self.unit} ({self.key})"
@@ -255,7 +257,7 @@ class CrankRange(Check):
         return f"the range [{lo:g}, {hi:g}] deg (limits.theta_range_deg)"
 
     def measure(self, columns, info):
-        if self.ctx.limits.theta_range is None:
+        if not np.isfinite(self.ctx.limits.theta_range).any():
             return _missing(self, "the model sets no crank range (limits.theta_range_deg)")
         theta = _columns(columns, [f"theta{i}" for i in range(1, 7)])
         if theta is None:

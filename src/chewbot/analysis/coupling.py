@@ -28,10 +28,11 @@ import numpy as np
 
 import casadi as ca
 
-from chewbot.casadi_tools import evaluate, native
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
+from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
 
 _OFF = ~np.eye(6, dtype=bool)
 
@@ -59,34 +60,35 @@ class Coupling:
                 "branch_variation": float(self.branch_variation.mean())}
 
 
-def coupling_kernel(model: Model) -> ca.Function:
-    """Per-sample kernel (theta, q_EE) -> M_A (6 x 6, kg m^2), MCI (6) (Eqs. 58-60), q_EE in Euler angles.
+def coupling_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+    """Per-sample kernel (theta, q_EE, p) -> M_A (6 x 6, kg m^2), MCI (6) (Eqs. 58-60), q_EE in Euler angles (no p
+    for a model: its numbers folded in).
 
     J_theta1^+ is (J_theta1' J_theta1)^-1 J_theta1' for the target and J_theta1^-1 for the 6RSS, solved inside the
     graph, so the kernel is one straight-line C function (exported for the controller by ``chewbot export-c``).
     """
+    name = f"coupling_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        e = energy(model)
+        e = energy(model_or_mechanism)
         s = e.kin
         J1 = s.J_theta1()
-        J1_pinv = ca.solve(ca.mtimes(J1.T, J1), J1.T) if model.has_hkp else ca.inv(J1)
+        J1_pinv = ca.solve(ca.mtimes(J1.T, J1), J1.T) if s.params.has_hkp else ca.inv(J1)
         J5 = ca.vertcat(ca.SX.eye(6), J1_pinv)
         M_A = ca.mtimes([J5.T, e.M, J5])
         a = ca.fabs(M_A)
         diag = ca.diag(a)
         MCI = ca.log((ca.sum2(a) - diag) / (5 * diag) + 1)
-        return ca.Function(f"coupling_{model.mechanism.replace('6rss', 'sixrss')}", [s.theta, s.q], [M_A, MCI],
-                           ["theta", "q"], ["M_A", "MCI"], {"cse": True})
+        extra, names = parameter_input(s.params)
+        return ca.Function(name, [s.theta, s.q, *extra], [ca.densify(M_A), MCI], ["theta", "q", *names], ["M_A", "MCI"], {"cse": True})
 
-    return model.cached(("fn", "coupling_kernel"), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism))
 
 
 def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:
     """M_A = J_theta5' M J_theta5 along the task (Eqs. 58-59), (N, 6, 6), kg m^2."""
     q, _, _ = generalised_state(kin)
-    fn = model.cached(("fn", "coupling_kernel", "native"), lambda: native(coupling_kernel(model)))
-    return evaluate(fn, q[:, :6], q[:, 6:])[0]
+    return evaluate(native(coupling_kernel(model.mechanism)), q[:, :6], q[:, 6:], model.vector())[0]
 
 
 def mci(M_A: np.ndarray) -> np.ndarray:

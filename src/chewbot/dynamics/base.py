@@ -33,16 +33,27 @@ class Dynamics:
 
 Formulation = Callable[..., Dynamics]
 METHODS: dict[str, Formulation] = {}
+KERNELS: dict[str, Callable[..., list]] = {}
 
 
-def register(name: str):
-    """Decorator: make a formulation available under ``name`` (``chewbot run --method NAME``)."""
+def register(name: str, kernels: Callable[..., list] | None = None):
+    """Decorator: make a formulation available under ``name`` (``chewbot run --method NAME``). ``kernels``:
+    ``(mechanism, orientation, **options) -> [KernelSpec]``, the compiled kernels it uses (compiled side by side
+    before a run, see :func:`formulation_kernels`)."""
 
     def wrap(fn: Formulation) -> Formulation:
         METHODS[name] = fn
+        KERNELS[name] = kernels or (lambda mechanism, orientation, **options: [])
         return fn
 
     return wrap
+
+
+def formulation_kernels(mechanism: str, orientation: str, method: str, **options) -> list:
+    """The compiled kernels (:class:`~chewbot.casadi_tools.KernelSpec`) that ``method`` uses on a mechanism."""
+    import chewbot.dynamics  # noqa: F401  (imports every formulation module, which registers itself)
+
+    return KERNELS[method](mechanism, orientation, **options)
 
 
 def inverse_dynamics(model: Model, kin: Kinematics, method: str = "hessian", **options) -> Dynamics:

@@ -37,13 +37,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import evaluate, native
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.energy import require_euler_angles
-from chewbot.kinematics.ik import branches
+from chewbot.kinematics.functions import lift_sx
 from chewbot.kinematics.motion import Kinematics
-from chewbot.kinematics.symbolic import Z_parasitic_sx, gamma_parasitic_sx
 from chewbot.model import Model
+from chewbot.model_vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
 
@@ -55,22 +55,22 @@ def _skew(v):
 CORE_OUTPUTS = ("theta", "J6", "M6", "C6", "G6", "Q6", "f6")
 
 
-def core_function(model: Model) -> ca.Function:
-    """The 6RSS core per sample: (x, x_dot, x_ddot, B, F_B) -> theta, J_6, M_6, C_6, G_6, Q_6 and
-    f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6 (module docstring)."""
-    return model.cached(("fn", "core6rss", "core"), lambda: _core(model))
+def core_function(model_or_mechanism: Model | str) -> ca.Function:
+    """The 6RSS core per sample: (x, x_dot, x_ddot, B, F_B, p) -> theta, J_6, M_6, C_6, G_6, Q_6 and
+    f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6 (module docstring); no p for a model (numbers folded in)."""
+    return cached_graph(model_or_mechanism, ("core6rss",), lambda: _core(symbols(model_or_mechanism)))
 
 
-def _augmented_body(model: Model) -> tuple[float, np.ndarray, np.ndarray]:
+def _augmented_body(model: SymbolicModel) -> tuple[ca.SX, ca.SX, ca.SX]:
     """The mandible with a point mass m_i/3 at each M_i (the couplers' share of |v_M|^2): mass, first moment and
-    inertia about O_M, all in {M} and constant."""
-    m3 = model.coupler_mass / 3
-    first = m3 @ model.M
-    inertia = model.mandible_inertia + sum(mi * (Mi @ Mi * np.eye(3) - np.outer(Mi, Mi)) for mi, Mi in zip(m3, model.M))
-    return model.mandible_mass + m3.sum(), first, inertia
+    inertia about O_M, all in {M} and constant (functions of the parameters only)."""
+    m3 = [model.coupler_mass[i] / 3 for i in range(6)]
+    first = sum((mi * Mi for mi, Mi in zip(m3, model.M)), ca.SX.zeros(3))
+    inertia = model.mandible_inertia + sum(mi * (ca.dot(Mi, Mi) * ca.SX.eye(3) - ca.mtimes(Mi, Mi.T)) for mi, Mi in zip(m3, model.M))
+    return model.mandible_mass + sum(m3), first, inertia
 
 
-def _structured_inertia(model: Model, x, R, M_0a, dx, chains):
+def _structured_inertia(model: SymbolicModel, x, R, M_0a, dx, chains):
     """M_6 and C_6 from the structure of the kinetic energy, without the 42-row Jacobian products:
 
     T = 1/2 t' Lambda t + sum_i [1/2 a_i theta_i_dot^2 + m_i/6 theta_i_dot (s_i . v_M,i)], t = M_0a x_dot, where
@@ -84,8 +84,8 @@ def _structured_inertia(model: Model, x, R, M_0a, dx, chains):
     body's bias [w x (w x h); w x I w] (h: first moment, I: inertia about O_M, both in {S}).
     """
     mass, first, inertia = _augmented_body(model)
-    h = ca.mtimes(R, ca.DM(first))
-    I_O = ca.mtimes([R, ca.DM(inertia), R.T])
+    h = ca.mtimes(R, first)
+    I_O = ca.mtimes([R, inertia, R.T])
     Lam = ca.vertcat(ca.horzcat(mass * ca.SX.eye(3), -_skew(h)), ca.horzcat(_skew(h), I_O))
     t = ca.mtimes(M_0a, dx)
     v, w = t[0:3], t[3:6]
@@ -112,35 +112,35 @@ def _structured_inertia(model: Model, x, R, M_0a, dx, chains):
     return M6, C6
 
 
-def _core(model: Model) -> ca.Function:
+def _core(model: SymbolicModel) -> ca.Function:
     x, dx, ddx = ca.SX.sym("x", 6), ca.SX.sym("dx", 6), ca.SX.sym("ddx", 6)
     B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
     p, R = x[0:3], matrix_from_euler_angles_sx(x[3], x[4], x[5])
     W_omega = ca.horzcat(ca.SX(3, 3), R_omega_sx(x[3], x[4]))  # omega = W_omega x_dot
     M_0a = ca.diagcat(ca.SX.eye(3), R_omega_sx(x[3], x[4]))
-    I_S = ca.mtimes([R, ca.DM(model.mandible_inertia), R.T])
-    sigma = branches(model)
+    I_S = ca.mtimes([R, model.mandible_inertia, R.T])
+    sigma = model.branch
     # Velocity Jacobians of every body (rows: theta_i_dot of each crank, v_S and v_M of each coupler) and the
     # constant weights of their kinetic energies: T = 1/2 x_dot' W' K W x_dot + mandible.
     blocks, weights, theta, chains = [], [], [], []
     V = model.mandible_mass * model.g * p[2]
     for i in range(6):
-        u, v = ca.DM(model.R_C0[i][:, 0]), ca.DM(model.R_C0[i][:, 1])
+        u, v = model.R_C0[i][:, 0], model.R_C0[i][:, 1]
         Lc, Lr = model.crank_length[i], model.coupler_length[i]
-        r = ca.mtimes(R, ca.DM(model.M[i]))
+        r = ca.mtimes(R, model.M[i])
         Mi = p + r
-        d0 = Mi - ca.DM(model.G[i])
+        d0 = Mi - model.G[i]
         A_, B_, C_ = 2 * Lc * ca.dot(u, d0), 2 * Lc * ca.dot(v, d0), Lc**2 + ca.dot(d0, d0) - Lr**2
         th = ca.atan2(B_, A_) + sigma[i] * ca.acos(C_ / ca.sqrt(A_**2 + B_**2))
         rGS = Lc * (ca.cos(th) * u + ca.sin(th) * v)
-        S = ca.DM(model.G[i]) + rGS
+        S = model.G[i] + rGS
         s = Lc * (-ca.sin(th) * u + ca.cos(th) * v)
         d = S - Mi
         J6_i = ca.mtimes(ca.vertcat(d, ca.cross(r, d)).T / ca.dot(d, s), M_0a)  # theta_i_dot = J6_i x_dot
         W_M = ca.mtimes(ca.horzcat(ca.SX.eye(3), -_skew(r)), M_0a)  # v_M = v + omega x r
         m = model.coupler_mass[i]
         blocks += [J6_i, ca.mtimes(s, J6_i), W_M]
-        weights += [ca.DM(model.crank_inertia[i]), ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3)) * m)]
+        weights += [model.crank_inertia[i], ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3))) * m]
         chains.append((J6_i, r, s, rGS))
         V += m * model.g * (S[2] + Mi[2]) / 2
         theta.append(th)
@@ -161,31 +161,27 @@ def _core(model: Model) -> ca.Function:
     domega = ca.mtimes(W_omega, ddx) + ca.mtimes(W_omega_dot, dx)
     f6 = (ca.mtimes(W.T, ca.mtimes(K, acc)) + ca.vertcat(mm * ddx[0:3], ca.SX(3, 1))
           + ca.mtimes(W_omega.T, ca.mtimes(I_S, domega) + ca.cross(omega, ca.mtimes(I_S, omega))) + G6 - Q6)
-    return ca.Function("core6rss", [x, dx, ddx, B, F], [ca.vertcat(*theta), J6, M6, C6, G6, Q6, f6],
-                       ["x", "dx", "ddx", "B", "F_B"], list(CORE_OUTPUTS))
-
-
-def _lift(model: Model, q: ca.SX) -> ca.SX:
-    """x = phi(q_EE): the target's X_EE with its parasitic Z and gamma."""
-    gamma = gamma_parasitic_sx(model, q[2], q[3])
-    Z = Z_parasitic_sx(model, q[0], matrix_from_euler_angles_sx(q[2], q[3], gamma))
-    return ca.vertcat(q[0], q[1], Z, q[2], q[3], gamma)
+    extra, names = parameter_input(model)
+    return ca.Function("core6rss", [x, dx, ddx, B, F, *extra], [ca.vertcat(*theta), J6, M6, C6, G6, Q6, f6],
+                       ["x", "dx", "ddx", "B", "F_B", *names], list(CORE_OUTPUTS))
 
 
 DYNAMICS_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "Q_B")
 TORQUE_OUTPUTS = ("tau", "theta", "dtheta")
 
 
-def _kernel_terms(model: Model, matrices: bool):
+def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
+    model = symbols(model_or_mechanism)
+    extra, _ = parameter_input(model)
     n = model.dof
     q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
     B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
-    x = _lift(model, q) if model.has_hkp else q
+    x = lift_sx(model, q) if model.has_hkp else q
     M_J = ca.jacobian(x, q)
     dx = ca.mtimes(M_J, dq)
     dM_J = ca.jtimes(M_J, q, dq)
     ddx = ca.mtimes(M_J, ddq) + ca.mtimes(dM_J, dq)
-    core = dict(zip(CORE_OUTPUTS, core_function(model)(x, dx, ddx, B, F)))
+    core = dict(zip(CORE_OUTPUTS, core_function(model_or_mechanism)(x, dx, ddx, B, F, *extra)))
     J1 = ca.mtimes(core["J6"], M_J)
     terms = {
         "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
@@ -198,46 +194,49 @@ def _kernel_terms(model: Model, matrices: bool):
     else:  # without forming them
         rhs = ca.mtimes(M_J.T, core["f6"])
     terms["tau"] = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
-    return [q, dq, ddq, B, F], terms
+    return [q, dq, ddq, B, F, *extra], terms
 
 
-def _kernel(model: Model, prefix: str, outputs: tuple[str, ...]) -> ca.Function:
+def _kernel(model_or_mechanism: Model | str, prefix: str, outputs: tuple[str, ...]) -> KernelSpec:
+    name = f"{prefix}_{c_name(mechanism_of(model_or_mechanism))}"
+
     def build():
-        inputs, terms = _kernel_terms(model, matrices=len(outputs) > len(TORQUE_OUTPUTS))
-        return ca.Function(f"{prefix}_{model.mechanism.replace('6rss', 'sixrss')}", inputs, [terms[k] for k in outputs],
-                           ["q", "dq", "ddq", "B", "F_B"], list(outputs), {"cse": True})
+        inputs, terms = _kernel_terms(model_or_mechanism, matrices=len(outputs) > len(TORQUE_OUTPUTS))
+        return ca.Function(name, inputs, [ca.densify(terms[k]) for k in outputs],
+                           ["q", "dq", "ddq", "B", "F_B", "p"][:len(inputs)], list(outputs), {"cse": True})
 
-    return model.cached(("fn", "core6rss", prefix), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism))
 
 
-def torque_kernel(model: Model) -> ca.Function:
-    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B) -> tau, theta, theta_dot.
+def torque_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> tau, theta, theta_dot (no p for a model:
+    its numbers folded in, as ``chewbot export-c`` writes it).
 
     q_EE in Euler angles ([X, Y, alpha, beta] for the target, X_EE for the 6RSS; m, rad), B the bite point in
     {M} (m), F_B the bite force on the mandible in {S} (N). tau (N m) is the minimum-norm solution of Eq. (53)
     (unique for the 6RSS), its right-hand side built without the matrices (the lean kernel for a controller's
     feedforward).
     """
-    return _kernel(model, "tau", TORQUE_OUTPUTS)
+    return _kernel(model_or_mechanism, "tau", TORQUE_OUTPUTS)
 
 
-def dynamics_kernel(model: Model) -> ca.Function:
+def dynamics_kernel(model_or_mechanism: Model | str) -> KernelSpec:
     """Per-sample kernel with the same inputs as :func:`torque_kernel` and the terms of Eq. (53) as well:
     tau, theta, theta_dot, J_theta1, M_f, C_f, G_f, Q_B (for model-based control that needs the matrices)."""
-    return _kernel(model, "dynamics", DYNAMICS_OUTPUTS)
+    return _kernel(model_or_mechanism, "dynamics", DYNAMICS_OUTPUTS)
 
 
 def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices: bool = True) -> dict[str, np.ndarray]:
     """The kernel outputs along the task (arrays samples first): those of :func:`dynamics_kernel`, or of
     :func:`torque_kernel` with ``matrices=False``."""
     q, dq, ddq = kin.euler_angle_state()
-    kernel = dynamics_kernel(model) if matrices else torque_kernel(model)
-    fn = model.cached(("fn", "core6rss", kernel.name(), "native"), lambda: native(kernel))
-    out = evaluate(fn, q, dq, ddq, model.molar(side or kin.side), kin.force)
-    return dict(zip(kernel.name_out(), out))
+    outputs = DYNAMICS_OUTPUTS if matrices else TORQUE_OUTPUTS
+    fn = native((dynamics_kernel if matrices else torque_kernel)(model.mechanism))
+    out = evaluate(fn, q, dq, ddq, model.molar(side or kin.side), kin.force, model.vector())
+    return dict(zip(outputs, out))
 
 
-@register("6rss-core")
+@register("6rss-core", lambda mechanism, orientation, **options: [torque_kernel(mechanism)])
 def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring).
     ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""

@@ -25,10 +25,11 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, evaluate
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import Energy, energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
+from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
 
 
 @dataclass(frozen=True)
@@ -49,15 +50,16 @@ Derivation = Callable[[Energy], Rates]
 REDUCED_OUTPUTS = ("J_theta1", "M_f", "C_f", "G_f", "Q_B")
 
 
-def reduced_function(model: Model, name: str, derive: Derivation) -> ca.Function:
-    """Compiled (theta, q_EE, q_EE_dot, B, F_B) -> J_theta1, M_f, C_f, G_f, Q_B of Eq. (53), per sample.
+def reduced_kernel(model_or_mechanism: Model | str, name: str, derive: Derivation) -> KernelSpec:
+    """Per-sample kernel (theta, q_EE, q_EE_dot, B, F_B, p) -> J_theta1, M_f, C_f, G_f, Q_B of Eq. (53).
 
     ``B``: the bite point in {M} (m); ``F_B``: the bite force on the mandible in {S} (N). ``derive`` builds the
-    formulation's :class:`Rates`; the graph is built once per (model, name) and compiled to C.
+    formulation's :class:`Rates`, ``name`` names it (``"hessian"``, ``"liang"``).
     """
+    fname = f"{name}_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        e = energy(model)
+        e = energy(model_or_mechanism)
         s = e.kin
         rates = derive(e)
         J_theta, J1 = ca.diag(s.J_theta()), s.J_theta1()
@@ -72,18 +74,19 @@ def reduced_function(model: Model, name: str, derive: Derivation) -> ca.Function
         G_f = ca.mtimes(J3.T, ca.gradient(e.V, e.q))
         B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
         Q_B = ca.mtimes(ca.jacobian(s.p + ca.mtimes(s.R, B), s.q).T, F)
-        fn = ca.Function(f"{name}_{model.mechanism}", [s.theta, s.q, s.dq, B, F], [J1, M_f, C_f, G_f, Q_B],
-                         ["theta", "q", "dq", "B", "F_B"], list(REDUCED_OUTPUTS))
-        return compiled(fn)
+        extra, names = parameter_input(s.params)
+        return ca.Function(fname, [s.theta, s.q, s.dq, B, F, *extra], [ca.densify(x) for x in (J1, M_f, C_f, G_f, Q_B)],
+                           ["theta", "q", "dq", "B", "F_B", *names], list(REDUCED_OUTPUTS), {"cse": True})
 
-    return model.cached(("fn", "reduced", name), build)
+    return KernelSpec(fname, build, graph_key(model_or_mechanism, name))
 
 
 def reduced_terms(model: Model, kin: Kinematics, name: str, derive: Derivation, side: str | None = None) -> dict[str, np.ndarray]:
     """J_theta1 (N, 6, n_EE), M_f, C_f (N, n_EE, n_EE), G_f, Q_B (N, n_EE) of Eq. (53) along the task."""
     q, dq, _ = generalised_state(kin)
     B = model.molar(side or kin.side)
-    out = evaluate(reduced_function(model, name, derive), q[:, :6], q[:, 6:], dq[:, 6:], B, kin.force)
+    fn = native(reduced_kernel(model.mechanism, name, derive))
+    out = evaluate(fn, q[:, :6], q[:, 6:], dq[:, 6:], B, kin.force, model.vector())
     return dict(zip(REDUCED_OUTPUTS, out))
 
 

@@ -1,8 +1,9 @@
 """Optimal distribution of the redundant unknowns of an inverse-dynamics model (seed 001, Sect. 4.5).
 
-A problem is given by two CasADi functions of (D, x, friction): D the sample's data, x the free unknowns:
-``residual`` r, whose squared norm is the goal (minimise |r|^2), and ``limits`` c with |c| <= bound
-component-wise (the actuators' physical limits). Each sample is solved in two stages:
+A problem is given by two CasADi expressions of (D, x, friction, p): D the sample's data, x the free unknowns,
+p the model's parameters: ``residual`` r, whose squared norm is the goal (minimise |r|^2), and ``limits`` c with
+|c| <= bound component-wise (the actuators' physical limits, given per model). Each sample is solved in two
+stages:
 
 1. Unconstrained, all samples at once: x starts at the problem's ``start`` (for the Newton–Euler goals the
    best of the piecewise least-squares minimisers, :func:`chewbot.dynamics.newton_euler.start_sx`), or at
@@ -19,11 +20,12 @@ component-wise (the actuators' physical limits). Each sample is solved in two st
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, mapped
+from chewbot.casadi_tools import KernelSpec, compiled, mapped
 from chewbot.errors import InfeasibleError
 
 # Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
@@ -37,51 +39,92 @@ MEASURABLE = 1e-10
 LIMIT_RTOL = 1e-6
 
 
+@dataclass(frozen=True)
+class ProblemGraph:
+    """The symbols and expressions of a distribution problem: the sample's data ``D``, the unknowns ``x``, the
+    friction flag, ``params`` (``[p]``, or ``[]`` when the model's numbers are folded in); the goal's residual,
+    the limits c (|c| <= bound), and ``start`` (an expression of D and p; None: the friction-free optimum)."""
+
+    D: ca.SX
+    x: ca.SX
+    friction: ca.SX
+    params: list
+    residual: ca.SX
+    limits: ca.SX
+    start: ca.SX | None = None
+
+
 @dataclass
 class Problem:
-    """A distribution problem: the goal's residual and the limits, as per-sample CasADi functions.
+    """A distribution problem: the goal's residual and the limits, as compiled per-sample CasADi functions,
+    each taking the model's parameters p last (where the graph has them as an input).
 
-    ``objective``: (D, x, friction) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian (compiled);
-    ``value``: (D, x, friction) -> J alone (for the line search);
-    ``limits``: (D, x, friction) -> c; ``bound``: |c| <= bound; ``limit_names``: a label per entry of c;
-    ``start``: D -> x, where Newton starts with friction (None: the friction-free optimum);
-    ``nlp``: the SQP solver over x with parameters (D, friction), built on first use.
+    ``objective``: (D, x, friction, p) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian;
+    ``value``: (D, x, friction, p) -> J alone (for the line search);
+    ``limits``: (D, x, friction, p) -> c (|c| <= the bound :func:`solve` is given); ``limit_names``: a label per
+    entry of c; ``start``: (D, p) -> x, where Newton starts with friction (None: the friction-free optimum);
+    ``nlp``: the SQP solver over x with parameters (D, friction, p), built on first use (the only part that needs
+    the graph when the kernels are in the cache).
     """
 
     objective: ca.Function
     value: ca.Function
     limits: ca.Function
-    bound: np.ndarray
     limit_names: list[str]
     nx: int
     start: ca.Function | None = None
-    _nlp_args: tuple = field(repr=False, default=())
+    _graph: Callable[[], ProblemGraph] | None = field(repr=False, default=None)
     _nlp: object = field(repr=False, default=None)
 
     @property
     def nlp(self):
         if self._nlp is None:
-            self._nlp = ca.nlpsol("distribution", "sqpmethod", *self._nlp_args)
+            g = self._graph()
+            nlp = {"x": g.x, "p": ca.vertcat(g.D, g.friction, *g.params), "f": ca.sumsqr(g.residual), "g": g.limits}
+            opts = {"qpsol": "qrqp", "print_header": False, "print_iteration": False, "print_time": False,
+                    "print_status": False, "error_on_fail": False, "max_iter": 200,
+                    "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}}
+            self._nlp = ca.nlpsol("distribution", "sqpmethod", nlp, opts)
         return self._nlp
 
 
-def build_problem(name: str, D: ca.SX, x: ca.SX, friction: ca.SX, residual: ca.SX, limits: ca.SX,
-                  bound, limit_names, start: ca.Function | None = None) -> Problem:
-    """Wrap the goal's residual r(D, x, friction) and the limits c(D, x, friction) into a :class:`Problem`;
-    ``start``: D -> x, the start of the Newton iteration with friction (default: the friction-free optimum)."""
-    J = ca.sumsqr(residual)
-    Jr = ca.jacobian(residual, x)
-    H, grad = ca.hessian(J, x)
-    objective = ca.Function(f"{name}_objective", [D, x, friction], [J, grad, H, 2 * ca.mtimes(Jr.T, Jr)],
-                            ["D", "x", "friction"], ["J", "grad", "H", "H_gn"])
-    value = ca.Function(f"{name}_value", [D, x, friction], [J], ["D", "x", "friction"], ["J"])
-    limits_fn = ca.Function(f"{name}_limits", [D, x, friction], [limits], ["D", "x", "friction"], ["c"])
-    nlp = {"x": x, "p": ca.vertcat(D, friction), "f": J, "g": limits}
-    opts = {"qpsol": "qrqp", "print_header": False, "print_iteration": False, "print_time": False,
-            "print_status": False, "error_on_fail": False, "max_iter": 200,
-            "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}}
-    return Problem(compiled(objective), compiled(value), compiled(limits_fn), np.asarray(bound, dtype=float), list(limit_names),
-                   x.numel(), start and compiled(start), (nlp, opts))
+PROBLEM_KERNELS = ("objective", "value", "limits", "start")
+
+
+def problem_kernels(name: str, graph: Callable[[], ProblemGraph], key: tuple, has_start: bool = True) -> list[KernelSpec]:
+    """The kernels of a :class:`Problem` (objective, value, limits and start, see there) named ``name_...``, of the
+    expressions ``graph()`` returns; ``key``: what determines the graph besides chewbot's source (see
+    :class:`~chewbot.casadi_tools.KernelSpec`)."""
+
+    def objective(g: ProblemGraph) -> list:
+        J = ca.sumsqr(g.residual)
+        Jr = ca.jacobian(g.residual, g.x)
+        H, grad = ca.hessian(J, g.x)
+        return [J, grad, H, 2 * ca.mtimes(Jr.T, Jr)]
+
+    def spec(suffix: str, outputs: Callable[[ProblemGraph], list], out_names: list[str]) -> KernelSpec:
+        def build():
+            g = graph()
+            ins, names = ([g.D], ["D"]) if suffix == "start" else ([g.D, g.x, g.friction], ["D", "x", "friction"])
+            return ca.Function(f"{name}_{suffix}", ins + g.params, [ca.densify(o) for o in outputs(g)],
+                               names + ["p"] * len(g.params), out_names, {"cse": True})
+
+        return KernelSpec(f"{name}_{suffix}", build, key)
+
+    kernels = [spec("objective", objective, ["J", "grad", "H", "H_gn"]), spec("value", lambda g: [ca.sumsqr(g.residual)], ["J"]),
+               spec("limits", lambda g: [g.limits], ["c"])]
+    return kernels + [spec("start", lambda g: [g.start], ["x"])] if has_start else kernels
+
+
+def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_names, has_start: bool,
+                  key: tuple | None = None) -> Problem:
+    """The compiled :class:`Problem` of the expressions ``graph()`` returns: ``name`` prefixes the kernels'
+    names, ``nx`` is the number of unknowns. ``key``: what determines the graph besides chewbot's source (see
+    :func:`problem_kernels`; the graph is then built only for kernels missing from the cache), or None for a
+    graph defined outside chewbot (built, and its kernels keyed by their serialised form)."""
+    kernels = problem_kernels(name, graph, () if key is None else key, has_start)
+    loaded = [compiled(k if key is not None else k.build()) for k in kernels]
+    return Problem(*loaded[:3], list(limit_names), nx, loaded[3] if has_start else None, graph)
 
 
 @dataclass
@@ -96,7 +139,8 @@ class Solution:
 
 
 class SampleData:
-    """The per-sample data of a whole task as a CasADi matrix (one column per sample), kept in CasADi.
+    """The per-sample data of a whole task as a CasADi matrix (one column per sample), kept in CasADi, and the
+    model's parameters p that every function takes last (none: ``p`` empty).
 
     Copying a (k, N) array between NumPy and CasADi costs about 0.1 us per entry, as much as evaluating the
     compiled kernels on it: the data is converted once, only the small unknowns and results cross over.
@@ -104,9 +148,10 @@ class SampleData:
     (a compiled kernel costs about 1 us per sample).
     """
 
-    def __init__(self, D: ca.DM):
+    def __init__(self, D: ca.DM, p: np.ndarray | None = None):
         self.D = D
         self.n = D.size2()
+        self.p = [] if p is None else [ca.DM(np.asarray(p, dtype=float))]
 
     def column(self, k: int) -> np.ndarray:
         return np.asarray(self.D[:, k]).ravel()
@@ -114,7 +159,7 @@ class SampleData:
     def __call__(self, fn: ca.Function, *args) -> list[np.ndarray]:
         """``fn(D, *args)`` on every sample; args (N, k) or scalars; outputs as
         :func:`chewbot.casadi_tools.evaluate` gives them: (N, rows) or (N, rows, cols)."""
-        ins = [self.D] + [np.atleast_2d(np.asarray(a, dtype=float).T) if np.ndim(a) else a for a in args]
+        ins = [self.D] + [np.atleast_2d(np.asarray(a, dtype=float).T) if np.ndim(a) else a for a in args] + self.p
         out = []
         for j, o in enumerate(mapped(fn, self.n).call(ins)):
             r, c = fn.size1_out(j), fn.size2_out(j)
@@ -123,14 +168,16 @@ class SampleData:
         return out
 
 
-def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float) -> np.ndarray:
+def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float, bound: np.ndarray) -> np.ndarray:
     """(N, n_limits) boolean: which limits each sample breaks."""
     (c,) = data(problem.limits, x, friction)
-    return np.abs(c) > problem.bound * (1 + LIMIT_RTOL)
+    return np.abs(c) > bound * (1 + LIMIT_RTOL)
 
 
-def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, strict: bool = False) -> Solution:
-    """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports."""
+def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bound: np.ndarray, strict: bool = False) -> Solution:
+    """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports;
+    ``bound``: the limits' bounds, |c| <= bound."""
+    bound = np.asarray(bound, dtype=float)
     x = np.zeros((data.n, problem.nx))
     iterations, unconverged = 0, []
     if problem.nx:
@@ -141,13 +188,13 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, st
             x = -np.linalg.solve(H, g[..., None])[..., 0]  # friction-free optimum: r is affine in x there
         if friction:
             x, iterations, unconverged = _newton(problem, data, x, friction)
-    broken = broken_limits(problem, data, x, friction)
+    broken = broken_limits(problem, data, x, friction, bound)
     rows = np.flatnonzero(broken.any(axis=1))
     constrained, infeasible = [], []
     status = {}
     if problem.nx and rows.size:
-        x, constrained, status = _constrained(problem, data, x, friction, rows)
-        broken = broken_limits(problem, data, x, friction)
+        x, constrained, status = _constrained(problem, data, x, friction, rows, bound)
+        broken = broken_limits(problem, data, x, friction, bound)
         rows = np.flatnonzero(broken.any(axis=1))
     for k in rows:
         names = [problem.limit_names[j] for j in np.flatnonzero(broken[k])]
@@ -190,18 +237,18 @@ def _newton(problem: Problem, data: SampleData, x, friction):
     return x, MAX_NEWTON, np.flatnonzero(active).tolist()
 
 
-def _constrained(problem: Problem, data: SampleData, x, friction, rows):
+def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound):
     """SQP with the limits, sample after sample in time order, each warm-started from the previous one."""
     x = x.copy()
     solver = problem.nlp
-    lb, ub = -problem.bound, problem.bound
     status = {}
+    params = [np.asarray(p).ravel() for p in data.p]
     for k in rows:
         x0 = x[k - 1] if k > 0 else x[k]
-        sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction]]), lbg=lb, ubg=ub)
+        sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound)
         xk = np.asarray(sol["x"]).ravel()
         c = np.asarray(sol["g"]).ravel()
-        if np.all(np.abs(c) <= problem.bound * (1 + LIMIT_RTOL)):
+        if np.all(np.abs(c) <= bound * (1 + LIMIT_RTOL)):
             x[k] = xk
         else:  # what the solver said: a proven infeasible problem and a failure to converge read differently
             status[int(k)] = str(solver.stats().get("return_status", "unknown"))

@@ -22,20 +22,21 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, evaluate
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import Symbolic, symbolic
 from chewbot.model import Model
+from chewbot.model_vector import c_name, cached_graph, graph_key, mechanism_of, parameter_input
 
 ORIENTATION = "euler-angles"
 
 
 @dataclass(frozen=True, eq=False)
 class Energy:
-    """The energies of one mechanism as CasADi expressions of q = [theta; q_EE] and q_dot.
+    """The energies of one mechanism as CasADi expressions of q = [theta; q_EE], q_dot and the parameters.
 
-    ``kin``: the symbolic kinematics (Euler angles); ``q``, ``dq``, ``ddq``: the generalised coordinates and
+    ``kin``: the symbolic kinematics (Euler angles; ``kin.params``: the model's numbers); ``q``, ``dq``, ``ddq``: the generalised coordinates and
     their rates (symbols); ``M``: inertia matrix (Eq. 38, kg m^2, m and rad mixed as the coordinates are);
     ``M_cranks``, ``M_couplers`` (one per chain), ``M_mandible``: its parts (Eqs. 24, 30, 36);
     ``T``: kinetic energy (J); ``V``: potential energy (J, constant crank terms left out).
@@ -67,20 +68,21 @@ def require_euler_angles(kin: Kinematics, method: str) -> None:
             "orientation is parametrised) or use a formulation written for Euler parameters")
 
 
-def energy(model: Model) -> Energy:
-    """The symbolic energies of ``model`` (built once per model and cached)."""
-    return model.cached(("energy",), lambda: _build(model))
+def energy(model_or_mechanism: Model | str) -> Energy:
+    """The symbolic energies of a mechanism (parameters as the symbol p) or of one model (its numbers folded
+    in); built once and cached."""
+    return cached_graph(model_or_mechanism, ("energy",), lambda: _build(symbolic(model_or_mechanism, ORIENTATION)))
 
 
-def _build(model: Model) -> Energy:
-    s = symbolic(model, ORIENTATION)
+def _build(s: Symbolic) -> Energy:
+    model = s.params
     q = ca.vertcat(s.theta, s.q)
     dq = ca.vertcat(s.dtheta, s.dq)
     ddq = ca.vertcat(ca.SX.sym("ddtheta", 6), s.ddq)
     n = q.numel()
 
     M_cranks = ca.SX(n, n)
-    M_cranks[:6, :6] = ca.diag(ca.DM(model.crank_inertia))
+    M_cranks[:6, :6] = ca.diag(model.crank_inertia)
 
     couplers = []
     V = ca.SX(0)
@@ -93,7 +95,7 @@ def _build(model: Model) -> Energy:
         V += m * model.g * (S[2] + Mi[2]) / 2
 
     M_0b = s.M_0b()
-    I_S = ca.mtimes([s.R, ca.DM(model.mandible_inertia), s.R.T])
+    I_S = ca.mtimes([s.R, model.mandible_inertia, s.R.T])
     spatial = ca.diagcat(model.mandible_mass * ca.SX.eye(3), I_S)
     M_mandible = ca.SX(n, n)
     M_mandible[6:, 6:] = ca.mtimes([M_0b.T, spatial, M_0b])
@@ -104,15 +106,16 @@ def _build(model: Model) -> Energy:
     return Energy(s, q, dq, ddq, M_cranks, tuple(couplers), M_mandible, M, T, V)
 
 
-def energy_function(model: Model) -> ca.Function:
-    """Compiled (q, q_dot) -> (T [J], V [J], M [kg m^2 ...]) per sample."""
+def energy_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+    """Per-sample kernel (q, q_dot, p) -> (T [J], V [J], M [kg m^2 ...])."""
+    name = f"energy_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        e = energy(model)
-        fn = ca.Function(f"energy_{model.mechanism}", [e.q, e.dq], [e.T, e.V, e.M], ["q", "dq"], ["T", "V", "M"])
-        return compiled(fn)
+        e = energy(model_or_mechanism)
+        extra, names = parameter_input(e.kin.params)
+        return ca.Function(name, [e.q, e.dq, *extra], [e.T, e.V, ca.densify(e.M)], ["q", "dq", *names], ["T", "V", "M"])
 
-    return model.cached(("fn", "energy"), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism))
 
 
 def generalised_state(kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,5 +130,5 @@ def generalised_state(kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarr
 def energies(model: Model, kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Kinetic energy T (N,), potential energy V (N,) (J) and inertia matrix M (N, n, n) along the task."""
     q, dq, _ = generalised_state(kin)
-    T, V, M = evaluate(energy_function(model), q, dq)
+    T, V, M = evaluate(native(energy_kernel(model.mechanism)), q, dq, model.vector())
     return T[:, 0], V[:, 0], M

@@ -19,7 +19,7 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.dynamics.base import Dynamics, register
-from chewbot.dynamics.dalembert import Rates, reduced_torques
+from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -36,7 +36,7 @@ def hessian_rates(e: Energy) -> Rates:
     return Rates(J_theta_dot, J_qEE_dot, H12 - 0.5 * H12.T)
 
 
-@register("hessian")
+@register("hessian", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "hessian", hessian_rates)])
 def hessian(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm actuator torques by the Hessian method (Eq. 54); the target's redundancy resolved by the
     pseudo-inverse, the 6RSS's torques unique. ``side`` overrides the bite side of ``kin``; ``goal`` and

@@ -23,38 +23,40 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, evaluate
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
+from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
 from chewbot.results import Table
 
 LAGRANGE_OUTPUTS = ("D", "J_theta", "J_qEE", "Q_B")
 
 
-def lagrange_function(model: Model) -> ca.Function:
-    """Compiled (q, q_dot, q_ddot, B, F_B) -> D (n), J_theta (diagonal, 6), J_qEE (6 x n_EE), Q_B (n_EE)."""
+def lagrange_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+    """Per-sample kernel (q, q_dot, q_ddot, B, F_B, p) -> D (n), J_theta (diagonal, 6), J_qEE (6 x n_EE), Q_B (n_EE)."""
+    name = f"lagrange_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        e = energy(model)
+        e = energy(model_or_mechanism)
         s = e.kin
         L = e.T - e.V
         dL_ddq = ca.gradient(L, e.dq)
         D = ca.jtimes(dL_ddq, ca.vertcat(e.q, e.dq), ca.vertcat(e.dq, e.ddq)) - ca.gradient(L, e.q)
         B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
         Q_B = ca.mtimes(ca.jacobian(s.p + ca.mtimes(s.R, B), s.q).T, F)
-        fn = ca.Function(f"lagrange_{model.mechanism}", [e.q, e.dq, e.ddq, B, F],
-                         [D, ca.diag(s.J_theta()), s.J_qEE(), Q_B], ["q", "dq", "ddq", "B", "F_B"], list(LAGRANGE_OUTPUTS))
-        return compiled(fn)
+        extra, names = parameter_input(s.params)
+        return ca.Function(name, [e.q, e.dq, e.ddq, B, F, *extra], [ca.densify(x) for x in (D, ca.diag(s.J_theta()), s.J_qEE(), Q_B)],
+                           ["q", "dq", "ddq", "B", "F_B", *names], list(LAGRANGE_OUTPUTS), {"cse": True})
 
-    return model.cached(("fn", "lagrange"), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism))
 
 
 def lagrange_terms(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
     """D (N, n), J_theta (N, 6), J_qEE (N, 6, n_EE), Q_B (N, n_EE) along the task."""
     q, dq, ddq = generalised_state(kin)
-    out = evaluate(lagrange_function(model), q, dq, ddq, model.molar(side or kin.side), kin.force)
+    out = evaluate(native(lagrange_kernel(model.mechanism)), q, dq, ddq, model.molar(side or kin.side), kin.force, model.vector())
     return dict(zip(LAGRANGE_OUTPUTS, out))
 
 
@@ -81,7 +83,7 @@ def solve_multipliers(terms: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndar
     return z[:, :6], z[:, 6:12]
 
 
-@register("lagrange")
+@register("lagrange", lambda mechanism, orientation, **options: [lagrange_kernel(mechanism)])
 def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm torques and the closure multipliers lambda1..6 (N/m: h_i is in m^2) by Lagrange's equations of
     the first kind. ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.dynamics.base import Dynamics, register
-from chewbot.dynamics.dalembert import Rates, reduced_torques
+from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -42,7 +42,7 @@ def liang_rates(e: Energy) -> Rates:
     return Rates(ca.diag(matrix_rate(s.J_theta(), e.q, e.dq)), matrix_rate(s.J_qEE(), e.q, e.dq), C)
 
 
-@register("liang")
+@register("liang", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "liang", liang_rates)])
 def liang(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
     """Minimum-norm actuator torques (Eq. 54) with J_dot and C by Liang's method (Eq. 61). ``side`` overrides
     the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored."""

@@ -36,12 +36,13 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.indices import friction_share, performance_indices
-from chewbot.casadi_tools import compiled, mapped
+from chewbot.casadi_tools import KernelSpec, compiled, mapped
 from chewbot.dynamics.base import Dynamics, register
-from chewbot.dynamics.distribution import Problem, SampleData, build_problem, solve
+from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.model import Model
+from chewbot.model_vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.results import Table
 
 # Regularisation of sgn(theta_dot) and v_T/|v_T| (known inputs per sample): below these speeds Coulomb
@@ -57,9 +58,10 @@ GOALS = ("min-torque", "min-coupler-force", "min-hkp-force")
 LIMIT_NAMES = ("torque", "power", "axial_load", "radial_load")
 
 
-def n_unknowns(model: Model) -> int:
+def n_unknowns(model_or_mechanism: Model | SymbolicModel | str) -> int:
     """Number of HKP normal forces to distribute: 2 for the target, 0 for the 6RSS."""
-    return 2 if model.has_hkp else 0
+    mechanism = model_or_mechanism if isinstance(model_or_mechanism, str) else model_or_mechanism.mechanism
+    return 2 if mechanism == "target" else 0
 
 
 def _layout(nN: int) -> dict[str, tuple[int, int]]:
@@ -73,38 +75,34 @@ def _layout(nN: int) -> dict[str, tuple[int, int]]:
     return out
 
 
-def coefficients_function(model: Model, orientation: str) -> ca.Function:
-    """:func:`coefficients_sx_function` compiled to C (cached)."""
-    return model.cached(("ne", "coefficients", orientation, "compiled"), lambda: compiled(coefficients_sx_function(model, orientation)))
-
-
-def coefficients_sx_function(model: Model, orientation: str) -> ca.Function:
-    """(theta, q, dq, ddq, F_B, B) -> D: the sample's equations with N and |N| left free (cached).
+def coefficients_kernel(model_or_mechanism: Model | str, orientation: str) -> KernelSpec:
+    """Per-sample kernel (theta, q, dq, ddq, F_B, B, p) -> D: the sample's equations with N and |N| left free.
 
     D packs (see :func:`_layout`) the forces f_i at S_i as f = f0 + fV + F1 N + F2 |N| (fV: the share of
     the HKP viscous friction, F2: of the HKP Coulomb friction, both to be switched with the friction flag),
     m_i (a_E,i - g) (so that the force on the mandible at M_i is f_i - m_i (a_E,i - g)), the crank vectors S_i - G_i, the crank inertia torques I_i theta_ddot_i and theta_dot. Also returned:
     the unit direction v_T/|v_T| (regularised, 3 x nN) and velocity v_T (3 x nN) of the ball centres.
     """
+    name = f"ne_coefficients_{c_name(mechanism_of(model_or_mechanism))}_{orientation.replace('-', '_')}"
 
     def build():
-        m = model
-        s = symbolic(m, orientation)
+        s = symbolic(model_or_mechanism, orientation)
+        m = s.params
         nN = n_unknowns(m)
         F_B, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
         dth, ddth = s.theta_rates()
         tw, twr = s.twist(), s.twist_rate()
         v_O, w, a_O, dw = tw[0:3], tw[3:6], twr[0:3], twr[3:6]
-        grav = ca.DM([0.0, 0.0, -m.g])
-        I_S = ca.mtimes([s.R, ca.DM(m.mandible_inertia), s.R.T])
+        grav = ca.vertcat(0.0, 0.0, -m.g)
+        I_S = ca.mtimes([s.R, m.mandible_inertia, s.R.T])
         r_B = ca.mtimes(s.R, B)
 
         cols_A, rest_F, rest_M, f_const, u_all, r_GS, fE = [], ca.SX.zeros(3), ca.SX.zeros(3), [], [], [], []
         for i in range(6):
-            z = ca.DM(m.R_C0[i][:, 2])
-            rGS = s.crank_tip(i) - ca.DM(m.G[i])
+            z = m.R_C0[i][:, 2]
+            rGS = s.crank_tip(i) - m.G[i]
             a_S = ddth[i] * ca.cross(z, rGS) - dth[i] ** 2 * rGS
-            r_i = ca.mtimes(s.R, ca.DM(m.M[i]))
+            r_i = ca.mtimes(s.R, m.M[i])
             a_M = a_O + ca.cross(dw, r_i) + ca.cross(w, ca.cross(w, r_i))
             L, mc = m.coupler_length[i], m.coupler_mass[i]
             u = (s.p + r_i - s.crank_tip(i)) / L
@@ -128,9 +126,9 @@ def coefficients_sx_function(model: Model, orientation: str) -> ca.Function:
         rhs = [wrench, ca.SX.zeros(6)]
         P, Q, vhat, v_T = [], [], [], []
         if nN:
-            n = ca.DM(m.hkp.normal)
+            n = m.hkp.normal
             for T in (m.hkp.T_L, m.hkp.T_R):
-                r_T = ca.mtimes(s.R, ca.DM(T))
+                r_T = ca.mtimes(s.R, T)
                 v = v_O + ca.cross(w, r_T)
                 e = v / ca.sqrt(ca.sumsqr(v) + EPS_V_T**2)
                 P.append(ca.vertcat(n, ca.cross(r_T, n)))
@@ -149,15 +147,15 @@ def coefficients_sx_function(model: Model, orientation: str) -> ca.Function:
         if nN:
             blocks += [ca.vec(ca.vertcat(*[ca.mtimes(U[:, i], X[i, 2 + 2 * j: 4 + 2 * j]) for i in range(6)]))
                        for j in range(2)]
-        inertial = ca.DM(m.crank_inertia) * ddth
+        inertial = m.crank_inertia * ddth
         D = ca.vertcat(*blocks, *fE, *r_GS, inertial, dth)
         vh = ca.horzcat(*vhat) if nN else ca.SX(3, 0)
         vt = ca.horzcat(*v_T) if nN else ca.SX(3, 0)
-        return ca.Function(f"ne_coefficients_{m.mechanism}_{orientation.replace('-', '_')}",
-                           [s.theta, s.q, s.dq, s.ddq, F_B, B], [D, vh, vt],
-                           ["theta", "q", "dq", "ddq", "F_B", "B"], ["D", "vhat_T", "v_T"])
+        extra, names = parameter_input(m)
+        return ca.Function(name, [s.theta, s.q, s.dq, s.ddq, F_B, B, *extra], [ca.densify(x) for x in (D, vh, vt)],
+                           ["theta", "q", "dq", "ddq", "F_B", "B", *names], ["D", "vhat_T", "v_T"], {"cse": True})
 
-    return model.cached(("ne", "coefficients", orientation), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism, orientation))
 
 
 def _unpack(D, nN: int) -> dict:
@@ -168,13 +166,14 @@ def _unpack(D, nN: int) -> dict:
     return out
 
 
-def forces_sx(model: Model, D, N, friction, absN=None):
-    """Every force of the sample as CasADi expressions of the data D, the normal forces N and the friction
-    flag (0 or 1): a dict of tau, tau_f, tau_fT (HKP friction mapped onto the shafts), f (FS), F_G, M_G,
-    axial and radial loads at G_i, |N| smoothed, f_M (force of coupler i on the mandible at M_i). Shared by the
-    solver, its limits and the outputs. ``absN`` replaces the smoothed |N| (for :func:`start_sx`).
+def forces_sx(params: SymbolicModel, D, N, friction, absN=None):
+    """Every force of the sample as CasADi expressions of the data D, the normal forces N, the friction
+    flag (0 or 1) and the model's numbers ``params``: a dict of tau, tau_f, tau_fT (HKP friction mapped onto the
+    shafts), f (FS), F_G, M_G, axial and radial loads at G_i, |N| smoothed, f_M (force of coupler i on the
+    mandible at M_i). Shared by the solver, its limits and the outputs. ``absN`` replaces the smoothed |N|
+    (for :func:`start_sx`).
     """
-    m, fr = model, model.friction
+    m, fr = params, params.friction
     nN = N.numel()
     d = _unpack(D, nN)
     absN = ca.sqrt(N**2 + DELTA_N**2) if absN is None else absN
@@ -184,9 +183,9 @@ def forces_sx(model: Model, D, N, friction, absN=None):
     sgn = dth / ca.sqrt(dth**2 + EPS_THETA_DOT**2)
     tau, tau_f, tau_fT, F_G, M_G, axial, radial = [], [], [], [], [], [], []
     for i in range(6):
-        x, y, z = (ca.DM(m.R_C0[i][:, k]) for k in range(3))
+        x, y, z = (m.R_C0[i][:, k] for k in range(3))
         fi, ri = f[3 * i: 3 * i + 3], d["r_GS"][3 * i: 3 * i + 3]
-        FG = fi + ca.DM([0.0, 0.0, m.crank_mass[i] * m.g])
+        FG = fi + ca.vertcat(0.0, 0.0, m.crank_mass[i] * m.g)
         tf = friction * (fr.actuator_arm * fr.actuator_coulomb * ca.sqrt(ca.sumsqr(FG) + DELTA_F_G**2) * sgn[i]
                          + fr.actuator_viscous * dth[i])
         tau.append(d["inertial"][i] + ca.dot(ca.cross(z, ri), fi) + tf)
@@ -202,66 +201,92 @@ def forces_sx(model: Model, D, N, friction, absN=None):
             "radial": ca.vertcat(*radial), "absN": absN, "f_M": f - d["fE"]}
 
 
-def forces_function(model: Model) -> ca.Function:
-    """(D, N, friction) -> tau, tau_f, tau_fT, f (FS), F_G, M_G, axial, radial, |N|, f_M (compiled, cached)."""
+def forces_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+    """Per-sample kernel (D, N, friction, p) -> tau, tau_f, tau_fT, f (FS), F_G, M_G, axial, radial, |N|, f_M."""
+    name = f"ne_forces_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        nN = n_unknowns(model)
+        m = symbols(model_or_mechanism)
+        nN = n_unknowns(m)
         D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
-        out = forces_sx(model, D, N, fl)
-        return compiled(ca.Function(f"ne_forces_{model.mechanism}", [D, N, fl], list(out.values()),
-                                    ["D", "N", "friction"], list(out)))
+        out = forces_sx(m, D, N, fl)
+        extra, names = parameter_input(m)
+        return ca.Function(name, [D, N, fl, *extra], [ca.densify(x) for x in out.values()], ["D", "N", "friction", *names],
+                           list(out), {"cse": True})
 
-    return model.cached(("ne", "forces"), build)
+    return KernelSpec(name, build, graph_key(model_or_mechanism))
 
 
 def sample_data(model: Model, kin: Kinematics, side: str | None = None):
     """Per-sample data D (kept in CasADi), ball-centre directions and velocities (N, 3, nN) along the task."""
     B = model.molar(side or kin.side)
-    fn = coefficients_function(model, kin.orientation)
+    fn = compiled(coefficients_kernel(model.mechanism, kin.orientation))
     args = [np.asarray(a, dtype=float).T for a in (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)]
-    D, vhat, v_T = mapped(fn, kin.n).call([*args, B])
+    D, vhat, v_T = mapped(fn, kin.n).call([*args, B, model.vector()])
     nN = n_unknowns(model)
-    return (SampleData(D), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
+    return (SampleData(D, model.vector()), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
             v_T.full().reshape(3, kin.n, nN).transpose(1, 0, 2))
 
 
-def problem(model: Model, goal: str) -> Problem:
-    """The distribution problem of ``goal`` on ``model`` (seed 001, Eqs. 52–54), with the actuator limits.
+def limit_bounds(model: Model) -> np.ndarray:
+    """The bounds of the distribution's 24 limits (:func:`problem`), from the model's actuator limits."""
+    lim = model.limits
+    return np.repeat([lim.torque, lim.power, lim.axial_load, lim.radial_load], 6).astype(float)
+
+
+def problem(mechanism: str, goal: str) -> Problem:
+    """The distribution problem of ``goal`` on a mechanism (seed 001, Eqs. 52–54), with the actuator limits.
 
     Goals: ``min-torque`` (G1, |tau|^2), ``min-coupler-force`` (G2, sum |f_i|^2 over S_1..S_6),
     ``min-hkp-force`` (G3, N_L^2 + N_R^2). Limits (docs/conventions.md): |tau_i| <= torque, |tau_i theta_dot_i| <= power,
-    |F_G,i . z_i| <= axial load, |F_G,i x z_i| <= radial load.
+    |F_G,i . z_i| <= axial load, |F_G,i x z_i| <= radial load (bounds: :func:`limit_bounds` of a model).
     """
     check_goal(goal)
+    names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
+    return cached_graph(mechanism, ("ne-problem-kernels", goal), lambda: build_problem(
+        _problem_name(mechanism, goal), _problem_graph(mechanism, goal), n_unknowns(mechanism), names, has_start=True,
+        key=graph_key(mechanism, goal)))
+
+
+def _problem_name(mechanism: str, goal: str) -> str:
+    return f"ne_{c_name(mechanism)}_{goal.replace('-', '_')}"
+
+
+def _problem_graph(mechanism: str, goal: str):
+    """A function that builds (once) the expressions of the distribution problem of ``goal``."""
+    nN = n_unknowns(mechanism)
 
     def build():
-        nN = n_unknowns(model)
+        m = symbols(mechanism)
         D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
-        out = forces_sx(model, D, N, fl)
-        residual = goal_residual(model, goal, D, N, fl)
+        out = forces_sx(m, D, N, fl)
         dth = _unpack(D, nN)["dtheta"]
-        lim = model.limits
         limits = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
-        bound = np.repeat([lim.torque, lim.power, lim.axial_load, lim.radial_load], 6)
-        names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
-        start = ca.Function("start", [D], [start_sx(model, goal, D) if nN else ca.SX(0, 1)])
-        return build_problem(f"ne_{model.mechanism}_{goal.replace('-', '_')}", D, N, fl, residual, limits, bound, names, start)
+        return ProblemGraph(D, N, fl, [m.p], goal_residual(m, goal, D, N, fl), limits,
+                            start_sx(m, goal, D) if nN else ca.SX(0, 1))
 
-    return model.cached(("ne", "problem", goal), build)
+    return lambda: cached_graph(mechanism, ("ne-problem", goal), build)
+
+
+def newton_euler_kernels(mechanism: str, orientation: str, goal: str | None = None, **ignored) -> list[KernelSpec]:
+    """The compiled kernels of a Newton–Euler run: the sample's coefficients, the forces and the distribution
+    problem of ``goal`` (default min-torque)."""
+    goal = goal or "min-torque"
+    return [coefficients_kernel(mechanism, orientation), forces_kernel(mechanism),
+            *problem_kernels(_problem_name(mechanism, goal), _problem_graph(mechanism, goal), graph_key(mechanism, goal))]
 
 
 GOAL_RESIDUALS = {"min-torque": "tau", "min-coupler-force": "f"}
 
 
-def goal_residual(model: Model, goal: str, D, N, friction, absN=None):
+def goal_residual(params: SymbolicModel, goal: str, D, N, friction, absN=None):
     """The residual r whose squared norm the goal minimises (seed 001, Eqs. 52-54)."""
     if goal == "min-hkp-force":
         return N
-    return forces_sx(model, D, N, friction, absN)[GOAL_RESIDUALS[goal]]
+    return forces_sx(params, D, N, friction, absN)[GOAL_RESIDUALS[goal]]
 
 
-def start_sx(model: Model, goal: str, D) -> ca.SX:
+def start_sx(params: SymbolicModel, goal: str, D) -> ca.SX:
     """A start for the distribution: the best of nine piecewise least-squares candidates (2 unknowns).
 
     With friction the goal's residual is affine in N and |N| (apart from the small, smooth actuator-friction
@@ -270,20 +295,20 @@ def start_sx(model: Model, goal: str, D) -> ca.SX:
     The optimum often lies on a kink (one condyle nearly unloaded), where Newton from the friction-free optimum
     converges slowly or to another local minimum; from this start it converges in a few steps.
     """
-    N = ca.SX.sym("N", n_unknowns(model))
+    N = ca.SX.sym("N", n_unknowns(params))
     best, best_J = None, None
     # (0, 0) first: always finite, so a singular piece (NaN) never becomes the start (NaN < x is false)
     for signs in ((0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0)):
         free = [j for j in range(2) if signs[j]]
         Nc = ca.vertcat(*[N[j] if signs[j] else 0 for j in range(2)])
-        r = goal_residual(model, goal, D, Nc, 1.0, absN=ca.vertcat(*[signs[j] * N[j] for j in range(2)]))
+        r = goal_residual(params, goal, D, Nc, 1.0, absN=ca.vertcat(*[signs[j] * N[j] for j in range(2)]))
         cand = ca.SX.zeros(2)
         if free:
             r0, A = ca.substitute([r, ca.jacobian(r, N[free])], [N], [ca.DM.zeros(2)])
             step = -ca.solve(ca.mtimes(A.T, A), ca.mtimes(A.T, r0))
             for k, j in enumerate(free):
                 cand[j] = step[k]
-        J = ca.sumsqr(goal_residual(model, goal, D, cand, 1.0))
+        J = ca.sumsqr(goal_residual(params, goal, D, cand, 1.0))
         if best is None:
             best, best_J = cand, J
         else:
@@ -298,7 +323,7 @@ def check_goal(goal: str) -> None:
         raise ValueError(f"goal must be one of {', '.join(GOALS)}, not {goal!r}")
 
 
-@register("newton-euler")
+@register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
                  friction: bool = True, strict: bool = False, **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
@@ -311,8 +336,9 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
     check_goal(goal)
     fl = 1.0 if friction else 0.0
     data, vhat, v_T = sample_data(model, kin, side)
-    sol = solve(problem(model, goal), data, fl, kin.t, strict=strict)
-    out = dict(zip(forces_function(model).name_out(), data(forces_function(model), sol.x, fl)))
+    sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict)
+    forces = compiled(forces_kernel(model.mechanism))
+    out = dict(zip(forces.name_out(), data(forces, sol.x, fl)))
     table = Table()
     table.add_block([f"tau_f{i + 1}" for i in range(6)], out["tau_f"], "N*m", "actuator friction torque (in tau)")
     table.add_block([f"tau_fT{i + 1}" for i in range(6)], out["tau_fT"], "N*m",

@@ -6,7 +6,9 @@ B = 2 L_c v.d, C = L_c^2 + abs(d)^2 - L_r^2. Its two solutions are theta = atan2
 r = sqrt(A^2 + B^2); abs(C) > r means the chain cannot reach the pose, abs(C) = r is the singular
 configuration where crank and coupler are aligned and the two branches meet. The sign of
 dh_i/dtheta_i = r sin(theta - atan2(B, A)) tells the branch; the working branch is the one through
-theta = 0 at the home pose, kept along the whole trajectory.
+theta = 0 at the home pose, kept along the whole trajectory. Its sign per chain is part of the model's parameter
+vector (:mod:`chewbot.model_vector`), so the compiled kinematics (:func:`chewbot.kinematics.functions.kinematics_kernel`)
+solves the same branch; this NumPy version is its independent reference.
 """
 
 from __future__ import annotations
@@ -18,9 +20,9 @@ from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
 
-# A chain closer than this to its singular configuration (sin of the angle between the crank's motion and the
-# coupler, 1 when they are perpendicular, 0 when aligned) is reported as singular: its theta_dot would be
-# more than 1e4 times the speed of the coupler end divided by the crank length.
+# A chain closer than this to its singular configuration (sin of the transmission angle, :func:`transmission`: 1
+# when the coupler lies along the crank tip's motion, 0 at the dead point) is reported as singular: its
+# theta_dot would be more than 1e4 times the speed of the coupler end along the coupler divided by the crank length.
 SINGULAR_TOLERANCE = 1e-4
 
 
@@ -83,14 +85,22 @@ def inverse_kinematics(model: Model, p: np.ndarray, R: np.ndarray, times: np.nda
     p = np.atleast_2d(p)
     R = np.asarray(R).reshape(-1, 3, 3)
     A, B, C = _coefficients(model, p, R)
-    r = np.hypot(A, B)
-    ratio = C / r
-    _raise_first(np.abs(ratio) > 1, times, lambda n, k: "pose out of reach: "
-                 f"abs(C)/sqrt(A^2+B^2) = {abs(ratio[n, k]):.6f} > 1 (the coupler cannot close the loop)")
-    sin_tr = np.sqrt(np.clip(1 - ratio**2, 0, None))
-    _raise_first(sin_tr < SINGULAR_TOLERANCE, times, lambda n, k: f"chain {k + 1} is singular: crank and "
-                 f"coupler aligned (sin of transmission angle {sin_tr[n, k]:.2e} < {SINGULAR_TOLERANCE:g})")
-    theta = np.arctan2(B, A) + branches(model)[None, :] * np.arccos(ratio)
+    ratio = C / np.hypot(A, B)
+    check_chains(np.abs(ratio), transmission(model, p, R), times)
+    return continuous(np.arctan2(B, A) + branches(model)[None, :] * np.arccos(ratio))
+
+
+def check_chains(reach: np.ndarray, sin_transmission: np.ndarray, times: np.ndarray | None = None) -> None:
+    """Raise :class:`KinematicsError` at the first sample (and chain) out of reach (abs(C)/sqrt(A^2 + B^2) > 1),
+    else at the first singular one (sin of the transmission angle below :data:`SINGULAR_TOLERANCE`)."""
+    _raise_first(reach > 1, times, lambda n, k: "pose out of reach: "
+                 f"abs(C)/sqrt(A^2+B^2) = {reach[n, k]:.6f} > 1 (the coupler cannot close the loop)")
+    _raise_first(sin_transmission < SINGULAR_TOLERANCE, times, lambda n, k: f"chain {k + 1} is singular: crank and "
+                 f"coupler aligned (sin of transmission angle {sin_transmission[n, k]:.2e} < {SINGULAR_TOLERANCE:g})")
+
+
+def continuous(theta: np.ndarray) -> np.ndarray:
+    """Angles (N, 6) made continuous along the samples (no 2 pi jumps), the first sample in (-pi, pi]."""
     theta = np.unwrap(theta, axis=0)
     return theta - 2 * np.pi * np.round(theta[:1] / (2 * np.pi))
 
@@ -117,7 +127,7 @@ def forward_kinematics(
     closure residual below ``tol`` (in units of the coordinates' step).
     """
     theta = np.atleast_2d(theta)
-    fn = closure_function(model, orientation)
+    fn, p = closure_function(model.mechanism, orientation), model.vector()
     n = fn.numel_in(1)
     N = theta.shape[0]
     if q0 is None:
@@ -125,14 +135,14 @@ def forward_kinematics(
     q = np.array(np.broadcast_to(q0, (N, n)), dtype=float)
     scale = model.coupler_length[None, :] ** 2  # H is in m^2: normalise each equation by L_r^2
     for _ in range(max_iter):
-        H, J, unit, Ju = evaluate(fn, theta, q)
+        H, J, unit, Ju = evaluate(fn, theta, q, p)
         res = np.concatenate([H / scale, unit], axis=1)
         Jac = np.concatenate([J / scale[:, :, None], Ju.reshape(N, 1, n)], axis=1)
         step = _batched_lstsq(Jac, -res)
         q = q + step
         if np.abs(step).max() < tol:
             break
-    H, _, unit, _ = evaluate(fn, theta, q)
+    H, _, unit, _ = evaluate(fn, theta, q, p)
     bad = np.flatnonzero(np.abs(H / scale).max(axis=1) > 1e-9)
     if bad.size:
         raise KinematicsError(f"forward kinematics did not converge (closure residual {np.abs(H[bad[0]] / scale[0]).max():.2e})", sample=int(bad[0]))

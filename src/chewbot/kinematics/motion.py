@@ -1,7 +1,9 @@
 """The kinematics of a whole task: pose, parasitic motions, actuator angles and all rates, vectorised.
 
 :func:`solve_kinematics` is the entry point: a :class:`~chewbot.task.base.Task` and a model in, a
-:class:`Kinematics` (arrays, samples first) out.
+:class:`Kinematics` (arrays, samples first) out. The whole stage is one call of the compiled
+:func:`~chewbot.kinematics.functions.kinematics_kernel` over the task; the checks (reach, singular chains,
+sockets, parallel singularity, the parasitic e3's denominator) then read its outputs.
 """
 
 from __future__ import annotations
@@ -10,13 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate
+from chewbot.casadi_tools import evaluate, native
 from chewbot.errors import KinematicsError
-from chewbot.kinematics.functions import jacobian_rates_function, jacobians_function, parasitic_function, points_function, pose_function, rates_function
-from chewbot.kinematics.ik import inverse_kinematics, transmission
+from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
+from chewbot.kinematics.ik import check_chains, continuous
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation
 from chewbot.model import Model
-from chewbot.rotation import euler_angles_to_parameters
 from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
 
 # A 6-coordinate task given to the target must already satisfy its HKPs: Z and gamma may differ from the
@@ -79,10 +80,11 @@ class Kinematics:
     def jacobians(self) -> dict[str, np.ndarray]:
         """J_theta (diagonal, (N, 6)), J_qEE, J_theta1 .. J_theta4, M_J, M_0a, M_0b along the task (seed 000,
         Sect. 4; seed 001 for Euler parameters)."""
-        fn = jacobians_function(self.model, self.orientation)
-        out = dict(zip(fn.name_out(), evaluate(fn, self.theta, self.q)))
-        fn = jacobian_rates_function(self.model, self.orientation)
-        out.update(zip(fn.name_out(), evaluate(fn, self.theta, self.q, self.dq)))
+        m, p = self.model.mechanism, self.model.vector()
+        fn = jacobians_function(m, self.orientation)
+        out = dict(zip(fn.name_out(), evaluate(fn, self.theta, self.q, p)))
+        fn = jacobian_rates_function(m, self.orientation)
+        out.update(zip(fn.name_out(), evaluate(fn, self.theta, self.q, self.dq, p)))
         return out
 
 
@@ -92,38 +94,40 @@ def euler_angle_columns(model: Model) -> list[int]:
     return [0, 1, 3, 4] if model.has_hkp else list(range(6))
 
 
-def full_motion(model: Model, task: Task) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """X_EE (N, 6) and its rates for a task, lifting a 4-coordinate task with the sockets' parasitic motions."""
-    if task.coords == TARGET_COORDS:
-        X, dX, ddX = evaluate(parasitic_function(model), task.q, task.dq, task.ddq)
-        return X, dX, ddX
-    if model.has_hkp:
+def task_coordinates(model: Model, task: Task) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mechanism's independent coordinates in Euler angles and their rates, (N, 4) or (N, 6), from a task:
+    a 4-coordinate task on the 6RSS is lifted with the sockets' parasitic motions; a 6-coordinate task on the
+    target is checked against them after the kinematics (:func:`check_parasitic`)."""
+    if task.coords == TARGET_COORDS and not model.has_hkp:
+        return tuple(evaluate(parasitic_function(model.mechanism), task.q, task.dq, task.ddq, model.vector()))
+    if task.coords == FULL_COORDS and model.has_hkp:
         cols = euler_angle_columns(model)
-        X, _, _ = evaluate(parasitic_function(model), task.q[:, cols], task.dq[:, cols], task.ddq[:, cols])
-        dev = np.abs(X[:, [2, 5]] - task.q[:, [2, 5]])
-        bad = np.flatnonzero(dev.max(axis=1) > PARASITIC_TOLERANCE)
-        if bad.size:
-            i = int(bad[0])
-            raise KinematicsError(
-                f"task {task.name!r}: Z and gamma do not satisfy the target's HKPs (off by {dev[i, 0]:.3g} m, "
-                f"{dev[i, 1]:.3g} rad); give X, Y, alpha, beta only and let the model compute the parasitic motions",
-                sample=i, time=float(task.t[i]))
-    return np.array(task.q), np.array(task.dq), np.array(task.ddq)
+        return task.q[:, cols], task.dq[:, cols], task.ddq[:, cols]
+    return task.q, task.dq, task.ddq
 
 
-def mechanism_coordinates(model: Model, orientation: str, X, dX, ddX):
-    """q_EE of the mechanism in ``orientation`` from a motion in Euler angles, plus (e, e_dot, e_ddot)."""
-    e, de, dde = euler_angles_to_parameters(X[:, 3:6], dX[:, 3:6], ddX[:, 3:6])
+def check_parasitic(model: Model, task: Task, X: np.ndarray) -> None:
+    """A 6-coordinate task given to the target must already satisfy its HKPs: its Z and gamma equal the
+    parasitic ones of X_EE (within :data:`PARASITIC_TOLERANCE`)."""
+    if not (model.has_hkp and task.coords == FULL_COORDS):
+        return
+    dev = np.abs(X[:, [2, 5]] - task.q[:, [2, 5]])
+    bad = np.flatnonzero(dev.max(axis=1) > PARASITIC_TOLERANCE)
+    if bad.size:
+        i = int(bad[0])
+        raise KinematicsError(
+            f"task {task.name!r}: Z and gamma do not satisfy the target's HKPs (off by {dev[i, 0]:.3g} m, "
+            f"{dev[i, 1]:.3g} rad); give X, Y, alpha, beta only and let the model compute the parasitic motions",
+            sample=i, time=float(task.t[i]))
+
+
+def mechanism_coordinates(model: Model, orientation: str, X, dX, ddX, e, de, dde):
+    """q_EE of the mechanism in ``orientation`` and its rates, from X_EE and the Euler parameters."""
     if orientation == "euler-angles":
         cols = euler_angle_columns(model)
-        q, dq, ddq = X[:, cols], dX[:, cols], ddX[:, cols]
-    else:
-        k = 2 if model.has_hkp else 3
-        ne = 3 if model.has_hkp else 4
-        q = np.concatenate([X[:, :k], e[:, :ne]], axis=1)
-        dq = np.concatenate([dX[:, :k], de[:, :ne]], axis=1)
-        ddq = np.concatenate([ddX[:, :k], dde[:, :ne]], axis=1)
-    return q, dq, ddq, e, de, dde
+        return X[:, cols], dX[:, cols], ddX[:, cols]
+    k, ne = (2, 3) if model.has_hkp else (3, 4)
+    return tuple(np.concatenate([x[:, :k], y[:, :ne]], axis=1) for x, y in ((X, e), (dX, de), (ddX, dde)))
 
 
 def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarray) -> None:
@@ -143,69 +147,92 @@ def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarra
                 sample=i, time=float(t[i]))
 
 
-def check_parallel_singularity(model: Model, orientation: str, theta: np.ndarray, q: np.ndarray, t: np.ndarray) -> None:
+def check_parallel_singularity(J_theta1: np.ndarray, J_unit: np.ndarray | None, t: np.ndarray) -> None:
     """Raise :class:`KinematicsError` at the first sample where J_theta1 loses rank (type II singularity).
 
     The columns are normalised first, so the test does not depend on the units of q_EE; for Euler parameters
-    the direction that changes abs(e) is not a motion and is left out (J_theta1 restricted to abs(e) = 1).
+    (``J_unit``: the gradient of abs(e)^2 - 1, (N, 1, n)) the direction that changes abs(e) is not a motion and is
+    left out (J_theta1 restricted to an orthonormal basis of abs(e) = 1's tangent space). The test is on the ratio
+    of the smallest to the largest singular value; it is computed only where a cheap bound cannot exclude it: with
+    G = J' J (columns of unit length, so trace G = n), sigma_min / sigma_max < tol implies
+    det G < tol^2 sigma_max^(2 n) <= tol^2 n^n.
     """
-    J1 = evaluate(jacobians_function(model, orientation), theta, q)[2]
-    if orientation == "euler-parameters":
-        J1 = J1 @ _unit_norm_tangent(model, q)
+    J1 = J_theta1 if J_unit is None else J_theta1 @ _unit_norm_tangent(J_unit)
     J1 = J1 / np.linalg.norm(J1, axis=1, keepdims=True)
-    sv = np.linalg.svd(J1, compute_uv=False)
+    n = J1.shape[2]
+    gram = np.einsum("nki,nkj->nij", J1, J1)
+    candidates = np.flatnonzero(np.linalg.det(gram) < PARALLEL_SINGULAR_TOLERANCE**2 * float(n) ** n)
+    if not candidates.size:
+        return
+    sv = np.linalg.svd(J1[candidates], compute_uv=False)
     ratio = sv[:, -1] / sv[:, 0]
-    bad = np.flatnonzero(ratio < PARALLEL_SINGULAR_TOLERANCE)
+    bad = candidates[ratio < PARALLEL_SINGULAR_TOLERANCE]
     if bad.size:
         i = int(bad[0])
         raise KinematicsError(f"parallel (type II) singularity: J_theta1 loses rank (singular-value ratio "
-                              f"{ratio[i]:.2e} < {PARALLEL_SINGULAR_TOLERANCE:g}), the actuators do not fix the "
-                              f"mandible's motion; {bad.size} sample(s) affected", sample=i, time=float(t[i]))
+                              f"{ratio[np.searchsorted(candidates, i)]:.2e} < {PARALLEL_SINGULAR_TOLERANCE:g}), the "
+                              f"actuators do not fix the mandible's motion; {bad.size} sample(s) affected",
+                              sample=i, time=float(t[i]))
 
 
-def _unit_norm_tangent(model: Model, q: np.ndarray) -> np.ndarray:
-    """Orthonormal bases (N, n, n - 1) of the q_EE directions that keep abs(e) = 1."""
-    from chewbot.kinematics.functions import closure_function
+def _unit_norm_tangent(J_unit: np.ndarray) -> np.ndarray:
+    """Orthonormal bases (N, n, n - 1) of the q_EE directions that keep abs(e) = 1 (normal to J_unit): the
+    Householder reflection that maps the gradient g onto a coordinate axis k (its largest entry), without column k."""
+    g = J_unit.reshape(J_unit.shape[0], -1)
+    N, n = g.shape
+    k = np.argmax(np.abs(g), axis=1)
+    v = g / np.linalg.norm(g, axis=1, keepdims=True)
+    v[np.arange(N), k] += np.where(g[np.arange(N), k] < 0, -1.0, 1.0)
+    H = np.eye(n) - 2 * v[:, :, None] * v[:, None, :] / np.einsum("ni,ni->n", v, v)[:, None, None]
+    keep = np.argsort(np.arange(n)[None, :] == k[:, None], axis=1, kind="stable")[:, :n - 1]
+    return np.take_along_axis(H, keep[:, None, :], axis=2)
 
-    theta0 = np.zeros((q.shape[0], 6))
-    grad = evaluate(closure_function(model, "euler-parameters"), theta0, q)[3].reshape(q.shape[0], -1)
-    _, _, vt = np.linalg.svd(grad[:, None, :])
-    return np.swapaxes(vt[:, 1:, :], 1, 2)
+
+def check_e3_denominator(denominator: np.ndarray, t: np.ndarray) -> None:
+    """Target with Euler parameters: e3 = e1 (e0 + p1 e2) / (p1 e0 - e2) is undefined where p1 e0 - e2 = 0."""
+    bad = np.flatnonzero(np.abs(denominator) < E3_DENOMINATOR_TOLERANCE)
+    if bad.size:
+        raise KinematicsError("Euler parameters: p1 e0 - e2 = 0, the parasitic e3 is undefined here",
+                              sample=int(bad[0]), time=float(t[bad[0]]))
 
 
 def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles") -> Kinematics:
-    """Inverse kinematics of a whole task: parasitic motions, workspace check, theta and all rates."""
+    """Inverse kinematics of a whole task: parasitic motions, workspace check, theta and all rates.
+
+    One call of the compiled :func:`~chewbot.kinematics.functions.kinematics_kernel`; then the checks, in this
+    order: the task's parasitic Z and gamma, the e3 denominator (target, Euler parameters), the sockets, the
+    reach and the singular configuration of every chain, the parallel singularity. Each raises
+    :class:`KinematicsError` naming the first bad sample (its time, and the chain where there is one).
+    """
     check_orientation(orientation)
     if task.coords not in (TARGET_COORDS, FULL_COORDS):
         raise KinematicsError(f"task {task.name!r} has coordinates {task.coords}")
-    X, dX, ddX = full_motion(model, task)
-    q, dq, ddq, e, de, dde = mechanism_coordinates(model, orientation, X, dX, ddX)
-    if model.has_hkp and orientation == "euler-parameters":
-        den = model.hkp.p1 * q[:, 2] - q[:, 4]
-        bad = np.flatnonzero(np.abs(den) < E3_DENOMINATOR_TOLERANCE)
-        if bad.size:
-            raise KinematicsError("Euler parameters: p1 e0 - e2 = 0, the parasitic e3 is undefined here",
-                                  sample=int(bad[0]), time=float(task.t[bad[0]]))
-    _, p, R = evaluate(pose_function(model, orientation), q)
-    T_L, T_R, I, B_L, B_R = evaluate(points_function(model, orientation), q)
+    q, dq, ddq = task_coordinates(model, task)
+    fn = native(kinematics_kernel(model.mechanism, orientation))
+    out = dict(zip(KINEMATICS_OUTPUTS, evaluate(fn, q, dq, ddq, model.vector())))
+    check_parasitic(model, task, out["X"])
+    euler_parameters = orientation == "euler-parameters"
+    if euler_parameters and model.has_hkp:
+        check_e3_denominator(out["e3_denominator"][:, 0], task.t)
     if model.has_hkp:
-        check_workspace(model, T_L, T_R, task.t)
-    theta = inverse_kinematics(model, p, R, task.t)
-    check_parallel_singularity(model, orientation, theta, q, task.t)
-    dtheta, ddtheta, twist, twist_rate, _, _ = evaluate(rates_function(model, orientation), theta, q, dq, ddq)
+        check_workspace(model, out["T_L"], out["T_R"], task.t)
+    check_chains(out["reach"], out["transmission"], task.t)
+    check_parallel_singularity(out["J_theta1"], out["J_unit"] if euler_parameters else None, task.t)
+    X, dX, ddX, e, de, dde = (out[k] for k in ("X", "dX", "ddX", "e", "de", "dde"))
+    qo, dqo, ddqo = mechanism_coordinates(model, orientation, X, dX, ddX, e, de, dde)
     return Kinematics(
         model=model,
         orientation=orientation,
         t=np.array(task.t),
         coords=COORDINATES[(model.mechanism, orientation)],
-        q=q, dq=dq, ddq=ddq,
+        q=qo, dq=dqo, ddq=ddqo,
         X=X, dX=dX, ddX=ddX,
         e=e, de=de, dde=dde,
-        theta=theta, dtheta=dtheta, ddtheta=ddtheta,
-        twist=twist, twist_rate=twist_rate,
+        theta=continuous(out["theta"]), dtheta=out["dtheta"], ddtheta=out["ddtheta"],
+        twist=out["twist"], twist_rate=out["twist_rate"],
         force=np.array(task.force),
         side=task.side,
-        points={"T_L": T_L, "T_R": T_R, "I": I, "B_L": B_L, "B_R": B_R},
-        transmission=transmission(model, p, R),
+        points={k: out[k] for k in ("T_L", "T_R", "I", "B_L", "B_R")},
+        transmission=out["transmission"],
         task_name=task.name,
     )

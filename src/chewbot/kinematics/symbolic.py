@@ -1,4 +1,8 @@
-"""The kinematics of both mechanisms as CasADi expressions: one graph per (model, orientation).
+"""The kinematics of both mechanisms as CasADi expressions: one graph per (mechanism, orientation).
+
+The model's numbers enter as the symbol p (:class:`~chewbot.model_vector.SymbolicModel`): ``symbolic("target",
+orientation)`` is the graph of every target model, ``symbolic(model, orientation)`` the same graph with one
+model's numbers folded in (no p).
 
 Generalised coordinates of the mandible, q_EE (docs/conventions.md):
 
@@ -21,6 +25,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.model import Model
+from chewbot.model_vector import SymbolicModel, cached_graph, symbols
 from chewbot.rotation import E_sx, R_omega_sx, matrix_from_euler_angles_sx, matrix_from_euler_parameters_sx
 
 ORIENTATIONS = ("euler-angles", "euler-parameters")
@@ -39,27 +44,27 @@ def check_orientation(orientation: str) -> None:
         raise ValueError(f"orientation must be one of {', '.join(ORIENTATIONS)}, not {orientation!r}")
 
 
-def gamma_parasitic_sx(model: Model, alpha, beta):
+def gamma_parasitic_sx(params: SymbolicModel, alpha, beta):
     """Parasitic gamma of the target from p1 R12 + R32 = 0 (difference of the two plane equations).
 
     R12 = -c_beta s_gamma, R32 = c_alpha s_beta s_gamma + s_alpha c_gamma, so
     tan(gamma) = s_alpha / (p1 c_beta - c_alpha s_beta). erratum (docs/conventions.md): seed 000 Eq. (5) prints
     "+ c_alpha s_beta", which violates the constraint.
     """
-    p1 = model.hkp.p1
+    p1 = params.hkp.p1
     return ca.atan2(ca.sin(alpha), p1 * ca.cos(beta) - ca.cos(alpha) * ca.sin(beta))
 
 
-def e3_parasitic_sx(model: Model, e0, e1, e2):
+def e3_parasitic_sx(params: SymbolicModel, e0, e1, e2):
     """Parasitic e3 of the target from p1 R12 + R32 = 0: e3 = e1 (e0 + p1 e2) / (p1 e0 - e2)."""
-    p1 = model.hkp.p1
+    p1 = params.hkp.p1
     return e1 * (e0 + p1 * e2) / (p1 * e0 - e2)
 
 
-def Z_parasitic_sx(model: Model, X, R):
+def Z_parasitic_sx(params: SymbolicModel, X, R):
     """Parasitic Z of the target from the sum of the two plane equations (seed 000, Eq. 5)."""
-    h = model.hkp
-    t = ca.DM([h.T_L[0], 0.0, h.T_L[2]])
+    h = params.hkp
+    t = ca.vertcat(h.T_L[0], 0.0, h.T_L[2])
     return -(h.p1 * X + h.p2 + ca.mtimes(h.p1 * R[0, :] + R[2, :], t))
 
 
@@ -67,13 +72,14 @@ def Z_parasitic_sx(model: Model, X, R):
 class Symbolic:
     """Symbols and expressions of one mechanism in one orientation parametrisation.
 
-    ``q``, ``dq``, ``ddq``: q_EE and its rates; ``theta``, ``dtheta``: actuator angles and rates;
+    ``params``: the model's numbers (the symbol p, or one model's constants); ``q``, ``dq``, ``ddq``: q_EE and
+    its rates; ``theta``, ``dtheta``: actuator angles and rates;
     ``p``, ``R``: position of O_M and orientation of {M} in {S}; ``pose``: X_EE in this parametrisation
     (parasitic motions included); ``H``: the closure equations h_i(theta_i, q_EE) (seed 000, Eq. 8);
     ``unit``: abs(e)^2 - 1 for Euler parameters, else None.
     """
 
-    model: Model
+    params: SymbolicModel
     orientation: str
     coords: tuple[str, ...]
     q: ca.SX
@@ -91,20 +97,26 @@ class Symbolic:
     def n(self) -> int:
         return self.q.numel()
 
+    @property
+    def mechanism(self) -> str:
+        return self.params.mechanism
+
     def point(self, body_point) -> ca.SX:
-        """Position in {S} of a point fixed in {M} (given in {M}, metres)."""
-        return self.p + ca.mtimes(self.R, ca.DM(np.asarray(body_point, dtype=float)))
+        """Position in {S} of a point fixed in {M} (given in {M}, metres: numbers or an expression of p)."""
+        if not isinstance(body_point, (ca.SX, ca.DM)):
+            body_point = ca.DM(np.asarray(body_point, dtype=float))
+        return self.p + ca.mtimes(self.R, body_point)
 
     def crank_tip(self, i: int, theta_i=None) -> ca.SX:
         """S_i = G_i + R_C0,i Rz(theta_i) [L_c, 0, 0] (seed 000, Eq. 9)."""
-        m = self.model
+        m = self.params
         th = self.theta[i] if theta_i is None else theta_i
         u, v = m.R_C0[i][:, 0], m.R_C0[i][:, 1]
-        return ca.DM(m.G[i]) + m.crank_length[i] * (ca.cos(th) * ca.DM(u) + ca.sin(th) * ca.DM(v))
+        return m.G[i] + m.crank_length[i] * (ca.cos(th) * u + ca.sin(th) * v)
 
     def coupler_end(self, i: int) -> ca.SX:
         """M_i in {S}."""
-        return self.point(self.model.M[i])
+        return self.point(self.params.M[i])
 
     # ------------------------------------------------------------------ first order maps
 
@@ -183,13 +195,14 @@ class Symbolic:
         return dth, ddth
 
 
-def symbolic(model: Model, orientation: str = "euler-angles") -> Symbolic:
-    """The symbolic kinematics of ``model`` in ``orientation`` (built once per model and cached)."""
+def symbolic(model_or_mechanism: Model | str, orientation: str = "euler-angles") -> Symbolic:
+    """The symbolic kinematics in ``orientation`` of a mechanism (``"target"``, ``"6rss"``: parameters as the
+    symbol p) or of one model (its numbers folded in); built once and cached."""
     check_orientation(orientation)
-    return model.cached(("symbolic", orientation), lambda: _build(model, orientation))
+    return cached_graph(model_or_mechanism, ("symbolic", orientation), lambda: _build(symbols(model_or_mechanism), orientation))
 
 
-def _build(model: Model, orientation: str) -> Symbolic:
+def _build(model: SymbolicModel, orientation: str) -> Symbolic:
     coords = COORDINATES[(model.mechanism, orientation)]
     n = len(coords)
     q = ca.SX.sym("q", n)

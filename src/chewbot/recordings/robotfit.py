@@ -165,7 +165,7 @@ def _rotation_vector(A):
 
 
 def _reach_sx(model: Model, p, R):
-    """sin^2 of each chain's transmission angle, 1 - C^2 / (A^2 + B^2) (docs of :mod:`chewbot.kinematics.ik`):
+    """sin^2 of each chain's transmission angle, (A^2 + B^2 - C^2) / (2 L_c L_r)^2 (:func:`chewbot.kinematics.ik.transmission`):
     negative where a chain cannot close, 0 at its singular configuration."""
     out = []
     for i in range(6):
@@ -174,7 +174,7 @@ def _reach_sx(model: Model, p, R):
         A = 2 * Lc * ca.dot(d, ca.DM(model.R_C0[i][:, 0]))
         B = 2 * Lc * ca.dot(d, ca.DM(model.R_C0[i][:, 1]))
         C = Lc**2 + ca.dot(d, d) - Lr**2
-        out.append(1 - C**2 / (A**2 + B**2))
+        out.append((A**2 + B**2 - C**2) / (2 * Lc * Lr) ** 2)
     return out
 
 

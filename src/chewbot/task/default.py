@@ -10,7 +10,8 @@ Everything is analytic: the rates are exact derivatives of the bumps.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import difflib
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 from numpy.polynomial import Polynomial
@@ -54,6 +55,30 @@ class ChewingParameters:
         half = self.burst_s / (2 * self.period_s)
         if not (half <= self.burst_centre <= 1 - half):
             raise TaskError(f"default task: a burst of {self.burst_s} s centred at phase {self.burst_centre} does not fit in a cycle of {self.period_s} s")
+
+
+def parameters_with(overrides: dict[str, float], base: ChewingParameters | None = None) -> ChewingParameters:
+    """``base`` (default: the defaults) with the fields named in ``overrides`` (``{"force_z_N": -100.0}``, as
+    ``chewbot run --set task.force_z_N=-100`` gives them) replaced, then validated; errors name the argument."""
+    types = {f.name: f.type for f in fields(ChewingParameters)}
+    values = {}
+    for name, value in overrides.items():
+        argument = f"--set task.{name}={value:g}"
+        if name not in types:
+            close = difflib.get_close_matches(name, list(types), n=1)
+            raise TaskError(f"{argument}: the default task has no parameter {name!r}"
+                            + (f"; did you mean task.{close[0]}?" if close else f" (its parameters: {', '.join(types)})"))
+        if types[name] in ("int", int):
+            if float(value) != int(value):
+                raise TaskError(f"{argument}: task.{name} must be a whole number")
+            value = int(value)
+        values[name] = float(value) if types[name] in ("float", float) else value
+    params = replace(base or ChewingParameters(), **values)
+    try:
+        params.validate()
+    except TaskError as exc:
+        raise TaskError(f"{', '.join(f'--set task.{k}={v:g}' for k, v in overrides.items())}: {exc}") from None
+    return params
 
 
 def _bump(peak: float, order: int = 10) -> tuple[Polynomial, Polynomial, Polynomial]:
