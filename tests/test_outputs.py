@@ -338,7 +338,7 @@ def test_check_model_prints_units_and_warns_near_a_singular_home_pose(monkeypatc
         if np.degrees(np.arcsin(transmission(near, np.zeros((1, 3)), np.eye(3)[None])[0, 2])) < 6.0:
             break
     assert 3.0 < home_pose(near)["mu_deg"][2] < 6.0
-    monkeypatch.setattr(params, "load_model", lambda name: near)
+    monkeypatch.setattr(params, "load_model", lambda name, overrides=None: near)
     result = invoke("check-model", "target")
     assert result.exit_code == 0 and "warning: chain 3 is near-singular at the home pose" in result.output
 

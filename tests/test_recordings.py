@@ -532,10 +532,11 @@ def test_command_writes_a_task_that_runs_to_torques(tmp_path):
     assert result.exit_code == 0, result.output
     assert "robot fit: position error up to" in result.output and "wrote" in result.output
     for path in (out, tmp_path / "task.residuals.csv"):
-        assert path.read_text().startswith("# chewbot import-motion ")
+        first = path.read_text().splitlines()[0]
+        assert first.startswith("# written by chewbot") and "chewbot import-motion " in first  # the marker line
     header = out.read_text().splitlines()[1]
-    assert header.startswith("t[s],X[m],Y[m],alpha[rad],beta[rad],dX[m/s]") and header.endswith("Fz[N]")
-    assert "position_error[mm],orientation_error[deg]" in (tmp_path / "task.residuals.csv").read_text()
+    assert header.startswith("t [s],X [m],Y [m],alpha [rad],beta [rad],dX [m/s]") and header.endswith("Fz [N]")
+    assert "position_error [mm],orientation_error [deg]" in (tmp_path / "task.residuals.csv").read_text()
     task = read_task_csv(out)
     assert task.n == 901 and task.t[1] - task.t[0] == pytest.approx(1e-3)  # 1000 Hz over the 0.9 s recorded
     assert np.allclose(task.force[:, 2], np.interp(task.t, t, force[:, 2]), atol=1e-12)

@@ -126,11 +126,12 @@ atexit.register(lambda: open({count!r}, "w").write(str(calls)))
 
 
 def test_sigint_in_the_nlp_solver(tmp_path):
-    """1 s of chewing at 1 kHz against a torque limit of 0.005 N m: every one of the 1001 samples needs the SQP
-    (about 0.5 ms each), so SIGINT sent once the first has started lands in the solver's loop; the loop stops
-    short (fewer calls than samples) and the run ends with 130."""
-    t = np.arange(1001) / 1000
-    s = np.sin(np.pi * t) ** 2
+    """5 s of chewing at 1 kHz against a torque limit of 0.005 N m: every one of the 5001 samples needs the SQP
+    (0.1-0.5 ms each: the loop lasts long enough for the test to signal inside it even on a loaded machine), so
+    SIGINT sent once the first has started lands in the solver's loop; the loop stops short (fewer calls than
+    samples) and the run ends with 130."""
+    t = np.arange(5001) / 1000
+    s = np.sin(np.pi * t / 5) ** 2
     task = tmp_path / "task.csv"
     task.write_text("t,X[mm],Y[mm],alpha[deg],beta[deg],Fz\n" + "".join(f"{a:.3f},{2 * b:.9f},{b:.9f},{b:.9f},{5 * b:.9f},{-20 * b:.9f}\n" for a, b in zip(t, s)))
     weak = tmp_path / "weak.toml"

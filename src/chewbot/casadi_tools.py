@@ -76,7 +76,7 @@ class KernelSpec:
             return _GRAPHS[k]
 
 
-def _spec(kernel: KernelSpec | ca.Function) -> KernelSpec:
+def as_spec(kernel: KernelSpec | ca.Function) -> KernelSpec:
     """A spec for a function given as a graph: keyed by its serialised form (no code generation)."""
     if isinstance(kernel, KernelSpec):
         return kernel
@@ -236,7 +236,7 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
     one, the next graph is built (the C compilers run in parallel, one per available core)."""
     if c_compiler() is None:
         raise RuntimeError("no C compiler found (set $CC, or install cc/gcc/clang)")
-    specs = [_spec(k) for k in kernels]
+    specs = [as_spec(k) for k in kernels]
     libs = [_library_path(s, flags) for s in specs]
     missing = [(s, lib) for s, lib in zip(specs, libs) if not lib.exists()]
     if missing:
@@ -370,7 +370,7 @@ def native(kernel: KernelSpec | ca.Function, flags: tuple[str, ...] = FLAGS) -> 
 def _load(kernel: KernelSpec | ca.Function, flags: tuple[str, ...], kind: str, load: Callable):
     """``load(spec)`` (a library loaded as ``kind``), kept for the process; the graph itself where nothing can be
     compiled or cached."""
-    spec = _spec(kernel)
+    spec = as_spec(kernel)
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         return spec.graph()
     key = (kind, spec.name, spec.key, flags)
@@ -403,7 +403,7 @@ class NativeFunction:
     """
 
     def __init__(self, kernel: KernelSpec | ca.Function, flags: tuple[str, ...] = FLAGS):
-        spec = _spec(kernel)
+        spec = as_spec(kernel)
         path = str(compile_library(spec, flags))
         fn = ca.external(spec.name, path)
         if any(fn.nnz_in(i) != fn.numel_in(i) for i in range(fn.n_in())) or any(fn.nnz_out(j) != fn.numel_out(j) for j in range(fn.n_out())):

@@ -19,7 +19,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec
+from chewbot.casadi_tools import KernelSpec, as_spec
 from chewbot.outputs import EXPORT_FOLDER, atomic_folder, to_json
 
 # Version of chewbot-export.json, the exported folder's marker.
@@ -30,7 +30,7 @@ EXPORT_FORMAT = 1
 class Kernel:
     """A per-sample kernel to export, with a description and the units of its inputs and outputs."""
 
-    spec: KernelSpec
+    spec: KernelSpec | ca.Function  # a kernel, or its graph
     description: str
     input_units: dict[str, str]
     output_units: dict[str, str]
@@ -39,11 +39,11 @@ class Kernel:
     @property
     def function(self) -> ca.Function:
         """The CasADi function (its graph, built on first use)."""
-        return self.spec.graph()
+        return as_spec(self.spec).graph()
 
     @property
     def name(self) -> str:
-        return self.spec.name
+        return as_spec(self.spec).name
 
 
 def _c_array(values: np.ndarray) -> str:

@@ -137,7 +137,7 @@ def euler_parameters_sx(alpha, beta, gamma) -> ca.SX:
 
 # The outputs of the kinematics kernel, in order (docs/api.md).
 KINEMATICS_OUTPUTS = ("X", "dX", "ddX", "e", "de", "dde", "theta", "dtheta", "ddtheta", "twist", "twist_rate",
-                      *POINTS, "reach", "transmission", "J_theta1", "J_unit", "e3_denominator")
+                      *POINTS, "reach", "transmission", "J_theta1", "J_unit", "e3_denominator", "J_theta1_angles")
 
 
 def kinematics_kernel(model_or_mechanism: Model | str, orientation: str) -> KernelSpec:
@@ -151,7 +151,8 @@ def kinematics_kernel(model_or_mechanism: Model | str, orientation: str) -> Kern
     T_R, I, B_L, B_R in {S}; per chain the reachability ratio abs(C)/sqrt(A^2 + B^2) (> 1: out of reach) and the
     sine of the transmission angle; J_theta1 in ``orientation``'s q_EE (for the parallel-singularity check); for
     Euler parameters the gradient J_unit of abs(e)^2 - 1 and the target's p1 e0 - e2 (the denominator of the
-    parasitic e3), zero otherwise. Everything past the inputs is computed by ``orientation``'s graph from its
+    parasitic e3), zero otherwise; J_theta1 in Euler angles (d theta / d q, whatever ``orientation``, for the
+    conditioning measure of :mod:`chewbot.kinematics.conditioning`). Everything past the inputs is computed by ``orientation``'s graph from its
     own q_EE, itself computed from the inputs (exact chain rule).
     """
     check_orientation(orientation)
@@ -195,6 +196,7 @@ def _kinematics(model_or_mechanism: Model | str, orientation: str, name: str) ->
             ca.fabs(ratio), ca.vertcat(*sin_mu), J1, J_unit, den]
     outs = ca.substitute(outs, [s.theta], [theta])  # theta_dot, theta_ddot and J_theta1 at the solved theta
     outs = ca.substitute(outs, [s.q, s.dq, s.ddq], [qo, dqo, ddqo])
+    outs.append(ca.jacobian(outs[KINEMATICS_OUTPUTS.index("theta")], q))  # J_theta1 in Euler angles: d theta / d q
     extra, extra_names = parameter_input(m)
     return ca.Function(name, [q, dq, ddq, *extra], [ca.densify(o) for o in outs], ["q", "dq", "ddq", *extra_names],
                        list(KINEMATICS_OUTPUTS), {"cse": True})

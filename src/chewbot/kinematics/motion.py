@@ -15,6 +15,7 @@ import numpy as np
 from chewbot.casadi_tools import evaluate, native
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
+from chewbot.kinematics.conditioning import reciprocal_condition
 from chewbot.kinematics.ik import check_chains, continuous
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation
 from chewbot.model import Model
@@ -67,6 +68,7 @@ class Kinematics:
     points: dict
     transmission: np.ndarray
     task_name: str = ""
+    kappa: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -235,4 +237,5 @@ def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles"
         points={k: out[k] for k in ("T_L", "T_R", "I", "B_L", "B_R")},
         transmission=out["transmission"],
         task_name=task.name,
+        kappa=reciprocal_condition(out["J_theta1_angles"]),
     )

@@ -50,7 +50,7 @@ def home_pose(model: Model) -> dict[str, np.ndarray]:
     theta = inverse_kinematics(model, p, R)
     sin_mu = transmission(model, p, R)[0]
     return {"theta": theta[0], "transmission": sin_mu, "mu_deg": np.degrees(np.arcsin(np.clip(sin_mu, 0.0, 1.0))),
-            "kappa": float(jacobian_conditioning(model, theta, np.zeros((1, 6)))[0])}
+            "kappa": float(jacobian_conditioning(model, np.zeros((1, model.dof)))[0])}
 
 
 def assumed_values(model: Model) -> dict[str, object]:
