@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.casadi_tools import KernelSpec, compiled, mapped
+from chewbot.command import check_interrupted
 from chewbot.errors import InfeasibleError
 
 # Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
@@ -244,6 +245,7 @@ def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound):
     status = {}
     params = [np.asarray(p).ravel() for p in data.p]
     for k in rows:
+        check_interrupted()  # CasADi's solver may catch a SIGINT and return a failure status: stop here
         x0 = x[k - 1] if k > 0 else x[k]
         sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound)
         xk = np.asarray(sol["x"]).ravel()
