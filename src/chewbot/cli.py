@@ -27,6 +27,7 @@ from chewbot.command import (  # noqa: F401  (the exit codes, for the commands a
     check_interrupted,
 )
 from chewbot.errors import ChewbotError
+from chewbot.identification.command import identify
 from chewbot.recordings.command import import_motion
 
 app = typer.Typer(
@@ -452,6 +453,7 @@ def track_incisor(
 
 
 app.command("import-motion")(import_motion)
+app.command("identify")(identify)
 
 
 @app.command()
@@ -556,6 +558,8 @@ def _model_report(m, home: dict):
         facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
     assumed = assumed_values(m)
     facts.add_row("assumed", escape("\n".join(f"{k} = {v}" for k, v in assumed.items())) or "none")
+    if m.identified:
+        facts.add_row("identified", escape("\n".join(f"{k} = {v}" for k, v in assumed_values(m, m.identified).items())))
     if m.overrides:
         facts.add_row("overrides", escape("\n".join(f"{k} = {v:g}" for k, v in m.overrides.items())))
     return Group(chains, facts, f"[green]valid:[/] {escape(m.source)}")

@@ -157,6 +157,7 @@ class Model(MechanismMixin):
     limits: Limits
     contact: Contact = field(default_factory=Contact)
     overrides: dict = field(default_factory=dict)  # the --set values applied to the file, as given
+    identified: tuple[str, ...] = ()  # keys estimated from robot logs (the file's `identified`)
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):

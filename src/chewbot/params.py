@@ -156,6 +156,7 @@ class ParameterFile(_Strict):
     description: str = ""
     gravity_m_per_s2: float = Field(gt=0)
     assumed: list[str] = []
+    identified: list[str] = []  # keys estimated from robot logs (chewbot identify); none of them is also assumed
     chains: ChainsSection
     cranks: CranksSection
     couplers: CouplersSection
@@ -313,9 +314,14 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
                       f"(x in {h.x_range_mm}, y in {y_range} mm)")
 
     known = _known_keys(f)
-    for key in f.assumed:
-        if key not in known:
-            fail("assumed", f"{key!r} is not a key of this file")
+    for list_name in ("assumed", "identified"):
+        for key in getattr(f, list_name):
+            if key not in known:
+                fail(list_name, f"{key!r} is not a key of this file")
+    for key in sorted(set(f.assumed) & set(f.identified)):
+        fail("identified", f"{key!r} is listed as assumed too: an identified value is no longer assumed")
+    for key in sorted({k for k in f.identified if f.identified.count(k) > 1}):
+        fail("identified", f"{key!r} is listed twice")
 
     density = f.couplers.density_g_per_mm3 * 1e-3 / mm**3  # g/mm^3 -> kg/m^3
     area = f.couplers.area_mm2 * mm**2
@@ -327,6 +333,7 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
         source=source,
         sha256=sha256,
         assumed=tuple(f.assumed),
+        identified=tuple(f.identified),
         g=f.gravity_m_per_s2,
         G=G,
         S0=S0,

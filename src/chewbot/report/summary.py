@@ -53,8 +53,9 @@ def home_pose(model: Model) -> dict[str, np.ndarray]:
             "kappa": float(jacobian_conditioning(model, np.zeros((1, model.dof)))[0])}
 
 
-def assumed_values(model: Model) -> dict[str, object]:
-    """The values of the keys the parameter file lists as assumed, as written in the file (papers' units).
+def assumed_values(model: Model, keys: tuple[str, ...] | None = None) -> dict[str, object]:
+    """The values of the keys the parameter file lists as assumed (or of ``keys``: ``model.identified``), as written
+    in the file (papers' units).
 
     A model not read from a file (built from a dict) gives the keys with ``None``.
     """
@@ -62,7 +63,7 @@ def assumed_values(model: Model) -> dict[str, object]:
     if Path(model.source).is_file():
         raw = tomllib.loads(Path(model.source).read_text("utf-8"))
     out = {}
-    for key in model.assumed:
+    for key in model.assumed if keys is None else keys:
         value: object = raw
         for part in key.split("."):
             value = value.get(part) if isinstance(value, dict) else None

@@ -37,6 +37,7 @@ UNITS = {
     "angle": {"rad": 1.0, "mrad": 1e-3, "deg": np.pi / 180},
     "time": {"s": 1.0, "ms": 1e-3},
     "force": {"N": 1.0, "kN": 1e3},
+    "torque": {"N*m": 1.0, "Nm": 1.0, "N*mm": 1e-3, "mN*m": 1e-3},  # robot logs (chewbot identify)
 }
 KIND = {"X": "length", "Y": "length", "Z": "length", "alpha": "angle", "beta": "angle", "gamma": "angle"}
 FORCES = ("Fx", "Fy", "Fz")

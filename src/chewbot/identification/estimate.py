@@ -1,0 +1,275 @@
+"""Bounded nonlinear least squares for the identified parameters, their standard errors and identifiability.
+
+The estimator (docs/identification.md): minimise sum_k abs(r_k)^2 over the parameters x and the per-sample normal
+forces N_k, r_k the residual of sample k (:mod:`chewbot.identification.regressor`). The N_k are eliminated by
+variable projection: for given x each N_k solves its own two-unknown problem (all samples at once), and SciPy's
+``least_squares`` (trust-region reflective, bounds) works on the reduced residual r(x) with its exact Jacobian.
+It runs in the physical parametrisation phi (:mod:`chewbot.identification.parameters`), started from the model's
+values.
+
+Identifiability: the SVD of the reduced Jacobian with unit-norm columns (each parameter's column divided by its
+norm: the result does not depend on the parameters' units, and the condition number is within a factor
+sqrt(k) of the smallest any column scaling gives, van der Sluis 1969). A direction whose singular value is below
+:data:`RCOND` times the largest (the torques change by less than that fraction along it) is not identifiable
+from the log; such directions are held at the start values by rows added to the residual, heavy enough that
+the data cannot move them (``penalty``). Standard errors: the sandwich covariance of the identifiable
+directions with the residuals' autocorrelation up to the smoothing window included (Newey-West, Bartlett
+weights): smoothed rates correlate the residuals of neighbouring samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from chewbot.casadi_tools import evaluate, native
+from chewbot.command import check_interrupted
+from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
+from chewbot.identification.parameters import N_X, phi_bounds, phi_of, p_with, x_of_phi
+from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+
+# A direction of the parameters is not identifiable where its singular value (unit-norm columns) is below this
+# fraction of the largest: the torques then change along it less than 1e-8 of what the best direction changes them.
+RCOND = 1e-8
+# ... or where its standard error exceeds this fraction of the parameters' reference magnitudes (:func:`references`):
+# the log does not tell the value better than that, and the start value is kept.
+MAX_RELATIVE_SE = 0.3
+# Newton on the normal forces stops when every step is below this (N) times 1 + abs(N): 1e-10 N on forces of a few
+# newtons, above the rounding of N (the torques' rounding over the smallest singular value of d tau / d N).
+N_STEP_TOL = 1e-10
+N_MAX_ITERATIONS = 50
+# The rows that hold the non-identifiable directions weigh this much more than the largest singular value.
+PENALTY = 1e4
+
+
+@dataclass
+class Evaluation:
+    """The reduced problem at x: residuals r (n, 6), normal forces N (n, nN), and where asked the reduced Jacobian
+    d r / d x (n * 6, N_X)."""
+
+    x: np.ndarray
+    r: np.ndarray
+    N: np.ndarray
+    J: np.ndarray | None = None
+
+
+class ReducedProblem:
+    """The residual of a log with the normal forces eliminated, as a function of x (:meth:`evaluate_at`)."""
+
+    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray):
+        self.model, self.kin, self.tau = model, kin, np.asarray(tau, dtype=float)
+        self.nN = n_unknowns(model)
+        self.B = model.molar(kin.side)
+        self.coefficients = native(coefficients_kernel(model.mechanism, ORIENTATION))
+        self.normal = native(normal_force_kernel(model.mechanism)) if self.nN else None
+        self.jacobian = native(jacobian_kernel(model.mechanism))
+        self.inputs = (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)
+        self.evaluations = 0
+        self._N = None  # the last normal forces: the next evaluation starts from them
+
+    def evaluate_at(self, x: np.ndarray, jacobian: bool = False) -> Evaluation:
+        """The residual at x with each sample's normal forces at their optimum, and the reduced Jacobian."""
+        check_interrupted()
+        self.evaluations += 1
+        p = p_with(self.model, x)
+        n = self.kin.n
+        N = np.zeros((n, 0))
+        if self.nN:
+            (D, _, _) = evaluate(self.coefficients, *self.inputs, self.B, p)
+            N = self._N = normal_forces(self.normal, D, self.tau, p, self._N)
+        r, dr_dN, dr_dx, H_NN, H_Nx = evaluate(self.jacobian, *self.inputs, self.B, N, self.tau, x, p)
+        if not jacobian:
+            return Evaluation(x, r, N)
+        if self.nN:
+            dN_dx = -np.linalg.solve(H_NN.reshape(n, self.nN, self.nN), H_Nx.reshape(n, self.nN, N_X))
+            dr_dx = dr_dx.reshape(n, 6, N_X) + np.einsum("nij,njk->nik", dr_dN.reshape(n, 6, self.nN), dN_dx)
+        return Evaluation(x, r, N, dr_dx.reshape(n * 6, N_X))
+
+
+def normal_forces(kernel, D: np.ndarray, tau: np.ndarray, p: np.ndarray, warm: np.ndarray | None = None) -> np.ndarray:
+    """The normal forces (n, nN) that fit each sample's measured torques best: min_N abs(r(N))^2 per sample.
+
+    Start: per sample the better of the friction-free least-squares optimum (one step from 0: r is affine in N
+    without friction) and ``warm`` (the previous solution). Then Newton's method on all samples at once with the
+    exact Hessian (Gauss-Newton where it is not positive definite), halving the step until the objective
+    decreases, until every step is below :data:`N_STEP_TOL` (1 + abs(N)); samples that have converged are not
+    moved.
+    """
+    n = D.shape[0]
+    nN = kernel.function.size1_in(1)
+
+    def at(N, friction=1.0):
+        r, J, H = evaluate(kernel, D, N, tau, friction, p)
+        return r, J.reshape(n, 6, nN), H.reshape(n, nN, nN)
+
+    r, J, _ = at(np.zeros((n, nN)), 0.0)
+    N = -np.linalg.solve(np.einsum("nki,nkj->nij", J, J), np.einsum("nki,nk->ni", J, r)[..., None])[..., 0]
+    if warm is not None:
+        better = np.sum(at(warm)[0] ** 2, axis=1) < np.sum(at(N)[0] ** 2, axis=1)
+        N[better] = warm[better]
+    active = np.ones(n, dtype=bool)
+    for _ in range(N_MAX_ITERATIONS):
+        if not active.any():
+            break
+        r, J, H = at(N)
+        cost = np.sum(r**2, axis=1)
+        g = np.einsum("nki,nk->ni", J, r)
+        convex = np.linalg.eigvalsh(H)[:, 0] > 0
+        H = np.where(convex[:, None, None], H, np.einsum("nki,nkj->nij", J, J))
+        step = -np.linalg.solve(H, g[..., None])[..., 0]
+        # Halve where the objective does not decrease; where the predicted decrease is below the rounding of the
+        # cost the test is noise: the full Newton step is taken there (the region of quadratic convergence).
+        alpha = np.ones(n)
+        check = active & (-np.einsum("ni,ni->n", g, step) > 1e-12 * cost)
+        for _ in range(30):
+            check &= np.sum(at(N + alpha[:, None] * step)[0] ** 2, axis=1) > cost
+            if not check.any():
+                break
+            alpha[check] /= 2
+        alpha[check] = 0.0  # no decrease along a descent direction: at the optimum to rounding
+        moved = np.where(active[:, None], alpha[:, None] * step, 0.0)
+        N = N + moved
+        active &= np.abs(moved).max(axis=1) > N_STEP_TOL * (1 + np.abs(N).max(axis=1))
+    return N
+
+
+def condition_number(J: np.ndarray) -> tuple[float, np.ndarray]:
+    """Condition number of J with unit-norm columns, and its singular values (descending, the largest 1). A
+    column of zeros (a parameter the log does not excite) makes it infinite."""
+    norms = np.linalg.norm(J, axis=0)
+    if not norms.size:
+        return np.nan, norms
+    if norms.min() <= 1e-300:
+        return np.inf, np.linalg.svd(J, compute_uv=False) / max(norms.max(), 1e-300)
+    s = np.linalg.svd(J / norms, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else np.inf, s / s[0]
+
+
+def covariance(J: np.ndarray, r: np.ndarray, lags: int, free_rows: int) -> np.ndarray:
+    """Covariance (k, k) of parameters with Jacobian J (6 n, k) and residuals r (n, 6): the sandwich A B A with
+    A = (J' J)^-1 and B the Newey-West estimate of the scores' long-run covariance with Bartlett weights up to
+    ``lags`` samples, times n / (n - k) with n ``free_rows``, the residual rows the samples' own normal forces do not
+    absorb (4 per sample on the target). With lags = 0 and equal variances it is sigma^2 (J' J)^-1."""
+    n, k = r.shape[0], J.shape[1]
+    G = np.einsum("nik,ni->nk", J.reshape(n, -1, k), r)  # per-sample scores
+    B = G.T @ G
+    for lag in range(1, min(lags, n - 1) + 1):
+        Gamma = G[lag:].T @ G[:-lag]
+        B += (1 - lag / (lags + 1)) * (Gamma + Gamma.T)
+    B *= free_rows / max(free_rows - k, 1)
+    A = np.linalg.pinv(J.T @ J)
+    return A @ B @ A
+
+
+@dataclass
+class Fit:
+    """The estimate: x (SI, every parameter; held ones at their start), the evaluations at the start and at the
+    estimate, the free entries of x, ``held`` (k, h) the non-identifiable directions held at the start (columns,
+    in coordinates x / ref over the free entries, orthonormal), ``cov`` (N_X, N_X) the covariance of x (SI; zero
+    for what was not estimated), the condition numbers at the start and the estimate, the solver's result."""
+
+    x: np.ndarray
+    start: Evaluation
+    evaluation: Evaluation
+    free: np.ndarray
+    ref: np.ndarray
+    held: np.ndarray
+    cov: np.ndarray
+    condition_start: float
+    condition: float
+    singular: np.ndarray
+    at_bound: np.ndarray
+    solver: object
+    evaluations: int
+
+
+def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarray, lags: int,
+        rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE, progress=None) -> Fit:
+    """Bounded nonlinear least squares from x0 over the entries ``free`` (boolean (N_X,)) with the non-identifiable
+    directions held at x0 (see the module docstring). ``ref``: the parameters' reference magnitudes (SI), the
+    scale of the identifiability test; ``lags``: the residuals' correlation length in samples (the smoothing
+    window). The directions found not identifiable at an estimate are held and the fit repeated, until none is
+    found."""
+    idx = np.flatnonzero(free)
+    k = idx.size
+    phi0 = phi_of(x0)
+    lo, hi = phi_bounds(phi0)
+    rows_per_sample = 6 - problem.nN
+    start = problem.evaluate_at(x0, jacobian=True)
+    condition_start, _ = condition_number(start.J[:, idx])
+    held = _structural_null(start.J[:, idx] * ref[idx], rcond)
+    cache: dict[bytes, tuple] = {}
+
+    def evaluated(phi_free):
+        key = phi_free.tobytes()
+        if key not in cache:
+            cache.clear()
+            phi = phi0.copy()
+            phi[idx] = phi_free
+            x, dx = x_of_phi(phi)
+            cache[key] = (x, dx[np.ix_(idx, idx)], problem.evaluate_at(x, jacobian=True))
+        return cache[key]
+
+    while True:
+        weight = PENALTY * np.linalg.norm(start.J[:, idx] * ref[idx], 2)
+        H = held.T / ref[idx]  # (h, k): rows that hold the directions, per unit of x
+
+        def residual(z):
+            x, _, ev = evaluated(z)
+            return np.concatenate([ev.r.ravel(), weight * H @ (x - x0)[idx]])
+
+        def jac(z):
+            _, dx, ev = evaluated(z)
+            return np.vstack([ev.J[:, idx] @ dx, weight * H @ dx])
+
+        if progress:
+            progress(f"least squares ({k - held.shape[1]} of {k} directions)")
+        solver = least_squares(residual, np.clip(phi0[idx], lo[idx], hi[idx]), jac, bounds=(lo[idx], hi[idx]),
+                               x_scale=np.maximum(np.abs(phi0[idx]), 1e-12), ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                               max_nfev=300)
+        x, _, ev = evaluated(solver.x)
+        Jr = ev.J[:, idx] * ref[idx]
+        P = _complement(held, k)  # the directions estimated, orthonormal (k, k - h)
+        Jc = Jr @ P
+        more = _structural_null(Jc, rcond)
+        if not more.shape[1]:
+            C = covariance(Jc, ev.r, lags, rows_per_sample * problem.kin.n)
+            w, U = np.linalg.eigh(C)
+            more = U[:, np.sqrt(np.maximum(w, 0)) > max_relative_se]
+        if not more.shape[1]:
+            break
+        held = np.linalg.qr(np.hstack([held, P @ more]))[0]
+    cov = np.zeros((N_X, N_X))
+    T = ref[idx, None] * P
+    cov[np.ix_(idx, idx)] = T @ C @ T.T
+    condition, singular = condition_number(ev.J[:, idx])
+    at_bound = np.zeros(N_X, dtype=bool)
+    at_bound[idx] = solver.active_mask != 0
+    return Fit(x, start, ev, free, ref, held, cov, condition_start, condition, singular, at_bound, solver,
+               problem.evaluations)
+
+
+def _structural_null(J: np.ndarray, rcond: float) -> np.ndarray:
+    """Orthonormal directions (k, h) along which J (unit-norm columns; zero columns are their own direction)
+    changes by less than ``rcond`` of its largest singular value, in J's own coordinates."""
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= 1e-300
+    scaled = J / np.where(zero, 1.0, norms)
+    _, s, Vt = np.linalg.svd(scaled, full_matrices=True)
+    s = np.concatenate([s, np.zeros(J.shape[1] - s.size)])
+    null = Vt.T[:, s < rcond * max(s[0], 1e-300)] if s.size else np.zeros((J.shape[1], 0))
+    # back to J's coordinates: a null vector v of J D^-1 is D^-1 v for J
+    null = null / np.where(zero, 1.0, norms)[:, None]
+    return np.linalg.qr(null)[0] if null.shape[1] else null
+
+
+def _complement(held: np.ndarray, k: int) -> np.ndarray:
+    """An orthonormal basis (k, k - h) of the directions orthogonal to the orthonormal columns ``held``."""
+    if not held.shape[1]:
+        return np.eye(k)
+    Q = np.linalg.qr(np.hstack([held, np.eye(k)]))[0]
+    return Q[:, held.shape[1]:k]

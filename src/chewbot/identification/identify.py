@@ -1,0 +1,178 @@
+"""Friction and inertia of a model from a robot log: the whole identification (docs/identification.md).
+
+:func:`identify` takes a model and a :class:`~chewbot.identification.log.RobotLog`, recovers the mandible's motion
+(:mod:`~chewbot.identification.motion`), fits the parameters (:mod:`~chewbot.identification.estimate`) and returns
+an :class:`Identification`: estimates with standard errors, what could not be identified, the residuals before and
+after, and the model file's new values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from chewbot.errors import ChewbotError
+from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
+from chewbot.identification.log import RobotLog
+from chewbot.identification.motion import LogMotion, log_motion
+from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMETERS, x_of
+from chewbot.model import Model
+from chewbot.task import smoothing
+
+# Reference magnitudes of the friction parameters where the start model has 0 (the built-in models' values).
+TYPICAL_FRICTION = {"mu_H": 0.1, "c_H": 0.5, "R*mu_c": 2.5e-4, "c_A": 0.01}
+STEPS = 4  # progress: motion, start, least squares, results
+
+
+@dataclass
+class Identification:
+    """The result of :func:`identify`; arrays over the parameters of
+    :data:`chewbot.identification.parameters.PARAMETERS` (SI).
+
+    ``x0``, ``x``: start and estimate; ``se``: standard errors (0 where not estimated); ``status`` per parameter:
+    ``estimated``, ``partly held`` (it has a share in a held direction: its value depends on that direction's start
+    value), ``held`` (not identifiable from the log: kept at the start), ``fixed`` (by ``--fix``), ``not in the
+    model`` (the 6RSS has no HKP) or ``no arm`` (R = 0 in the file: R mu_c cannot be written back);
+    ``held_directions``: the non-identifiable combinations, each {parameter name: coefficient in file units};
+    ``identified``: the parameter-file keys that were estimated.
+    """
+
+    model: Model
+    log: RobotLog
+    motion: LogMotion
+    fit: Fit
+    x0: np.ndarray
+    x: np.ndarray
+    se: np.ndarray
+    status: list[str]
+    held_directions: list[dict[str, float]]
+    identified: list[str]
+    notes: list[str] = field(default_factory=list)
+
+    def rms(self, which: str = "estimate") -> np.ndarray:
+        """RMS of the torque residual per actuator (N*m), at the start model or the estimate."""
+        r = (self.fit.start if which == "start" else self.fit.evaluation).r
+        return np.sqrt(np.mean(r**2, axis=0))
+
+    def rows(self) -> list[dict]:
+        """The table of estimates in the file's units (one dict per parameter, keys of
+        :data:`chewbot.identification.output.TABLE_COLUMNS`), with the derived actuator Coulomb coefficient."""
+        rows = []
+        for j, p in enumerate(PARAMETERS):
+            rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(self.x0[j] * p.to_file),
+                         "estimate": _g(self.x[j] * p.to_file), "standard_error": _g(self.se[j] * p.to_file),
+                         "status": self.status[j]})
+        arm = self.model.friction.actuator_arm
+        if arm > 0:
+            j = NAMES_INDEX["R*mu_c"]
+            rows.append({"parameter": "mu_c", "key": "friction.actuator_coulomb", "unit": "1",
+                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": _g(self.se[j] / arm),
+                         "status": f"R*mu_c / R, R = {arm * 1e3:g} mm as in the file"})
+        return rows
+
+    def values(self) -> dict[str, object]:
+        """The parameter-file keys of the estimated groups with their new values (file units)."""
+        out: dict[str, object] = {}
+        x = self.x
+        for key in self.identified:
+            if key == "mandible.mass_g":
+                out[key] = float(x[0] * 1e3)
+            elif key == "mandible.inertia_g_mm2":
+                xx, yy, zz, xy, xz, yz = (float(v * 1e9) for v in x[INERTIA])
+                out[key] = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+            elif key == "friction.actuator_coulomb":
+                out[key] = float(x[NAMES_INDEX["R*mu_c"]] / self.model.friction.actuator_arm)
+            else:
+                j = next(j for j, p in enumerate(PARAMETERS) if p.group == key)
+                out[key] = float(x[j])
+        return out
+
+    def summary(self) -> list[str]:
+        """Lines of the summary: log, motion, condition number, residuals, held combinations."""
+        f, m = self.fit, self.motion
+        smoothing_line = ("rates: " + ", ".join(f"{k} from the log" if v == "logged" else f"{k} by Savitzky-Golay "
+                          f"(degree {smoothing.POLYORDER}, {m.window_samples} samples)" for k, v in m.rates.items()))
+        lines = [f"log {self.log.source}: {self.log.n} samples, {self.log.t[-1] - self.log.t[0]:.4g} s; bite force "
+                 f"{'logged' if self.log.force_given else 'not logged (zero)'}",
+                 f"poses from the crank angles: RMS angle residual {np.sqrt(np.mean(m.angle_residual**2)):.3g} rad; " + smoothing_line,
+                 f"condition number of the Jacobian (unit-norm columns, the {int(f.free.sum())} free parameters): "
+                 f"{f.condition_start:.4g} at the start, {f.condition:.4g} at the estimate",
+                 "RMS torque residual tau1..6 [N*m]: start " + " ".join(f"{v:.4g}" for v in self.rms("start"))
+                 + "; estimate " + " ".join(f"{v:.4g}" for v in self.rms()),
+                 f"least squares: {f.solver.nfev} evaluations, {f.solver.message}"]
+        for d in self.held_directions:
+            lines.append("not identifiable, held at the start: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
+                         + " (file units)")
+        return lines + [f"note: {n}" for n in self.notes]
+
+
+NAMES_INDEX = {p.name: j for j, p in enumerate(PARAMETERS)}
+
+
+def _g(value: float) -> float:
+    return float(f"{value:.6g}")
+
+
+def references(model: Model, x0: np.ndarray) -> np.ndarray:
+    """Reference magnitudes of the parameters (SI): the start value for the mass and friction (the built-in
+    models' where the start is 0), a third of the inertia's trace for every inertia entry (off-diagonal entries
+    are judged against the body's size, not their own near-zero values)."""
+    ref = np.abs(x0).astype(float)
+    ref[INERTIA] = np.trace(model.mandible_inertia) / 3
+    for j, p in enumerate(PARAMETERS):
+        if ref[j] == 0 and p.name in TYPICAL_FRICTION:
+            ref[j] = TYPICAL_FRICTION[p.name]
+    return ref
+
+
+def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
+             fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
+             progress=None) -> Identification:
+    """Estimate the friction and the mandible's inertia of ``model`` from ``log`` (see the module docstring).
+
+    ``fix``: parameter-file keys (:data:`chewbot.identification.parameters.GROUPS`) kept at the model's values;
+    ``window_s``: the smoothing window of the rates; ``rcond``, ``max_relative_se``: the identifiability
+    thresholds (:mod:`chewbot.identification.estimate`).
+    """
+    step = progress or (lambda msg: None)
+    for key in fix:
+        if key not in GROUPS:
+            raise ChewbotError(f"--fix {key}: not an identified key; choose among {', '.join(GROUPS)}")
+    step("motion from the crank angles")
+    motion = log_motion(model, log, side, window_s)
+    x0 = x_of(model)
+    status = ["" for _ in PARAMETERS]
+    notes = []
+    for j, p in enumerate(PARAMETERS):
+        if p.group in fix:
+            status[j] = "fixed"
+        elif j in HKP and not model.has_hkp:
+            status[j] = "not in the model"
+    if model.friction.actuator_arm == 0 and "friction.actuator_coulomb" not in fix:
+        status[NAMES_INDEX["R*mu_c"]] = "no arm"
+        notes.append("friction.actuator_arm_mm is 0: the actuators' Coulomb friction R mu_c cannot be written back as "
+                     "mu_c; it is not estimated")
+    free = np.array([s == "" for s in status])
+    problem = ReducedProblem(model, motion.kin, log.tau)
+    step("the start model")
+    result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
+    step("results")
+    idx = np.flatnonzero(free)
+    share = np.zeros(N_X)
+    share[idx] = np.sum(result.held**2, axis=1) if result.held.shape[1] else 0.0
+    for j in idx:
+        status[j] = "held" if share[j] > 0.99 else "partly held" if share[j] > 0.01 else "estimated"
+    for j in np.flatnonzero(result.at_bound):
+        if status[j] in ("estimated", "partly held"):
+            status[j] += " (at its bound)"
+    held_directions = []
+    for h in result.held.T:
+        d = h * result.ref[idx]  # a change of x (SI) along the direction
+        d = d / np.max(np.abs(h))
+        held_directions.append({PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in zip(idx, d)
+                                if abs(c / result.ref[j]) > 1e-3})
+    identified = [g for g in GROUPS if any(status[j].startswith(("estimated", "partly")) for j, p in enumerate(PARAMETERS)
+                                           if p.group == g)]
+    se = np.sqrt(np.maximum(np.diag(result.cov), 0.0))
+    return Identification(model, log, motion, result, x0, result.x, se, status, held_directions, identified, notes)

@@ -1,0 +1,131 @@
+"""The mandible's motion from a log's crank angles: poses by least squares on the angles, rates by smoothing.
+
+Forward kinematics as the robot needs it: the target's six crank angles over-determine its four coordinates, and
+measured angles carry noise, so the closure cannot hold exactly. The pose of each sample is the least-squares fit
+of the model's angles theta(q) (closed-form inverse kinematics) to the measured ones, by Gauss-Newton on all
+samples at once with the exact Jacobian d theta / d q of the compiled kinematics kernel. Its residual (2 degrees of
+freedom per sample on the target, none on the 6RSS) measures the angles' noise and the geometry's error.
+
+Rates: the fitted coordinates are differentiated by the Savitzky-Golay filter of :mod:`chewbot.task.smoothing`
+(``window_s`` long, degree 5); where the log gives the crank rates, q_dot solves J q_dot = theta_dot by least
+squares and q_ddot solves J q_ddot = theta_ddot - (theta_ddot at q_ddot = 0), or is the filter's derivative of
+q_dot. The motion then goes through :func:`chewbot.kinematics.motion.solve_kinematics` like any task, so the
+angles, rates and checks are the model's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from chewbot.casadi_tools import evaluate, native
+from chewbot.errors import KinematicsError, TaskError
+from chewbot.identification.log import RobotLog
+from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
+from chewbot.kinematics.motion import Kinematics, solve_kinematics
+from chewbot.model import Model
+from chewbot.task import smoothing
+from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+
+# Gauss-Newton on the angles stops when the largest step is below this (m or rad).
+STEP_TOL = 1e-13
+MAX_ITERATIONS = 50
+# A sample whose angles the model cannot fit closer than this (rad, RMS over the six) is not a pose of this robot:
+# a wrong model, a column in the wrong place or an angle offset, not noise (encoders resolve ~1e-4 rad).
+MAX_ANGLE_RESIDUAL = 1e-2
+
+
+@dataclass(frozen=True, eq=False)
+class LogMotion:
+    """The motion recovered from a log: ``kin`` (:class:`Kinematics`, Euler angles), the RMS residual of the angle
+    fit per sample (rad), and how the rates were obtained (``rates``: ``"smoothed"`` or ``"logged"`` per order)."""
+
+    kin: Kinematics
+    angle_residual: np.ndarray
+    rates: dict
+    window_samples: int
+
+
+def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, np.ndarray]:
+    """q_EE in Euler angles (N, 4 or 6) whose model angles fit ``theta`` (N, 6) best, and the residual (N, 6) rad.
+
+    Gauss-Newton from the home pose on all samples at once; ``where(i)`` names sample i in errors. Raises
+    :class:`KinematicsError` where it does not converge or leaves the workspace, :class:`TaskError` where the
+    fit is worse than :data:`MAX_ANGLE_RESIDUAL`.
+    """
+    fn = native(kinematics_kernel(model.mechanism, "euler-angles"))
+    p = model.vector()
+    n, k = theta.shape[0], model.dof
+    q = np.zeros((n, k))
+    zeros = np.zeros((n, k))
+    it_theta, it_J = KINEMATICS_OUTPUTS.index("theta"), KINEMATICS_OUTPUTS.index("J_theta1_angles")
+    for _ in range(MAX_ITERATIONS):
+        out = evaluate(fn, q, zeros, zeros, p)
+        res = _wrap(theta - out[it_theta])
+        step = _lstsq(out[it_J], res)
+        if not np.isfinite(step).all():
+            i = int(np.flatnonzero(~np.isfinite(step).all(axis=1))[0])
+            raise KinematicsError(f"{where(i) if where else f'sample {i}'}: the crank angles give no pose of the model "
+                                  "(out of reach or singular)")
+        q = q + step
+        if np.abs(step).max() < STEP_TOL:
+            break
+    out = evaluate(fn, q, zeros, zeros, p)
+    res = _wrap(theta - out[it_theta])
+    rms = np.sqrt(np.mean(res**2, axis=1))
+    bad = np.flatnonzero(~(rms <= MAX_ANGLE_RESIDUAL))
+    if bad.size:
+        i = int(bad[0])
+        raise TaskError(f"{where(i) if where else f'sample {i}'}: the crank angles fit no pose of the model: RMS residual "
+                        f"{np.degrees(rms[i]):.3g} deg > {np.degrees(MAX_ANGLE_RESIDUAL):.3g} deg ({bad.size} sample(s)); "
+                        "check the model, the order of the theta columns and their zero")
+    return q, res
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _lstsq(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Least-squares solutions of J x = r, batched (J (N, 6, k) of full column rank away from singularities)."""
+    Q, R = np.linalg.qr(J)
+    return np.linalg.solve(R, np.einsum("nki,nk->ni", Q, r)[..., None])[..., 0]
+
+
+def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S) -> LogMotion:
+    """The mandible's motion along a log (see the module docstring), as :class:`LogMotion`."""
+    q, res = fit_poses(model, log.theta, log.where)
+    coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
+    needs_filter = log.dtheta is None or log.ddtheta is None
+    window = 0
+    if needs_filter:
+        try:
+            dt = smoothing.uniform_step(log.t)
+            window = smoothing.window_samples(log.n, dt, window_s)
+        except smoothing.IrregularSampling as exc:
+            raise TaskError(f"{log.source}: {log.where(exc.sample)}: {exc}") from None
+        except TaskError as exc:
+            raise TaskError(f"{log.source}: {exc}") from None
+    fn = native(kinematics_kernel(model.mechanism, "euler-angles"))
+    p = model.vector()
+    zeros = np.zeros_like(q)
+    out = dict(zip(KINEMATICS_OUTPUTS, evaluate(fn, q, zeros, zeros, p)))
+    J = out["J_theta1_angles"]
+    if log.dtheta is None:
+        dq, ddq = smoothing.derivatives(log.t, q, window_s)
+    else:
+        dq = _lstsq(J, log.dtheta)
+        ddq = smoothing.derivatives(log.t, dq, window_s)[0] if log.ddtheta is None else None
+    if log.ddtheta is not None:
+        bias = dict(zip(KINEMATICS_OUTPUTS, evaluate(fn, q, dq, zeros, p)))["ddtheta"]  # theta_ddot at q_ddot = 0
+        ddq = _lstsq(J, log.ddtheta - bias)
+    task = Task(name=log.source, t=log.t, coords=coords, q=q, dq=dq, ddq=ddq, force=log.force, side=side,
+                source=log.source, lines=log.lines)
+    try:
+        kin = solve_kinematics(model, task, "euler-angles")
+    except KinematicsError as exc:
+        raise exc.located(f"{log.source}: {log.where(exc.sample)}" if exc.sample is not None else log.source) from None
+    rates = {"first": "logged" if log.dtheta is not None else "smoothed",
+             "second": "logged" if log.ddtheta is not None else "smoothed"}
+    return LogMotion(kin, np.sqrt(np.mean(res**2, axis=1)), rates, window)

@@ -1,0 +1,91 @@
+"""Writing an identification: the model file with the estimates in place, and the table of estimates beside it.
+
+The model file is the start model's own TOML with its layout and comments kept (tomlkit): the identified values
+replace the old ones (each with a comment giving its standard error), their keys move from ``assumed`` to the
+top-level ``identified``, and a header of comments says where they come from. Its first line is chewbot's marker,
+so that ``--force`` can replace it; a marker line the start file had (an identified model identified again) is
+replaced, not repeated.
+
+The table (CSV, the same as the printed one, ``MODEL.identification.csv``): one row per parameter, file units, with
+the run's summary (log, condition number, residuals, non-identifiable combinations) as ``#`` lines above the header.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+
+import tomlkit
+
+from chewbot.identification.parameters import PARAMETERS
+
+TABLE_COLUMNS = ("parameter", "key", "unit", "start", "estimate", "standard_error", "status")
+_MARKER = re.compile(r"^\ufeff?\s*#\s*written by chewbot\b")
+
+
+def _format(value: float) -> float:
+    """A value as written: 10 significant digits (far below any standard error), as a float."""
+    return float(f"{value:.10g}")
+
+
+def model_text(source_text: str, values: dict[str, object], identified: list[str], header: list[str],
+               comments: dict[str, str]) -> str:
+    """The start model's TOML text with ``values`` (file key -> number or nested list) in place, their keys in
+    ``identified`` and out of ``assumed``, ``comments`` (file key -> text) beside them and ``header`` lines on top
+    (the marker line first)."""
+    lines = source_text.splitlines(keepends=True)
+    if lines and _MARKER.match(lines[0]):
+        lines = lines[1:]
+    doc = tomlkit.parse("".join(lines))
+    for key, value in values.items():
+        section, leaf = key.split(".")
+        item = tomlkit.item(value)
+        if isinstance(value, list):
+            item.multiline(True)
+        doc[section][leaf] = item
+        if key in comments and not isinstance(value, list):
+            doc[section][leaf].comment(comments[key])
+    assumed = [k for k in doc.get("assumed", []) if k not in identified]
+    previous = [k for k in doc.get("identified", []) if k not in identified]
+    if "assumed" in doc:
+        array = tomlkit.array()
+        array.extend(assumed)
+        array.multiline(True)
+        doc["assumed"] = array
+    array = tomlkit.array()
+    array.extend(previous + identified)
+    array.multiline(True)
+    if "identified" in doc:
+        doc["identified"] = array
+    else:
+        _insert_after(doc, "assumed" if "assumed" in doc else "gravity_m_per_s2", "identified", array)
+    return "".join(line + "\n" for line in header) + tomlkit.dumps(doc)
+
+
+def _insert_after(doc, after: str, key: str, value) -> None:
+    """Put ``key`` into the top level of ``doc`` right after ``after`` (before the tables)."""
+    items = list(doc.items())
+    doc.clear()
+    for k, v in items:
+        doc[k] = v
+        if k == after:
+            doc[key] = value
+
+
+def table_text(marker: str, summary: list[str], rows: list[dict]) -> str:
+    """The CSV of the estimates: the marker line, the summary as # lines, the header, a row per parameter."""
+    out = io.StringIO()
+    out.write(marker + "\n")
+    for line in summary:
+        out.write(f"# {line}\n")
+    writer = csv.DictWriter(out, TABLE_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow(row)
+    return out.getvalue()
+
+
+def unit_of(name: str) -> str:
+    """The file unit of a parameter of x by its name."""
+    return next(p.file_unit for p in PARAMETERS if p.name == name)
