@@ -60,8 +60,9 @@ class Evaluation:
 class ReducedProblem:
     """The residual of a log with the normal forces eliminated, as a function of x (:meth:`evaluate_at`)."""
 
-    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray):
+    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray, used: np.ndarray | None = None):
         self.model, self.kin, self.tau = model, kin, np.asarray(tau, dtype=float)
+        self.used = np.ones(kin.n, dtype=bool) if used is None else used  # samples in the fit; others weigh 0
         self.nN = n_unknowns(model)
         self.B = model.molar(kin.side)
         self.coefficients = native(coefficients_kernel(model.mechanism, ORIENTATION))
@@ -82,12 +83,13 @@ class ReducedProblem:
             (D, _, _) = evaluate(self.coefficients, *self.inputs, self.B, p)
             N = self._N = normal_forces(self.normal, D, self.tau, p, self._N)
         r, dr_dN, dr_dx, H_NN, H_Nx = evaluate(self.jacobian, *self.inputs, self.B, N, self.tau, x, p)
+        r = r * self.used[:, None]
         if not jacobian:
             return Evaluation(x, r, N)
         if self.nN:
             dN_dx = -np.linalg.solve(H_NN.reshape(n, self.nN, self.nN), H_Nx.reshape(n, self.nN, N_X))
             dr_dx = dr_dx.reshape(n, 6, N_X) + np.einsum("nij,njk->nik", dr_dN.reshape(n, 6, self.nN), dN_dx)
-        return Evaluation(x, r, N, dr_dx.reshape(n * 6, N_X))
+        return Evaluation(x, r, N, (dr_dx.reshape(n, 6, N_X) * self.used[:, None, None]).reshape(n * 6, N_X))
 
 
 def normal_forces(kernel, D: np.ndarray, tau: np.ndarray, p: np.ndarray, warm: np.ndarray | None = None) -> np.ndarray:
@@ -185,6 +187,7 @@ class Fit:
     at_bound: np.ndarray
     solver: object
     evaluations: int
+    used: np.ndarray
 
 
 def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarray, lags: int,
@@ -237,7 +240,7 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
         Jc = Jr @ P
         more = _structural_null(Jc, rcond)
         if not more.shape[1]:
-            C = covariance(Jc, ev.r, lags, rows_per_sample * problem.kin.n)
+            C = covariance(Jc, ev.r, lags, rows_per_sample * int(problem.used.sum()))
             w, U = np.linalg.eigh(C)
             more = U[:, np.sqrt(np.maximum(w, 0)) > max_relative_se]
         if not more.shape[1]:
@@ -250,7 +253,7 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
     at_bound = np.zeros(N_X, dtype=bool)
     at_bound[idx] = solver.active_mask != 0
     return Fit(x, start, ev, free, ref, held, cov, condition_start, condition, singular, at_bound, solver,
-               problem.evaluations)
+               problem.evaluations, problem.used)
 
 
 def _structural_null(J: np.ndarray, rcond: float) -> np.ndarray:

@@ -15,7 +15,8 @@ import numpy as np
 from chewbot.errors import ChewbotError
 from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
 from chewbot.identification.log import RobotLog
-from chewbot.identification.motion import LogMotion, log_motion
+from chewbot.dynamics.newton_euler import EPS_THETA_DOT
+from chewbot.identification.motion import MIN_SPEED_EPS, MIN_SPEED_NOISES, LogMotion, log_motion
 from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMETERS, x_of
 from chewbot.model import Model
 from chewbot.task import smoothing
@@ -50,9 +51,14 @@ class Identification:
     identified: list[str]
     notes: list[str] = field(default_factory=list)
 
+    @property
+    def min_speed(self) -> float:
+        """rad/s: samples with a crank slower than this are left out of the fit."""
+        return max(MIN_SPEED_NOISES * self.motion.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT)
+
     def rms(self, which: str = "estimate") -> np.ndarray:
-        """RMS of the torque residual per actuator (N*m), at the start model or the estimate."""
-        r = (self.fit.start if which == "start" else self.fit.evaluation).r
+        """RMS of the torque residual per actuator (N*m) over the samples in the fit, at the start or the estimate."""
+        r = (self.fit.start if which == "start" else self.fit.evaluation).r[self.fit.used]
         return np.sqrt(np.mean(r**2, axis=0))
 
     def rows(self) -> list[dict]:
@@ -95,6 +101,7 @@ class Identification:
                           f"(degree {smoothing.POLYORDER}, {m.window_samples} samples)" for k, v in m.rates.items()))
         lines = [f"log {self.log.source}: {self.log.n} samples, {self.log.t[-1] - self.log.t[0]:.4g} s; bite force "
                  f"{'logged' if self.log.force_given else 'not logged (zero)'}",
+                 f"samples in the fit: {int(self.fit.used.sum())} (every crank turning faster than {self.min_speed:.3g} rad/s)",
                  f"poses from the crank angles: RMS angle residual {np.sqrt(np.mean(m.angle_residual**2)):.3g} rad; " + smoothing_line,
                  f"condition number of the Jacobian (unit-norm columns, the {int(f.free.sum())} free parameters): "
                  f"{f.condition_start:.4g} at the start, {f.condition:.4g} at the estimate",
@@ -154,7 +161,12 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
         notes.append("friction.actuator_arm_mm is 0: the actuators' Coulomb friction R mu_c cannot be written back as "
                      "mu_c; it is not estimated")
     free = np.array([s == "" for s in status])
-    problem = ReducedProblem(model, motion.kin, log.tau)
+    used = motion.moving()
+    if used.sum() < 10 * N_X:
+        raise ChewbotError(f"{log.source}: only {int(used.sum())} of {log.n} samples have every crank turning (faster than "
+                           f"{max(MIN_SPEED_NOISES * motion.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT):.3g} rad/s): too "
+                           "little motion to identify friction; log a longer or livelier motion")
+    problem = ReducedProblem(model, motion.kin, log.tau, used)
     step("the start model")
     result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
     step("results")

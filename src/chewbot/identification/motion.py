@@ -20,17 +20,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from chewbot.casadi_tools import evaluate, native
+from chewbot.dynamics.newton_euler import EPS_THETA_DOT
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.identification.log import RobotLog
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
+from scipy.signal import savgol_coeffs
 from chewbot.task import smoothing
 from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
 
 # Gauss-Newton on the angles stops when the largest step is below this (m or rad).
 STEP_TOL = 1e-13
 MAX_ITERATIONS = 50
+# Samples where a crank turns slower than the larger of these are left out of the fit (LogMotion.moving).
+MIN_SPEED_NOISES = 5.0
+MIN_SPEED_EPS = 10.0
 # A sample whose angles the model cannot fit closer than this (rad, RMS over the six) is not a pose of this robot:
 # a wrong model, a column in the wrong place or an angle offset, not noise (encoders resolve ~1e-4 rad).
 MAX_ANGLE_RESIDUAL = 1e-2
@@ -45,6 +50,15 @@ class LogMotion:
     angle_residual: np.ndarray
     rates: dict
     window_samples: int
+    speed_noise: float  # rad/s: standard deviation of the crank rates' error (0 where the log gives the rates)
+
+    def moving(self) -> np.ndarray:
+        """(N,) True where every crank turns clearly: faster than :data:`MIN_SPEED_NOISES` times the rates' noise
+        and :data:`MIN_SPEED_EPS` times the regularisation of sgn(theta_dot). Elsewhere the direction of the
+        Coulomb friction is not known (at rest static friction is indeterminate, and a smoothed rate near zero has
+        a random sign): those samples are left out of the fit."""
+        limit = max(MIN_SPEED_NOISES * self.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT)
+        return np.abs(self.kin.dtheta).min(axis=1) > limit
 
 
 def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, np.ndarray]:
@@ -128,4 +142,12 @@ def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float 
         raise exc.located(f"{log.source}: {log.where(exc.sample)}" if exc.sample is not None else log.source) from None
     rates = {"first": "logged" if log.dtheta is not None else "smoothed",
              "second": "logged" if log.ddtheta is not None else "smoothed"}
-    return LogMotion(kin, np.sqrt(np.mean(res**2, axis=1)), rates, window)
+    speed_noise = 0.0
+    if log.dtheta is None:
+        # the angles' noise from the fit's residual (6 - dof degrees of freedom of 6 per sample), times the filter's
+        # gain on white noise for the first derivative
+        dof = 6 - model.dof
+        sigma = np.sqrt(np.mean(res**2) * 6 / dof) if dof else 0.0
+        gain = np.linalg.norm(savgol_coeffs(window, smoothing.POLYORDER, deriv=1, delta=smoothing.uniform_step(log.t)))
+        speed_noise = float(sigma * gain)
+    return LogMotion(kin, np.sqrt(np.mean(res**2, axis=1)), rates, window, speed_noise)
