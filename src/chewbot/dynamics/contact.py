@@ -56,6 +56,9 @@ NORMAL_FORCE_DESCRIPTION = "normal force of the plane on the condyle along n = (
 # A candidate of the unilateral QP counts as feasible down to this much below a bound (N): the rounding of
 # N (about 1e-14 N on forces of tens of newtons), far below the contact-pull check's 1e-6 N.
 BOUND_TOL_N = 1e-9
+# A row of K Z, or the determinant of K Z, below this share of its size before the projection (abs(K_j), abs(a_1)
+# abs(a_2)) is rounding, not a lever: the null-space torques cannot change that N (a singular pose).
+SINGULAR_RTOL = 1e-12
 FALLBACK = ("unilateral fallback: the minimum-norm torques subject to N_L, N_R >= contact.preload_N "
             "(a QP in the two null-space torques, solved exactly by its active sets)")
 
@@ -137,7 +140,7 @@ def unilateral_minimum_norm(tau: np.ndarray, terms: dict[str, np.ndarray], prelo
     Z = Q[:, :, 4:]  # (n, 6, 2): J_theta1' Z = 0, Z'Z = I
     N = apply_map(terms, tau)
     A = terms["K"] @ Z
-    y, feasible = _nearest_point(A, preload - N)
+    y, feasible = _nearest_point(A, preload - N, np.linalg.norm(terms["K"], axis=2))
     y[~feasible] = 0.0  # never clipped: the infeasible samples are named and keep the minimum-norm torques
     raised = np.flatnonzero(np.any(y != 0.0, axis=1))
     tau = tau.copy()
@@ -147,8 +150,10 @@ def unilateral_minimum_norm(tau: np.ndarray, terms: dict[str, np.ndarray], prelo
     return UnilateralSolution(tau, N, raised, np.flatnonzero(~feasible))
 
 
-def _nearest_point(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _nearest_point(A: np.ndarray, b: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The y of least norm with A y >= b, at every sample (A (n, 2, 2), b (n, 2)), and whether there is one.
+    ``scale`` (n, 2): the size of each row's coefficients before the projection onto the null space (abs(K_j)),
+    against which a row of A counts as zero.
 
     The KKT point of the convex QP is the equality-constrained minimiser of its active set; the four sets give
     y = 0, the projections of 0 onto each line a_j . y = b_j, and the vertex A y = b. The feasible candidate of
@@ -159,9 +164,12 @@ def _nearest_point(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     adjugate = np.stack([np.stack([A[:, 1, 1], -A[:, 0, 1]], -1), np.stack([-A[:, 1, 0], A[:, 0, 0]], -1)], 1)
     with np.errstate(divide="ignore", invalid="ignore"):
+        # a row of A that vanishes to rounding cannot reach its bound, nor can two parallel rows both (singular poses)
+        reach = a_dot > (SINGULAR_RTOL * scale) ** 2
         candidates = [np.zeros((n, 2))]
-        candidates += [A[:, j, :] * (b[:, j] / a_dot[:, j])[:, None] for j in range(2)]
-        candidates.append(np.einsum("nij,nj->ni", adjugate, b) / det[:, None])
+        candidates += [np.where(reach[:, j, None], A[:, j, :] * (b[:, j] / a_dot[:, j])[:, None], np.nan) for j in range(2)]
+        vertex = reach.all(axis=1) & (np.abs(det) > SINGULAR_RTOL * np.sqrt(a_dot[:, 0] * a_dot[:, 1]))
+        candidates.append(np.where(vertex[:, None], np.einsum("nij,nj->ni", adjugate, b) / det[:, None], np.nan))
     best, cost = np.zeros((n, 2)), np.full(n, np.inf)
     for y in candidates:
         ok = np.isfinite(y).all(axis=1) & np.all(np.einsum("nij,nj->ni", A, y) >= b - BOUND_TOL_N, axis=1)
