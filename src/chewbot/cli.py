@@ -218,8 +218,8 @@ def run(
     Writes results.csv (one row per sample, SI units in the header; torques tau1..tau6 and inertia coupling
     MCI1..MCI6 included), run.json (model, options, versions, units, the validity checks), figures and report.html.
     The folder is always written in full; the exit code is then 4 if a validity check failed (torque, power or
-    bearing limits, crank range, speed, an infeasible distribution, and under --contact unilateral a plane pulling
-    a condyle), unless --allow-violations.
+    bearing limits, crank range, speed, an infeasible distribution, and under --contact unilateral a normal force
+    below contact.preload_N), unless --allow-violations.
 
     Examples:
 
