@@ -5,7 +5,7 @@ The stages, one module each, in the order the data takes: :mod:`~chewbot.identif
 (what is estimated, its place in p, the physical parametrisation), :mod:`~chewbot.identification.regressor` (the
 torque model of a sample and its exact derivatives, compiled), :mod:`~chewbot.identification.estimate` (bounded
 least squares with the normal forces eliminated, standard errors, identifiability),
-:mod:`~chewbot.identification.identify` (all of them: :func:`identify`) and :mod:`~chewbot.identification.output`
+:mod:`~chewbot.identification.identifier` (all of them: :func:`identify`) and :mod:`~chewbot.identification.output`
 (the model file and the table). The command line is :mod:`~chewbot.identification.command`. The names below load
 on first use, so that the command line starts fast.
 """
@@ -15,7 +15,7 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "identify": "identify", "Identification": "identify",
+    "identify": "identifier", "Identification": "identifier",
     "RobotLog": "log", "read_log": "log",
     "LogMotion": "motion", "log_motion": "motion", "fit_poses": "motion",
     "PARAMETERS": "parameters", "x_of": "parameters",

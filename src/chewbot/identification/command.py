@@ -1,6 +1,6 @@
 """``chewbot identify``: a robot log in, the model with its friction and inertia estimated out.
 
-The command's options and files; the work is :func:`chewbot.identification.identify.identify`. The model file and
+The command's options and files; the work is :func:`chewbot.identification.identifier.identify`. The model file and
 the table beside it (``MODEL.identification.csv``) are written together through
 :func:`chewbot.outputs.atomic_files` (all or none), each beginning with chewbot's marker line; an existing file is
 replaced only with ``--force`` and only if chewbot wrote it.
@@ -42,7 +42,7 @@ def identify(
     """
     from chewbot.cli import EXIT_BAD_INPUT, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
-    from chewbot.identification.identify import STEPS, identify as run_identify
+    from chewbot.identification.identifier import STEPS, identify as run_identify
     from chewbot.identification.log import read_log
     from chewbot.identification.output import model_text, table_text
     from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line

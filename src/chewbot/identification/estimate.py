@@ -140,12 +140,13 @@ def normal_forces(kernel, D: np.ndarray, tau: np.ndarray, p: np.ndarray, warm: n
 
 
 def condition_number(J: np.ndarray) -> tuple[float, np.ndarray]:
-    """Condition number of J with unit-norm columns, and its singular values (descending, the largest 1). A
-    column of zeros (a parameter the log does not excite) makes it infinite."""
+    """Condition number of J with unit-norm columns, and its singular values (descending, the largest 1). J's
+    columns are per reference magnitude of their parameter (:func:`fit`); a column below :data:`RCOND` of the
+    largest (a parameter the log does not excite: its column is rounding) makes it infinite."""
     norms = np.linalg.norm(J, axis=0)
     if not norms.size:
         return np.nan, norms
-    if norms.min() <= 1e-300:
+    if norms.min() <= RCOND * max(norms.max(), 1e-300):
         return np.inf, np.linalg.svd(J, compute_uv=False) / max(norms.max(), 1e-300)
     s = np.linalg.svd(J / norms, compute_uv=False)
     return float(s[0] / s[-1]) if s[-1] > 0 else np.inf, s / s[0]
@@ -203,7 +204,7 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
     lo, hi = phi_bounds(phi0)
     rows_per_sample = 6 - problem.nN
     start = problem.evaluate_at(x0, jacobian=True)
-    condition_start, _ = condition_number(start.J[:, idx])
+    condition_start, _ = condition_number(start.J[:, idx] * ref[idx])
     held = _structural_null(start.J[:, idx] * ref[idx], rcond)
     cache: dict[bytes, tuple] = {}
 
@@ -249,7 +250,7 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
     cov = np.zeros((N_X, N_X))
     T = ref[idx, None] * P
     cov[np.ix_(idx, idx)] = T @ C @ T.T
-    condition, singular = condition_number(ev.J[:, idx])
+    condition, singular = condition_number(ev.J[:, idx] * ref[idx])
     at_bound = np.zeros(N_X, dtype=bool)
     at_bound[idx] = solver.active_mask != 0
     return Fit(x, start, ev, free, ref, held, cov, condition_start, condition, singular, at_bound, solver,
@@ -257,12 +258,14 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
 
 
 def _structural_null(J: np.ndarray, rcond: float) -> np.ndarray:
-    """Orthonormal directions (k, h) along which J (unit-norm columns; zero columns are their own direction)
-    changes by less than ``rcond`` of its largest singular value, in J's own coordinates."""
+    """Orthonormal directions (k, h) along which J (unit-norm columns) changes by less than ``rcond`` of its
+    largest singular value, in J's own coordinates. A column below ``rcond`` of the largest (J's columns are per
+    reference magnitude) is rounding, not an effect of its parameter: it is a direction of its own, not scaled up
+    to unit norm."""
     norms = np.linalg.norm(J, axis=0)
-    zero = norms <= 1e-300
-    scaled = J / np.where(zero, 1.0, norms)
-    _, s, Vt = np.linalg.svd(scaled, full_matrices=True)
+    zero = norms <= rcond * max(norms.max(initial=0.0), 1e-300)
+    scaled = np.where(zero, 0.0, J / np.where(zero, 1.0, norms))
+    _, s, Vt = np.linalg.svd(scaled, full_matrices=False)
     s = np.concatenate([s, np.zeros(J.shape[1] - s.size)])
     null = Vt.T[:, s < rcond * max(s[0], 1e-300)] if s.size else np.zeros((J.shape[1], 0))
     # back to J's coordinates: a null vector v of J D^-1 is D^-1 v for J

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import qr
 
 from chewbot.errors import ChewbotError
 from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
@@ -121,6 +122,15 @@ def _g(value: float) -> float:
     return float(f"{value:.6g}")
 
 
+def _echelon(H: np.ndarray) -> np.ndarray:
+    """The rows of H (h, k) spanning the same directions in reduced row echelon form, pivots chosen by QR with
+    column pivoting: where the held directions include single parameters, each is reported alone."""
+    if not H.shape[0]:
+        return H
+    piv = qr(H, pivoting=True, mode="r")[1][: H.shape[0]]
+    return np.linalg.solve(H[:, piv], H)
+
+
 def references(model: Model, x0: np.ndarray) -> np.ndarray:
     """Reference magnitudes of the parameters (SI): the start value for the mass and friction (the built-in
     models' where the start is 0), a third of the inertia's trace for every inertia entry (off-diagonal entries
@@ -179,7 +189,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
         if status[j] in ("estimated", "partly held"):
             status[j] += " (at its bound)"
     held_directions = []
-    for h in result.held.T:
+    for h in _echelon(result.held.T):
         d = h * result.ref[idx]  # a change of x (SI) along the direction
         d = d / np.max(np.abs(h))
         held_directions.append({PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in zip(idx, d)
