@@ -36,11 +36,11 @@ TORQUES = [f"tau{i}" for i in range(1, 7)]
 
 
 @functools.cache
-def robot(name: str = "target", rate_hz: float = 250.0, cycles: int = 1):
+def robot(name: str = "target", rate_hz: float = 250.0, cycles: int = 1, **motion):
     """The true model and its kinematics and torques along the default chewing motion (no rest: every crank
-    turns nearly all the time)."""
+    turns nearly all the time; ``motion``: other ChewingParameters)."""
     m = load_model(name, TRUE if name == "target" else {k: v for k, v in TRUE.items() if "hkp" not in k})
-    task = default_task(m, "left", ChewingParameters(cycles=cycles, rest_s=0.0, rate_hz=rate_hz))
+    task = default_task(m, "left", ChewingParameters(cycles=cycles, rest_s=0.0, rate_hz=rate_hz, **motion))
     kin = solve_kinematics(m, task, "euler-angles")
     return m, kin, inverse_dynamics(m, kin, "newton-euler", friction=True).tau
 
@@ -94,7 +94,11 @@ def test_with_noise_the_estimates_are_within_their_standard_errors(tmp_path, see
     result = identify(load_model("target"), read_log(write_log(tmp_path / "noisy.csv", kin, noisy, theta, rates=False)))
     truth = x_of(m)
     est = np.array([s.startswith("estimated") for s in result.status])
-    assert est[[NAMES.index(n) for n in ("mu_H", "c_H", "R*mu_c", "c_A", "m")]].all(), result.status
+    # At this noise the friction and the mass are identified; the inertia's torques (~1e-2 N*m along this motion)
+    # and the HKP viscous force's (tangential speeds of mm/s) are too small: both are held with their reason.
+    assert [NAMES[j] for j in np.flatnonzero(est)] == ["m", "mu_H", "R*mu_c", "c_A"], result.status
+    assert all(result.status[j] == "held" and j in result.fit.reasons for j in np.flatnonzero(~est))
+    np.testing.assert_array_equal(result.x[~est], x_of(load_model("target"))[~est])  # held at the start
     z = np.abs(result.x - truth)[est] / result.se[est]
     # Tolerance: 4 standard errors. For one parameter a normal error exceeds that with probability 6e-5, so with
     # at most 11 parameters a correct estimator and correct standard errors pass with probability > 0.999 (the
@@ -185,7 +189,7 @@ def test_bad_logs_get_errors_naming_file_line_and_column(tmp_path):
     row = lines[20].split(",")
     row[header.index("theta4")] = repr(float(row[header.index("theta4")]) + 0.1)
     msg = bad("offset.csv", "\n".join(lines[:20] + [",".join(row)] + lines[21:]) + "\n")
-    assert "offset.csv" in msg and "line 21" in msg and "theta" in msg
+    assert "offset.csv" in msg and "line 21" in msg and "theta4" in msg
     # some rates but not all
     msg = bad("rates.csv", "\n".join([lines[0] + ",dtheta1"] + [r + ",0" for r in lines[1:]]) + "\n")
     assert "rates.csv" in msg and "dtheta2" in msg

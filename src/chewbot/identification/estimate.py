@@ -9,12 +9,12 @@ values.
 
 Identifiability: the SVD of the reduced Jacobian with unit-norm columns (each parameter's column divided by its
 norm: the result does not depend on the parameters' units, and the condition number is within a factor
-sqrt(k) of the smallest any column scaling gives, van der Sluis 1969). A direction whose singular value is below
-:data:`RCOND` times the largest (the torques change by less than that fraction along it) is not identifiable
-from the log; such directions are held at the start values by rows added to the residual, heavy enough that
-the data cannot move them (``penalty``). Standard errors: the sandwich covariance of the identifiable
-directions with the residuals' autocorrelation up to the smoothing window included (Newey-West, Bartlett
-weights): smoothed rates correlate the residuals of neighbouring samples.
+sqrt(k) of the smallest any column scaling gives, van der Sluis 1969). A combination whose singular value is
+below :data:`RCOND` times the largest (the torques change by less than that fraction along it) is not
+identifiable from the log; one parameter of each such combination is held at its start value. A parameter whose
+standard error exceeds :data:`MAX_RELATIVE_SE` of its magnitude is held too (:func:`fit`). Standard errors: the
+sandwich covariance with the residuals' autocorrelation up to the smoothing window included (Newey-West,
+Bartlett weights): smoothed rates correlate the residuals of neighbouring samples.
 """
 
 from __future__ import annotations
@@ -22,12 +22,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from chewbot.casadi_tools import evaluate, native
 from chewbot.command import check_interrupted
 from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
-from chewbot.identification.parameters import N_X, phi_bounds, phi_of, p_with, x_of_phi
+from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -42,8 +43,13 @@ MAX_RELATIVE_SE = 0.3
 # newtons, above the rounding of N (the torques' rounding over the smallest singular value of d tau / d N).
 N_STEP_TOL = 1e-10
 N_MAX_ITERATIONS = 50
-# The rows that hold the non-identifiable directions weigh this much more than the largest singular value.
-PENALTY = 1e4
+# The least squares stop when the sum of squares falls by less than FTOL of itself in a step, or the scaled step
+# is below XTOL of the scaled parameters (SciPy's criteria). No gradient test: its threshold is absolute, and a
+# log that the model fits to rounding has a tiny gradient long before the parameters have converged.
+FTOL = 1e-10
+XTOL = 1e-10
+# Evaluations of the residual per least-squares solve (each with its Jacobian): converged fits take 20-80.
+MAX_EVALUATIONS = 300
 
 
 @dataclass
@@ -171,9 +177,10 @@ def covariance(J: np.ndarray, r: np.ndarray, lags: int, free_rows: int) -> np.nd
 @dataclass
 class Fit:
     """The estimate: x (SI, every parameter; held ones at their start), the evaluations at the start and at the
-    estimate, the free entries of x, ``held`` (k, h) the non-identifiable directions held at the start (columns,
-    in coordinates x / ref over the free entries, orthonormal), ``cov`` (N_X, N_X) the covariance of x (SI; zero
-    for what was not estimated), the condition numbers at the start and the estimate, the solver's result."""
+    estimate, the entries ``free`` to estimate and those of them ``held`` at the start (not identifiable from the
+    log) with the reason of each (``reasons``: index -> text), ``null``: the combinations the log does not
+    identify (each a change of x in SI, in reduced row echelon form), ``cov`` (N_X, N_X) the covariance of x (SI;
+    zero for what was not estimated), the condition numbers at the start and the estimate, the solver's result."""
 
     x: np.ndarray
     start: Evaluation
@@ -181,6 +188,8 @@ class Fit:
     free: np.ndarray
     ref: np.ndarray
     held: np.ndarray
+    reasons: dict
+    null: list
     cov: np.ndarray
     condition_start: float
     condition: float
@@ -193,68 +202,97 @@ class Fit:
 
 def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarray, lags: int,
         rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE, progress=None) -> Fit:
-    """Bounded nonlinear least squares from x0 over the entries ``free`` (boolean (N_X,)) with the non-identifiable
-    directions held at x0 (see the module docstring). ``ref``: the parameters' reference magnitudes (SI), the
-    scale of the identifiability test; ``lags``: the residuals' correlation length in samples (the smoothing
-    window). The directions found not identifiable at an estimate are held and the fit repeated, until none is
-    found."""
-    idx = np.flatnonzero(free)
-    k = idx.size
+    """Bounded nonlinear least squares from x0 over the entries ``free`` (boolean (N_X,)), holding at x0 what the
+    log does not identify. ``ref``: the parameters' reference magnitudes (SI), the scale of the identifiability
+    tests; ``lags``: the residuals' correlation length in samples (the smoothing window).
+
+    Identifiability, in two tests, each on the Jacobian scaled by ``ref``: (1) combinations along which the
+    torques do not change (singular values below ``rcond`` of the largest, :func:`_structural_null`): they are
+    reported, and for each the parameter with the largest share in it (the pivot of the reduced row echelon form)
+    is held; (2) at the estimate, a parameter whose standard error exceeds ``max_relative_se`` of its reference
+    magnitude: the one with the largest is held and the fit repeated, until none is left. Holding parameters
+    rather than combinations keeps the bounds simple boxes; an inertia entry holds the whole inertia
+    (:func:`_hold`). Each refit starts from the last estimate with the held parameters back at their start.
+    """
     phi0 = phi_of(x0)
     lo, hi = phi_bounds(phi0)
+    # the solver's scale of phi: the mass and friction by their reference magnitudes, every entry of the Cholesky
+    # factor by the factor's size (an off-diagonal entry near 0 at the start is not a small parameter)
+    scale = ref.copy()
+    scale[INERTIA] = np.linalg.norm(phi0[INERTIA])
     rows_per_sample = 6 - problem.nN
     start = problem.evaluate_at(x0, jacobian=True)
-    condition_start, _ = condition_number(start.J[:, idx] * ref[idx])
-    held = _structural_null(start.J[:, idx] * ref[idx], rcond)
+    free_idx = np.flatnonzero(free)
+    condition_start, _ = condition_number(start.J[:, free_idx] * ref[free_idx])
+    held = np.zeros(N_X, dtype=bool)
+    reasons: dict[int, str] = {}
+    null_x = []
+    rows, pivots = _echelon_rows(_structural_null(start.J[:, free_idx] * ref[free_idx], rcond).T)
+    for row, pivot in zip(rows, pivots):
+        d = np.zeros(N_X)
+        d[free_idx] = row * ref[free_idx]  # a change of x (SI) along which the torques do not change
+        null_x.append(d)
+        _hold(held, reasons, int(free_idx[pivot]), "the torques do not depend on it (with the other parameters)")
+    phi = phi0.copy()
     cache: dict[bytes, tuple] = {}
-
-    def evaluated(phi_free):
-        key = phi_free.tobytes()
-        if key not in cache:
-            cache.clear()
-            phi = phi0.copy()
-            phi[idx] = phi_free
-            x, dx = x_of_phi(phi)
-            cache[key] = (x, dx[np.ix_(idx, idx)], problem.evaluate_at(x, jacobian=True))
-        return cache[key]
-
     while True:
-        weight = PENALTY * np.linalg.norm(start.J[:, idx] * ref[idx], 2)
-        H = held.T / ref[idx]  # (h, k): rows that hold the directions, per unit of x
+        idx = np.flatnonzero(free & ~held)
 
-        def residual(z):
-            x, _, ev = evaluated(z)
-            return np.concatenate([ev.r.ravel(), weight * H @ (x - x0)[idx]])
-
-        def jac(z):
-            _, dx, ev = evaluated(z)
-            return np.vstack([ev.J[:, idx] @ dx, weight * H @ dx])
+        def evaluated(phi_free, idx=idx):
+            key = phi_free.tobytes()
+            if key not in cache:
+                cache.clear()
+                full = phi.copy()
+                full[idx] = phi_free
+                x, dx = x_of_phi(full)
+                cache[key] = (full, x, dx[:, idx], problem.evaluate_at(x, jacobian=True))
+            return cache[key]
 
         if progress:
-            progress(f"least squares ({k - held.shape[1]} of {k} directions)")
-        solver = least_squares(residual, np.clip(phi0[idx], lo[idx], hi[idx]), jac, bounds=(lo[idx], hi[idx]),
-                               x_scale=np.maximum(np.abs(phi0[idx]), 1e-12), ftol=1e-10, xtol=1e-10, gtol=1e-10,
-                               max_nfev=300)
-        x, _, ev = evaluated(solver.x)
+            progress(f"least squares ({idx.size} of {free_idx.size} parameters)")
+        solver = least_squares(lambda z: evaluated(z)[3].r.ravel(), np.clip(phi[idx], lo[idx], hi[idx]),
+                               lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
+                               x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,
+                               max_nfev=MAX_EVALUATIONS)
+        cache.clear()
+        phi, x, _, ev = evaluated(solver.x)
+        cache.clear()
         Jr = ev.J[:, idx] * ref[idx]
-        P = _complement(held, k)  # the directions estimated, orthonormal (k, k - h)
-        Jc = Jr @ P
-        more = _structural_null(Jc, rcond)
-        if not more.shape[1]:
-            C = covariance(Jc, ev.r, lags, rows_per_sample * int(problem.used.sum()))
-            w, U = np.linalg.eigh(C)
-            more = U[:, np.sqrt(np.maximum(w, 0)) > max_relative_se]
-        if not more.shape[1]:
+        C = covariance(Jr, ev.r, lags, rows_per_sample * int(problem.used.sum()))
+        relative = np.sqrt(np.maximum(np.diag(C), 0.0))
+        if not idx.size or relative.max() <= max_relative_se:
             break
-        held = np.linalg.qr(np.hstack([held, P @ more]))[0]
+        worst = int(np.argmax(relative))
+        _hold(held, reasons, int(idx[worst]), f"standard error {relative[worst]:.2g} of its magnitude (> {max_relative_se:g})")
+        phi[held] = phi0[held]
+    x = np.where(held | ~free, x0, x)  # exactly the start, not its round trip through the Cholesky factor
     cov = np.zeros((N_X, N_X))
-    T = ref[idx, None] * P
-    cov[np.ix_(idx, idx)] = T @ C @ T.T
-    condition, singular = condition_number(ev.J[:, idx] * ref[idx])
+    cov[np.ix_(idx, idx)] = ref[idx, None] * C * ref[idx]
+    condition, singular = condition_number(ev.J[:, free_idx] * ref[free_idx])
     at_bound = np.zeros(N_X, dtype=bool)
     at_bound[idx] = solver.active_mask != 0
-    return Fit(x, start, ev, free, ref, held, cov, condition_start, condition, singular, at_bound, solver,
-               problem.evaluations, problem.used)
+    return Fit(x, start, ev, free, ref, held, reasons, null_x, cov, condition_start, condition, singular, at_bound,
+               solver, problem.evaluations, problem.used)
+
+
+def _hold(held: np.ndarray, reasons: dict, j: int, reason: str) -> None:
+    """Hold parameter j at its start. An inertia entry holds the whole inertia: the Cholesky factor that keeps it
+    physical ties its entries together, so single entries cannot be held within simple bounds."""
+    group = range(N_X)[INERTIA] if j in range(N_X)[INERTIA] else (j,)
+    for k in group:
+        if not held[k]:
+            held[k] = True
+            reasons[k] = reason if k == j else f"held with {NAMES[j]}: the inertia is estimated whole or not at all"
+
+
+def _echelon_rows(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of H (h, k) spanning the same directions in reduced row echelon form, and their pivot columns,
+    chosen by QR with column pivoting: each row is 1 at its own pivot and 0 at the others', so where the
+    directions include single parameters, each is reported alone."""
+    if not H.shape[0]:
+        return H, np.zeros(0, dtype=int)
+    piv = qr(H, pivoting=True, mode="r")[1][: H.shape[0]]
+    return np.linalg.solve(H[:, piv], H), piv
 
 
 def _structural_null(J: np.ndarray, rcond: float) -> np.ndarray:
@@ -271,11 +309,3 @@ def _structural_null(J: np.ndarray, rcond: float) -> np.ndarray:
     # back to J's coordinates: a null vector v of J D^-1 is D^-1 v for J
     null = null / np.where(zero, 1.0, norms)[:, None]
     return np.linalg.qr(null)[0] if null.shape[1] else null
-
-
-def _complement(held: np.ndarray, k: int) -> np.ndarray:
-    """An orthonormal basis (k, k - h) of the directions orthogonal to the orthonormal columns ``held``."""
-    if not held.shape[1]:
-        return np.eye(k)
-    Q = np.linalg.qr(np.hstack([held, np.eye(k)]))[0]
-    return Q[:, held.shape[1]:k]

@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import qr
 
 from chewbot.errors import ChewbotError
 from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
@@ -33,8 +32,8 @@ class Identification:
     :data:`chewbot.identification.parameters.PARAMETERS` (SI).
 
     ``x0``, ``x``: start and estimate; ``se``: standard errors (0 where not estimated); ``status`` per parameter:
-    ``estimated``, ``partly held`` (it has a share in a held direction: its value depends on that direction's start
-    value), ``held`` (not identifiable from the log: kept at the start), ``fixed`` (by ``--fix``), ``not in the
+    ``estimated`` (``(at its bound)`` added where a bound holds it), ``held`` (not identifiable from the log: kept at
+    the start; the reason in ``fit.reasons``), ``fixed`` (by ``--fix``), ``not in the
     model`` (the 6RSS has no HKP) or ``no arm`` (R = 0 in the file: R mu_c cannot be written back);
     ``held_directions``: the non-identifiable combinations, each {parameter name: coefficient in file units};
     ``identified``: the parameter-file keys that were estimated.
@@ -110,8 +109,10 @@ class Identification:
                  + "; estimate " + " ".join(f"{v:.4g}" for v in self.rms()),
                  f"least squares: {f.solver.nfev} evaluations, {f.solver.message}"]
         for d in self.held_directions:
-            lines.append("not identifiable, held at the start: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
+            lines.append("the torques do not change along: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
                          + " (file units)")
+        for j, reason in sorted(f.reasons.items()):
+            lines.append(f"not identifiable from this log, held at the start: {PARAMETERS[j].name} ({reason})")
         return lines + [f"note: {n}" for n in self.notes]
 
 
@@ -120,15 +121,6 @@ NAMES_INDEX = {p.name: j for j, p in enumerate(PARAMETERS)}
 
 def _g(value: float) -> float:
     return float(f"{value:.6g}")
-
-
-def _echelon(H: np.ndarray) -> np.ndarray:
-    """The rows of H (h, k) spanning the same directions in reduced row echelon form, pivots chosen by QR with
-    column pivoting: where the held directions include single parameters, each is reported alone."""
-    if not H.shape[0]:
-        return H
-    piv = qr(H, pivoting=True, mode="r")[1][: H.shape[0]]
-    return np.linalg.solve(H[:, piv], H)
 
 
 def references(model: Model, x0: np.ndarray) -> np.ndarray:
@@ -180,21 +172,13 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     step("the start model")
     result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
     step("results")
-    idx = np.flatnonzero(free)
-    share = np.zeros(N_X)
-    share[idx] = np.sum(result.held**2, axis=1) if result.held.shape[1] else 0.0
-    for j in idx:
-        status[j] = "held" if share[j] > 0.99 else "partly held" if share[j] > 0.01 else "estimated"
+    for j in np.flatnonzero(free):
+        status[j] = "held" if result.held[j] else "estimated"
     for j in np.flatnonzero(result.at_bound):
-        if status[j] in ("estimated", "partly held"):
-            status[j] += " (at its bound)"
-    held_directions = []
-    for h in _echelon(result.held.T):
-        d = h * result.ref[idx]  # a change of x (SI) along the direction
-        d = d / np.max(np.abs(h))
-        held_directions.append({PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in zip(idx, d)
-                                if abs(c / result.ref[j]) > 1e-3})
-    identified = [g for g in GROUPS if any(status[j].startswith(("estimated", "partly")) for j, p in enumerate(PARAMETERS)
+        status[j] += " (at its bound)"
+    held_directions = [{PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in enumerate(d)
+                        if abs(c) > 1e-3 * result.ref[j]} for d in result.null]
+    identified = [g for g in GROUPS if any(status[j].startswith("estimated") for j, p in enumerate(PARAMETERS)
                                            if p.group == g)]
     se = np.sqrt(np.maximum(np.diag(result.cov), 0.0))
     return Identification(model, log, motion, result, x0, result.x, se, status, held_directions, identified, notes)

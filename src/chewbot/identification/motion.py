@@ -64,7 +64,7 @@ class LogMotion:
 def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, np.ndarray]:
     """q_EE in Euler angles (N, 4 or 6) whose model angles fit ``theta`` (N, 6) best, and the residual (N, 6) rad.
 
-    Gauss-Newton from the home pose on all samples at once; ``where(i)`` names sample i in errors. Raises
+    Gauss-Newton from the home pose on all samples at once, with backtracking; ``where(i)`` names sample i in errors. Raises
     :class:`KinematicsError` where it does not converge or leaves the workspace, :class:`TaskError` where the
     fit is worse than :data:`MAX_ANGLE_RESIDUAL`.
     """
@@ -74,16 +74,31 @@ def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, 
     q = np.zeros((n, k))
     zeros = np.zeros((n, k))
     it_theta, it_J = KINEMATICS_OUTPUTS.index("theta"), KINEMATICS_OUTPUTS.index("J_theta1_angles")
-    for _ in range(MAX_ITERATIONS):
+
+    def residual(q):
         out = evaluate(fn, q, zeros, zeros, p)
-        res = _wrap(theta - out[it_theta])
-        step = _lstsq(out[it_J], res)
-        if not np.isfinite(step).all():
-            i = int(np.flatnonzero(~np.isfinite(step).all(axis=1))[0])
+        return _wrap(theta - out[it_theta]), out[it_J]
+
+    res, J = residual(q)
+    for _ in range(MAX_ITERATIONS):
+        step = _lstsq(J, res)
+        # Backtracking per sample: far from home a full step can leave the workspace (no inverse kinematics) or
+        # overshoot; it is halved until the angles' residual is finite and smaller.
+        cost = np.sum(res**2, axis=1)
+        alpha = np.ones(n)
+        for _ in range(30):
+            trial, J_trial = residual(q + alpha[:, None] * step)
+            worse = ~(np.sum(trial**2, axis=1) <= cost) & np.isfinite(step).all(axis=1)
+            if not worse.any():
+                break
+            alpha[worse] /= 2
+        if not (np.isfinite(step).all() and np.isfinite(trial).all()):
+            bad = ~(np.isfinite(step).all(axis=1) & np.isfinite(trial).all(axis=1))
+            i = int(np.flatnonzero(bad)[0])
             raise KinematicsError(f"{where(i) if where else f'sample {i}'}: the crank angles give no pose of the model "
                                   "(out of reach or singular)")
-        q = q + step
-        if np.abs(step).max() < STEP_TOL:
+        q, res, J = q + alpha[:, None] * step, trial, J_trial
+        if np.abs(alpha[:, None] * step).max() < STEP_TOL:
             break
     out = evaluate(fn, q, zeros, zeros, p)
     res = _wrap(theta - out[it_theta])
@@ -91,9 +106,10 @@ def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, 
     bad = np.flatnonzero(~(rms <= MAX_ANGLE_RESIDUAL))
     if bad.size:
         i = int(bad[0])
+        column = f"theta{int(np.argmax(np.abs(res[i]))) + 1}"
         raise TaskError(f"{where(i) if where else f'sample {i}'}: the crank angles fit no pose of the model: RMS residual "
-                        f"{np.degrees(rms[i]):.3g} deg > {np.degrees(MAX_ANGLE_RESIDUAL):.3g} deg ({bad.size} sample(s)); "
-                        "check the model, the order of the theta columns and their zero")
+                        f"{np.degrees(rms[i]):.3g} deg > {np.degrees(MAX_ANGLE_RESIDUAL):.3g} deg, largest in column "
+                        f"{column} ({bad.size} sample(s)); check the model, the order of the theta columns and their zero")
     return q, res
 
 
@@ -109,7 +125,7 @@ def _lstsq(J: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S) -> LogMotion:
     """The mandible's motion along a log (see the module docstring), as :class:`LogMotion`."""
-    q, res = fit_poses(model, log.theta, log.where)
+    q, res = fit_poses(model, log.theta, lambda i: f"{log.source}: {log.where(i)}")
     coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
     needs_filter = log.dtheta is None or log.ddtheta is None
     window = 0
