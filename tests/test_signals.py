@@ -21,7 +21,10 @@ import numpy as np
 import pytest
 
 from chewbot.command import EXIT_INTERRUPTED, EXIT_TERMINATED, TEST_PAUSE_VARIABLE
+from chewbot import load_model
+from chewbot.kinematics.motion import solve_kinematics
 from chewbot.params import builtin_model_path
+from chewbot.task.default import ChewingParameters, default_task
 
 WAIT_S = 120  # a stage must be reached within this (a cold kernel cache on a loaded 2-core machine)
 
@@ -169,3 +172,19 @@ def test_sigterm_while_writing_leaves_the_old_folder_as_it_was(task_csv, tmp_pat
     _stop(proc, signal.SIGTERM, EXIT_TERMINATED)
     assert _leftovers(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["flag", "out"]
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+
+def test_sigint_in_the_identification_leaves_no_output(tmp_path):
+    """`identify` stopped as its least squares start: exit 130, one line, neither the model nor the table written."""
+    m = load_model("target")
+    kin = solve_kinematics(m, default_task(m, "left", ChewingParameters(cycles=1, rest_s=0.0, rate_hz=250.0)), "euler-angles")
+    cols = ["t", *[f"theta{i}" for i in range(1, 7)], *[f"tau{i}" for i in range(1, 7)]]
+    # the angles of a real motion (the pose fit accepts them); the torques do not matter before the fit
+    np.savetxt(tmp_path / "log.csv", np.column_stack([kin.t, kin.theta, 0.1 * np.tanh(kin.dtheta)]), delimiter=",",
+               header=",".join(cols), comments="")
+    flag = tmp_path / "flag"
+    proc = _start(["identify", "log.csv", "--out", "model.toml"], tmp_path, **{TEST_PAUSE_VARIABLE: f"fit:{flag}"})
+    _wait_for(proc, flag.exists)
+    _stop(proc, signal.SIGINT, EXIT_INTERRUPTED)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flag", "log.csv"]

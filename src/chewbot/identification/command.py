@@ -99,6 +99,7 @@ def _print_table(stdout, result) -> None:
                          ("unit", "left"), ("status", "left")):
         table.add_column(col, justify=justify)
     for row in result.rows():
-        table.add_row(escape(row["parameter"]), f"{row['estimate']:.6g}", f"{row['standard_error']:.3g}",
+        se = f"{row['standard_error']:.3g}" if row["standard_error"] != "" else "-"
+        table.add_row(escape(row["parameter"]), f"{row['estimate']:.6g}", se,
                       f"{row['start']:.6g}", escape(row["unit"]), escape(row["status"]))
     stdout.print(table)

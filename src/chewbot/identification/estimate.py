@@ -26,7 +26,7 @@ from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from chewbot.casadi_tools import evaluate, native
-from chewbot.command import check_interrupted
+from chewbot.command import check_interrupted, pause_for_tests
 from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
@@ -235,6 +235,7 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
         _hold(held, reasons, int(free_idx[pivot]), "the torques do not depend on it (with the other parameters)")
     phi = phi0.copy()
     cache: dict[bytes, tuple] = {}
+    pause_for_tests("fit")
     while True:
         idx = np.flatnonzero(free & ~held)
 

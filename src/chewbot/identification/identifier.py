@@ -64,16 +64,19 @@ class Identification:
     def rows(self) -> list[dict]:
         """The table of estimates in the file's units (one dict per parameter, keys of
         :data:`chewbot.identification.output.TABLE_COLUMNS`), with the derived actuator Coulomb coefficient."""
+        def se(j, factor):  # empty where the parameter was not estimated
+            return _g(self.se[j] * factor) if self.status[j].startswith("estimated") else ""
+
         rows = []
         for j, p in enumerate(PARAMETERS):
             rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(self.x0[j] * p.to_file),
-                         "estimate": _g(self.x[j] * p.to_file), "standard_error": _g(self.se[j] * p.to_file),
+                         "estimate": _g(self.x[j] * p.to_file), "standard_error": se(j, p.to_file),
                          "status": self.status[j]})
         arm = self.model.friction.actuator_arm
         if arm > 0:
             j = NAMES_INDEX["R*mu_c"]
             rows.append({"parameter": "mu_c", "key": "friction.actuator_coulomb", "unit": "1",
-                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": _g(self.se[j] / arm),
+                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": se(j, 1 / arm),
                          "status": f"R*mu_c / R, R = {arm * 1e3:g} mm as in the file"})
         return rows
 
@@ -107,7 +110,7 @@ class Identification:
                  f"{f.condition_start:.4g} at the start, {f.condition:.4g} at the estimate",
                  "RMS torque residual tau1..6 [N*m]: start " + " ".join(f"{v:.4g}" for v in self.rms("start"))
                  + "; estimate " + " ".join(f"{v:.4g}" for v in self.rms()),
-                 f"least squares: {f.solver.nfev} evaluations, {f.solver.message}"]
+                 f"least squares: {f.evaluations} evaluations of the residual in all; the last solve: {f.solver.message}"]
         for d in self.held_directions:
             lines.append("the torques do not change along: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
                          + " (file units)")

@@ -18,8 +18,6 @@ import re
 
 import tomlkit
 
-from chewbot.identification.parameters import PARAMETERS
-
 TABLE_COLUMNS = ("parameter", "key", "unit", "start", "estimate", "standard_error", "status")
 _MARKER = re.compile(r"^\ufeff?\s*#\s*written by chewbot\b")
 
@@ -85,7 +83,3 @@ def table_text(marker: str, summary: list[str], rows: list[dict]) -> str:
         writer.writerow(row)
     return out.getvalue()
 
-
-def unit_of(name: str) -> str:
-    """The file unit of a parameter of x by its name."""
-    return next(p.file_unit for p in PARAMETERS if p.name == name)
