@@ -24,7 +24,7 @@ def identify(
     side: str = typer.Option("left", "--side", help="Molar where the logged bite force acts (left or right)."),
     window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the Savitzky-Golay window that estimates the rates the log does not give."),
     fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.mass_g, mandible.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad); repeatable."),
-    max_relative_se: float = typer.Option(MAX_RELATIVE_SE, "--max-relative-se", min=0.0, help="A combination of parameters whose standard error exceeds this fraction of their reference magnitudes is not identifiable from the log and is held at the start."),
+    max_relative_se: float = typer.Option(MAX_RELATIVE_SE, "--max-relative-se", min=0.0, help="A parameter whose standard error exceeds this fraction of its magnitude is not identifiable from the log and is held at the start (the largest first, then the fit is repeated)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if chewbot wrote them."),
 ) -> None:
     """Estimate the friction and the mandible's inertia from a robot log (crank angles and measured torques).

@@ -180,7 +180,8 @@ class Fit:
     estimate, the entries ``free`` to estimate and those of them ``held`` at the start (not identifiable from the
     log) with the reason of each (``reasons``: index -> text), ``null``: the combinations the log does not
     identify (each a change of x in SI, in reduced row echelon form), ``cov`` (N_X, N_X) the covariance of x (SI;
-    zero for what was not estimated), the condition numbers at the start and the estimate, the solver's result."""
+    zero for what was not estimated), the condition numbers at the start and the estimate, the last solver's result
+    (None where nothing was left to estimate)."""
 
     x: np.ndarray
     start: Evaluation
@@ -236,8 +237,11 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
     phi = phi0.copy()
     cache: dict[bytes, tuple] = {}
     pause_for_tests("fit")
+    solver, x, ev, C = None, x0, start, np.zeros((0, 0))
     while True:
         idx = np.flatnonzero(free & ~held)
+        if not idx.size:  # everything fixed, not in the model or not identifiable: nothing to solve
+            break
 
         def evaluated(phi_free, idx=idx):
             key = phi_free.tobytes()
@@ -255,13 +259,12 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
                                lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
                                x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,
                                max_nfev=MAX_EVALUATIONS)
-        cache.clear()
         phi, x, _, ev = evaluated(solver.x)
         cache.clear()
         Jr = ev.J[:, idx] * ref[idx]
         C = covariance(Jr, ev.r, lags, rows_per_sample * int(problem.used.sum()))
         relative = np.sqrt(np.maximum(np.diag(C), 0.0))
-        if not idx.size or relative.max() <= max_relative_se:
+        if relative.max() <= max_relative_se:
             break
         worst = int(np.argmax(relative))
         _hold(held, reasons, int(idx[worst]), f"standard error {relative[worst]:.2g} of its magnitude (> {max_relative_se:g})")
@@ -271,7 +274,8 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
     cov[np.ix_(idx, idx)] = ref[idx, None] * C * ref[idx]
     condition, singular = condition_number(ev.J[:, free_idx] * ref[free_idx])
     at_bound = np.zeros(N_X, dtype=bool)
-    at_bound[idx] = solver.active_mask != 0
+    if solver is not None:
+        at_bound[idx] = solver.active_mask != 0
     return Fit(x, start, ev, free, ref, held, reasons, null_x, cov, condition_start, condition, singular, at_bound,
                solver, problem.evaluations, problem.used)
 

@@ -15,8 +15,7 @@ import numpy as np
 from chewbot.errors import ChewbotError
 from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
 from chewbot.identification.log import RobotLog
-from chewbot.dynamics.newton_euler import EPS_THETA_DOT
-from chewbot.identification.motion import MIN_SPEED_EPS, MIN_SPEED_NOISES, LogMotion, log_motion
+from chewbot.identification.motion import LogMotion, log_motion
 from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMETERS, x_of
 from chewbot.model import Model
 from chewbot.task import smoothing
@@ -50,11 +49,6 @@ class Identification:
     held_directions: list[dict[str, float]]
     identified: list[str]
     notes: list[str] = field(default_factory=list)
-
-    @property
-    def min_speed(self) -> float:
-        """rad/s: samples with a crank slower than this are left out of the fit."""
-        return max(MIN_SPEED_NOISES * self.motion.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT)
 
     def rms(self, which: str = "estimate") -> np.ndarray:
         """RMS of the torque residual per actuator (N*m) over the samples in the fit, at the start or the estimate."""
@@ -104,13 +98,13 @@ class Identification:
                           f"(degree {smoothing.POLYORDER}, {m.window_samples} samples)" for k, v in m.rates.items()))
         lines = [f"log {self.log.source}: {self.log.n} samples, {self.log.t[-1] - self.log.t[0]:.4g} s; bite force "
                  f"{'logged' if self.log.force_given else 'not logged (zero)'}",
-                 f"samples in the fit: {int(self.fit.used.sum())} (every crank turning faster than {self.min_speed:.3g} rad/s)",
+                 f"samples in the fit: {int(self.fit.used.sum())} (every crank turning faster than {m.min_speed:.3g} rad/s)",
                  f"poses from the crank angles: RMS angle residual {np.sqrt(np.mean(m.angle_residual**2)):.3g} rad; " + smoothing_line,
                  f"condition number of the Jacobian (unit-norm columns, the {int(f.free.sum())} free parameters): "
                  f"{f.condition_start:.4g} at the start, {f.condition:.4g} at the estimate",
                  "RMS torque residual tau1..6 [N*m]: start " + " ".join(f"{v:.4g}" for v in self.rms("start"))
                  + "; estimate " + " ".join(f"{v:.4g}" for v in self.rms()),
-                 f"least squares: {f.evaluations} evaluations of the residual in all; the last solve: {f.solver.message}"]
+                 f"least squares: {f.evaluations} evaluations of the residual in all; the last solve: {f.solver.message if f.solver else 'nothing left to estimate'}"]
         for d in self.held_directions:
             lines.append("the torques do not change along: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
                          + " (file units)")
@@ -169,7 +163,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     used = motion.moving()
     if used.sum() < 10 * N_X:
         raise ChewbotError(f"{log.source}: only {int(used.sum())} of {log.n} samples have every crank turning (faster than "
-                           f"{max(MIN_SPEED_NOISES * motion.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT):.3g} rad/s): too "
+                           f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
     problem = ReducedProblem(model, motion.kin, log.tau, used)
     step("the start model")

@@ -52,13 +52,17 @@ class LogMotion:
     window_samples: int
     speed_noise: float  # rad/s: standard deviation of the crank rates' error (0 where the log gives the rates)
 
+    @property
+    def min_speed(self) -> float:
+        """rad/s: the larger of :data:`MIN_SPEED_NOISES` times the rates' noise and :data:`MIN_SPEED_EPS` times the
+        regularisation of sgn(theta_dot)."""
+        return max(MIN_SPEED_NOISES * self.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT)
+
     def moving(self) -> np.ndarray:
-        """(N,) True where every crank turns clearly: faster than :data:`MIN_SPEED_NOISES` times the rates' noise
-        and :data:`MIN_SPEED_EPS` times the regularisation of sgn(theta_dot). Elsewhere the direction of the
+        """(N,) True where every crank turns faster than :attr:`min_speed`. Elsewhere the direction of the
         Coulomb friction is not known (at rest static friction is indeterminate, and a smoothed rate near zero has
         a random sign): those samples are left out of the fit."""
-        limit = max(MIN_SPEED_NOISES * self.speed_noise, MIN_SPEED_EPS * EPS_THETA_DOT)
-        return np.abs(self.kin.dtheta).min(axis=1) > limit
+        return np.abs(self.kin.dtheta).min(axis=1) > self.min_speed
 
 
 def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, np.ndarray]:
