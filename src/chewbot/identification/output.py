@@ -38,7 +38,7 @@ def model_text(source_text: str, values: dict[str, object], identified: list[str
     doc = tomlkit.parse("".join(lines))
     for key, value in values.items():
         section, leaf = key.split(".")
-        item = tomlkit.item(value)
+        item = tomlkit.item([[_format(v) for v in row] for row in value] if isinstance(value, list) else _format(value))
         if isinstance(value, list):
             item.multiline(True)
         doc[section][leaf] = item
