@@ -49,7 +49,8 @@ STAGES = 3
 # from stick-slip transitions; where the corrections are not enough, the caller splits the step
 # (chewbot.simulation.plant).
 TOLERANCE = 1e-10
-ITERATIONS = 8
+SIMPLIFIED = 5
+NEWTON = 4
 
 STEP_OUTPUTS = ("q1", "v1", "z1", "residual")
 
@@ -76,10 +77,6 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
     s, h = ca.MX.sym("s", stage.size1_in(5)), ca.MX.sym("h")
     r0, Rv, Rz = jac(q0, v0, z0[:n], z0[n:], W[:, 0], s)
     zs = z0 - ca.solve(Rz, r0, "qr")
-    Rv_z = ca.horzcat(Rv, ca.MX(6, nN))  # dr/dv acts on the accelerations' columns only
-    blocks = [[h * A[k, j] * Rv_z + (Rz if k == j else 0) for j in range(STAGES)] for k in range(STAGES)]
-    M = ca.vertcat(*[ca.horzcat(*row) for row in blocks])
-    M_inv = ca.solve(M, ca.MX.eye(STAGES * nz), "qr")
 
     def positions(Z, q0, v0, h):
         acc = [Z[k * nz: k * nz + n] for k in range(STAGES)]
@@ -91,18 +88,33 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
         Q, V, acc = positions(Z, q0, v0, h)
         return ca.vertcat(*[stage(Q[k], V[k], acc[k], Z[k * nz + n:(k + 1) * nz], W[:, k], s) for k in range(STAGES)])
 
-    # One correction as a function, skipped at run time once the residual is below the tolerance (a Switch: the C
-    # code evaluates only the branch taken), so a step costs as many residuals as its iteration needs.
+    def newton_matrix(Rv, Rz, h):
+        """The iteration matrix from dr/dv and dr/dz per stage (one pair for all stages: the simplified iteration)."""
+        Rv_z = [ca.horzcat(x, ca.MX(6, nN)) for x in Rv]  # dr/dv acts on the accelerations' columns only
+        return ca.vertcat(*[ca.horzcat(*[h * A[k, j] * Rv_z[k] + (Rz[k] if k == j else 0) for j in range(STAGES)])
+                            for k in range(STAGES)])
+
+    M_inv = ca.solve(newton_matrix([Rv] * STAGES, [Rz] * STAGES, h), ca.MX.eye(STAGES * nz), "qr")
+
+    # A correction is a function, skipped at run time once the residual is below the tolerance (a Switch: the C code
+    # evaluates only the branch taken), so a step costs as many residuals as its iteration needs. First the
+    # simplified corrections (the Jacobian of the start); where they have not converged (the regularised Coulomb
+    # friction turning sharply within the step), Newton's, with each stage's own Jacobian.
     x = [ca.MX.sym(nm, sz) for nm, sz in (("Z", STAGES * nz), ("r", STAGES * 6), ("q0", n), ("v0", n))]
     x += [ca.MX.sym("W", W.sparsity()), ca.MX.sym("s", s.sparsity()), ca.MX.sym("h"), ca.MX.sym("M_inv", M_inv.sparsity())]
     Z_new = x[0] - ca.mtimes(x[7], x[1])
-    correct = ca.Function(f"{name}_correct", x, [Z_new, stages(Z_new, *x[2:7])])
+    simplified = ca.Function(f"{name}_simplified", x, [Z_new, stages(Z_new, *x[2:7])])
+    Qx, Vx, acc = positions(x[0], x[2], x[3], x[6])
+    local = [jac(Qx[k], Vx[k], acc[k], x[0][k * nz + n:(k + 1) * nz], x[4][:, k], x[5]) for k in range(STAGES)]
+    Z_newton = x[0] - ca.solve(newton_matrix([j[1] for j in local], [j[2] for j in local], x[6]), x[1], "qr")
+    newton = ca.Function(f"{name}_newton", x, [Z_newton, stages(Z_newton, *x[2:7])])
     keep = ca.Function(f"{name}_keep", x, [x[0], x[1]])
-    iteration = ca.Function.if_else(f"{name}_iteration", keep, correct)
     Z = ca.repmat(zs, STAGES, 1)
     r = stages(Z, q0, v0, W, s, h)
-    for _ in range(ITERATIONS):
-        Z, r = iteration(ca.norm_inf(r) <= TOLERANCE, Z, r, q0, v0, W, s, h, M_inv)
+    for correction, count in ((simplified, SIMPLIFIED), (newton, NEWTON)):
+        iteration = ca.Function.if_else(f"{correction.name()}_unless_converged", keep, correction)
+        for _ in range(count):
+            Z, r = iteration(ca.norm_inf(r) <= TOLERANCE, Z, r, q0, v0, W, s, h, M_inv)
     Q, V, _ = positions(Z, q0, v0, h)
     return ca.Function(name, [q0, v0, z0, W, s, h], [Q[-1], V[-1], Z[(STAGES - 1) * nz:], ca.norm_inf(r)],
                        ["q0", "v0", "z0", "W", "s", "h"], list(STEP_OUTPUTS))
