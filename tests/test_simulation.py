@@ -205,16 +205,17 @@ def mass_error_plant_set() -> dict[str, float]:
 @pytest.mark.slow
 def test_computed_torque_beats_pd_under_a_mass_error():
     """A plant 20 % heavier than the controller's model, the default task at 1 kHz: computed torque (its model wrong
-    by 20 %, the feedback absorbing the rest) tracks at least 3 times better than independent PD on the cranks in
-    RMS position and orientation error (measured: about 20 times), and neither leaves the workspace; the plant's
-    constraints do not drift (<= 1e-9 m)."""
+    by 20 %, the feedback absorbing the rest) tracks at least 2 times better than independent PD on the cranks in
+    RMS position and orientation error (measured: 3.5 times in position, 7.5 times in orientation, with the default
+    gains), and neither leaves the workspace; the plant's constraints do not drift (<= 1e-9 m)."""
     options = SimulateOptions(plant_overrides=mass_error_plant_set())
     ct = compute(options)
     pd = compute(SimulateOptions(controller="pd", plant_overrides=mass_error_plant_set()))
     assert ct.metrics["stopped"] is None and pd.metrics["stopped"] is None
-    assert ct.metrics["rms_position_mm"] * 3 < pd.metrics["rms_position_mm"]
-    assert ct.metrics["rms_orientation_deg"] * 3 < pd.metrics["rms_orientation_deg"]
-    assert ct.plant.mandible.mass == pytest.approx(1.2 * ct.model.mandible.mass)
+    assert ct.metrics["rms_position_mm"] * 2 < pd.metrics["rms_position_mm"]
+    assert ct.metrics["rms_orientation_deg"] * 2 < pd.metrics["rms_orientation_deg"]
+    assert ct.plant.mandible_mass == pytest.approx(1.2 * ct.model.mandible_mass)
+    assert ct.plant.coupler_mass == pytest.approx(1.2 * ct.model.coupler_mass)
     for r in (ct, pd):
         assert max(r.table["drift_chains"].max(), r.table["drift_hkp"].max()) <= 1e-9
 

@@ -39,6 +39,7 @@ from chewbot.export import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.model_vector import cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.simulation.forward import NEWTON_ITERATIONS, forward_kernel
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
 # least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
@@ -163,6 +164,16 @@ def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray
             Kernel(coupling_kernel(m), f"Joint-space inertia M_A and MCI (seed 000, Eqs. 58-60) of the {m.mechanism}.",
                    coupling_in, coupling_out, sample[f"coupling_{tag}"]),
         ]
+    forward_in = {"q": torque_in["q"], "dq": torque_in["dq"], "tau": "N m", "B": torque_in["B"], "F_B": torque_in["F_B"],
+                  "friction": "0 (off) or 1 (the model's HKP and actuator friction)"}
+    for m in (target, sixrss):
+        tag = m.mechanism.replace("6rss", "sixrss")
+        out.append(Kernel(forward_kernel(m), f"Forward dynamics of the {m.mechanism}: the accelerations of the independent "
+                          f"coordinates{' and the HKP normal forces N_L, N_R' if m.has_hkp else ''} under the torques tau, "
+                          f"friction regularised as in the inverse dynamics; {NEWTON_ITERATIONS} Newton steps from the "
+                          "frictionless solution (exact without friction). Check residual (N m, ~1e-15 when converged).",
+                          forward_in, {"ddq": "m/s^2, rad/s^2", "N": "N (N_L, N_R along the planes' normal)",
+                                       "residual": "N m"}, sample[f"forward_{tag}"]))
     out.append(
         Kernel(g1_kernel(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
                f"{G1_ITERATIONS} safeguarded Newton steps from the best piecewise least-squares start; q in Euler "
@@ -188,6 +199,8 @@ def example_inputs(target: Model, sixrss: Model, t: float = EXAMPLE_T) -> dict[s
         B = m.molar("left")
         out[f"tau_{tag}"] = {"q": q, "dq": dq, "ddq": ddq, "B": B, "F_B": kin.force[k]}
         out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": q}
+        tau = np.asarray(torque_kernel(m).graph()(q, dq, ddq, B, kin.force[k])[0]).ravel()
+        out[f"forward_{tag}"] = {"q": q, "dq": dq, "tau": tau, "B": B, "F_B": kin.force[k], "friction": np.array([1.0])}
         if m.has_hkp:
             kp = solve_kinematics(m, task, G1_ORIENTATION)
             out["g1_target"] = {"theta": kp.theta[k], "q": kp.q[k], "dq": kp.dq[k], "ddq": kp.ddq[k], "F_B": kp.force[k], "B": B}

@@ -18,8 +18,9 @@ of the velocities (known here: the state) regularised with the same constants
 (:data:`~chewbot.dynamics.newton_euler.EPS_THETA_DOT`, :data:`~chewbot.dynamics.newton_euler.EPS_V_T`), so that the
 forward and the inverse model are one model: the inverse dynamics evaluated at the forward's accelerations and normal
 forces returns the applied torques (tested). The smoothed r is differentiable; :func:`forward_kernel` starts from the
-friction-free solution and takes :data:`NEWTON_ITERATIONS` Newton steps with the exact Jacobian dr/dz (a fixed cost,
-as a controller or a compiled simulation loop needs) and returns the final residual so that the caller can verify it.
+friction-free solution and takes at most :data:`NEWTON_ITERATIONS` Newton steps with the exact Jacobian dr/dz (a bounded
+cost, as a controller or a compiled simulation loop needs; the steps stop once the residual is below
+:data:`TOLERANCE`) and returns the final residual so that the caller can verify it.
 
 The residual itself (:func:`residual_function`) is what the integrator (:mod:`chewbot.simulation.integrator`) solves
 at its stages, with the accelerations and normal forces of every stage as unknowns.
@@ -47,6 +48,8 @@ ORIENTATION = "euler-angles"
 # residual then stays large, and the caller reports it.
 NEWTON_ITERATIONS = 8
 HALVINGS = 4
+# Newton stops where max abs(r) is below this (N m): rounding leaves about 1e-16 on torques of tenths of N m.
+TOLERANCE = 1e-13
 
 RESIDUAL_INPUTS = ("q", "dq", "ddq", "N", "tau", "B", "F_B", "friction")
 
@@ -158,21 +161,32 @@ def forward_kernel(model_or_mechanism: Model | str) -> KernelSpec:
         q, dq, tau, B, F, fl = (ca.MX.sym(R.name_in(i), R.sparsity_in(i)) for i in (0, 1, 4, 5, 6, 7))
         extra = [ca.MX.sym("p", R.sparsity_in(8))] if R.n_in() > 8 else []
 
-        def merit(z):
-            return ca.sumsqr(R(q, dq, z[:n], z[n:], tau, B, F, fl, *extra))
+        args = [q, dq, tau, B, F, fl, *extra]
 
+        def residual(z, q, dq, tau, B, F, fl, *extra):
+            return R(q, dq, z[:n], z[n:], tau, B, F, fl, *extra)
+
+        # One safeguarded Newton step as a function of (z, r, inputs) -> (z, r), skipped at run time once the residual
+        # is below TOLERANCE (a Switch: the C code evaluates only the branch taken): without friction the start is
+        # exact and no step runs; with it, as many as Newton needs.
+        zs, rs = ca.MX.sym("z", n + nN), ca.MX.sym("r", 6)
+        xs = [ca.MX.sym(a.name(), a.sparsity()) for a in args]
+        step = newton_step(xs[0], xs[1], zs[:n], zs[n:], *xs[2:])[1]
+        best, best_r = zs + step, residual(zs + step, *xs)
+        for k in range(1, HALVINGS):  # the trial step with the smallest residual (the full step where Newton converges)
+            trial = zs + 0.5**k * step
+            r_trial = residual(trial, *xs)
+            better = ca.sumsqr(r_trial) < ca.sumsqr(best_r)
+            best, best_r = ca.if_else(better, trial, best), ca.if_else(better, r_trial, best_r)
+        correct = ca.Function("forward_correct", [zs, rs, *xs], [best, best_r])
+        keep = ca.Function("forward_keep", [zs, rs, *xs], [zs, rs])
+        iteration = ca.Function.if_else("forward_iteration", keep, correct)
         # without friction r is affine in z: one step from 0 is exact; with it, Newton from there
         z = newton_step(q, dq, ca.MX.zeros(n), ca.MX.zeros(nN), tau, B, F, 0, *extra)[1]
+        r = residual(z, *args)
         for _ in range(NEWTON_ITERATIONS):
-            step = newton_step(q, dq, z[:n], z[n:], tau, B, F, fl, *extra)[1]
-            best, best_merit = z + step, merit(z + step)
-            for k in range(1, HALVINGS):  # the trial step with the smallest residual (the full step where Newton converges)
-                trial = z + 0.5**k * step
-                value = merit(trial)
-                better = value < best_merit
-                best, best_merit = ca.if_else(better, trial, best), ca.if_else(better, value, best_merit)
-            z = best
-        res = ca.norm_inf(R(q, dq, z[:n], z[n:], tau, B, F, fl, *extra))
+            z, r = iteration(ca.norm_inf(r) <= TOLERANCE, z, r, *args)
+        res = ca.norm_inf(r)
         outs = [z[:n], z[n:], res] if nN else [z[:n], res]
         return ca.Function(name, [q, dq, tau, B, F, fl, *extra], outs,
                            ["q", "dq", "tau", "B", "F_B", "friction", *(["p"] if extra else [])], list(FORWARD_OUTPUTS[mech]))
