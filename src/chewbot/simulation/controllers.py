@@ -309,6 +309,7 @@ class ModelBasedController:
     friction: bool = False
     bite_known: bool = True
     _kernel: object = field(default=None, init=False, repr=False)
+    _shared: tuple = field(default=(), init=False, repr=False)
 
     def __post_init__(self):
         if self.kind not in CONTROLLERS:
@@ -344,10 +345,9 @@ class ModelBasedController:
 
     def __call__(self, t: float, state: State) -> np.ndarray:
         if self._kernel is None:
-            self._kernel = native(self.kernel_spec())
+            self._kernel, self._shared = native(self.kernel_spec()), self.shared()
         q_ref, dq_ref, ddq_ref, force = self.reference.state(t)
-        gains, B, p = self.shared()
-        return self._kernel(state.q, state.dq, q_ref, dq_ref, ddq_ref, self.known_force(force), gains, B, p)[0]
+        return self._kernel(state.q, state.dq, q_ref, dq_ref, ddq_ref, self.known_force(force), *self._shared)[0]
 
 
 def Feedforward(model: Model, reference: Reference, method: str = "hessian", goal: str | None = None, friction: bool = False,

@@ -32,6 +32,7 @@ from chewbot.errors import KinematicsError
 from chewbot.model_vector import N_P, cached_graph
 from chewbot.simulation.controllers import ModelBasedController, State
 from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
+from chewbot.simulation.integrator import C
 from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage_times, step_kernel
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
@@ -153,6 +154,8 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     else:
         kernel, shared = None, None
     stopped, last = None, K - 1
+    if rate is not None:  # the bite force at the stages of each tick's step, all at once
+        stage_force = reference.force_at((times[:-1, None] + np.diff(times)[:, None] * C[None, :]).ravel()).reshape(K - 1, 3, 3)
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(K):
         q[k], dq[k] = state.q, state.dq
@@ -160,7 +163,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
             seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq)
             tau_cmd[k] = controller(times[k], seen)
             tau_k = np.clip(tau_cmd[k], -limit, limit)
-            data = _held_data(tau_k, reference)
+            data = _held_data(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
         if k == K - 1:
             break
         if progress is not None and k % 250 == 0:
@@ -182,10 +185,15 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
                       fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu)
 
 
-def _held_data(tau: np.ndarray, reference: Reference):
-    """W of the plant's step under held torques: the torques and the bite force at the stage times."""
+def _held_data(tau: np.ndarray, reference: Reference, tick=None):
+    """W of the plant's step under held torques: the torques and the bite force at the stage times. ``tick``:
+    (t0, h, the forces at its stages (3, 3)) of the whole tick's step, used where the step is that one."""
+    held = np.repeat(tau[:, None], 3, axis=1)
+
     def data(t0: float, h: float) -> np.ndarray:
-        return np.vstack([np.repeat(tau[:, None], 3, axis=1), reference.force_at(stage_times(t0, h)).T])
+        if tick is not None and t0 == tick[0] and h == tick[1]:
+            return np.vstack([held, tick[2].T])
+        return np.vstack([held, reference.force_at(stage_times(t0, h)).T])
     return data
 
 
