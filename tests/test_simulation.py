@@ -236,3 +236,78 @@ def test_gains_file_errors_name_the_file_and_key(tmp_path):
         Gains.load(bad)
     g = Gains.load(overrides={"pd.kp_Nm_per_rad[2]": 4.0})
     assert g.pd_kp[1] == 4.0 and g.pd_kp[0] != 4.0
+
+
+# ---------------------------------------------------------------------------------------- chewbot simulate
+
+
+def short_task(*extra: str) -> list[str]:
+    """Options of a short default task: 0.2 s rest, one 0.8 s cycle."""
+    return ["--set", "task.cycles=1", "--set", "task.rest_s=0.2", *extra]
+
+
+def check_folder(folder, controller: str) -> None:
+    """A simulation folder: its files, results.csv's units, the checks on the plant's normal forces, no drift, and
+    each row's accelerations those its state and applied torques produce (recomputed from the CSV, whose 17
+    significant digits leave about 1e-12 relative)."""
+    from chewbot.results import Table
+
+    assert {"results.csv", "run.json", "report.html", "tracking_error.png", "torques.png", "saturation.png"} <= {p.name for p in folder.iterdir()}
+    table = Table.read_csv(folder / "results.csv")
+    assert table.units["e_X"] == "m" and table.units["N_L"] == "N" and table.units["tau1"] == "N*m"
+    run = json.loads((folder / "run.json").read_text())
+    assert run["options"]["controller"] == controller and run["tracking"]["samples"] == table.n
+    pull = next(c for c in run["checks"] if c["name"] == "contact-pull")
+    assert pull["samples"] is not None  # evaluated on the plant's normal forces
+    assert max(table["drift_chains"].max(), table["drift_hkp"].max()) <= 1e-9
+    m = load_model("target")
+    coords = ("X", "Y", "alpha", "beta")
+    q, dq, ddq = (np.column_stack([table[p + c] for c in coords]) for p in ("", "d", "dd"))
+    tau = np.column_stack([table[f"tau{i}"] for i in range(1, 7)])
+    F = np.column_stack([table[c] for c in ("Fx", "Fy", "Fz")])
+    fwd = forward_dynamics(m, q, dq, tau, F, "left")
+    assert np.max(np.abs(fwd.ddq - ddq)) < 1e-9 * np.max(np.abs(ddq))
+    assert np.max(np.abs(fwd.N - np.column_stack([table["N_L"], table["N_R"]]))) < 1e-9 * np.max(np.abs(fwd.N))
+
+
+def test_simulate_writes_a_results_folder(tmp_path):
+    """The command end to end (PD on a short task): the folder (:func:`check_folder`); a second run without --force
+    is refused (exit 5) and leaves the folder as it was; bad options exit 2 before anything is written."""
+    from typer.testing import CliRunner
+
+    from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, app
+
+    runner = CliRunner()
+    out = tmp_path / "pd"
+    args = ["simulate", "--controller", "pd", *short_task(), "--out", str(out)]
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "RMS position" in result.output and "validity checks" in result.output
+    check_folder(out, "pd")
+    before = (out / "run.json").read_text()
+    again = runner.invoke(app, args)
+    assert again.exit_code == EXIT_OUTPUT and (out / "run.json").read_text() == before
+    for bad_args, words in ((["--rate", "fast"], "continuous"), (["--noise", "1e-4", "--rate", "continuous"], "--noise"),
+                            (["--plant", "6rss"], "same kind of robot"), (["--goal", "min-torque"], "--goal"),
+                            (["--plant-set", "mandible.mass_kg=1"], "mandible.mass_kg")):
+        bad = runner.invoke(app, ["simulate", *bad_args, "--out", str(tmp_path / "bad")], env={"COLUMNS": "200"})
+        assert bad.exit_code == EXIT_BAD_INPUT and words in bad.output, (bad_args, bad.output)
+        assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_simulate_compare_writes_one_folder_per_controller(tmp_path):
+    """--compare: each controller's folder (:func:`check_folder`), the comparison's run.json and table."""
+    from typer.testing import CliRunner
+
+    from chewbot.cli import app
+
+    out = tmp_path / "cmp"
+    result = CliRunner().invoke(app, ["simulate", "--compare", *short_task(), "--out", str(out)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "computed-torque" in result.output and "RMS position" in result.output
+    record = json.loads((out / "run.json").read_text())
+    assert set(record["comparison"]) == {"feedforward", "pd", "computed-torque"}
+    assert (out / "comparison.csv").is_file() and (out / "report.html").is_file()
+    for kind in ("feedforward", "pd", "computed-torque"):
+        check_folder(out / kind, kind)
