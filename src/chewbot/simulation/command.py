@@ -72,7 +72,7 @@ def simulate(
 
       chewbot simulate --controller computed-torque --out runs/ct
 
-      chewbot simulate --compare --plant-set mandible.mass_g=240 --out runs/compare
+      chewbot simulate --compare --plant-set mandible.mass_g=408 --out runs/compare
 
       chewbot simulate --controller pd --friction on --noise 1e-4 --out runs/pd-noisy
 
