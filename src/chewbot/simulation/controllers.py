@@ -252,7 +252,7 @@ class Gains:
                 target[i] = value
             else:
                 target = np.full_like(target, value)
-            arrays[attr] = _gain_value(target, target.size, f"--gain {key}={value:g}")
+            arrays[attr] = _gain_value(target, 0 if size == 0 else target.size, f"--gain {key}={value:g}")
         return cls(arrays["pd_kp"], arrays["pd_kd"], arrays["ct_frequency"], arrays["ct_damping"], float(arrays["cutoff"]),
                    str(path), dict(overrides or {}))
 

@@ -53,7 +53,7 @@ def forward_kinematics_kernel(mechanism: str) -> KernelSpec:
         for _ in range(FK_ITERATIONS):
             H, J = residual(x)
             x = x - ca.solve(ca.mtimes(J.T, J), ca.mtimes(J.T, H))
-        return ca.Function(name, [theta, q, m.p], [x, ca.norm_inf(residual(x)[0])], ["theta", "q", "p"], ["q", "residual"],
+        return ca.Function(name, [theta, q, m.p], [x, ca.norm_inf(residual(x)[0])], ["theta", "q_guess", "p"], ["q", "residual"],
                            {"cse": True})
 
     return KernelSpec(name, build, graph_key(mechanism, FK_ITERATIONS))
