@@ -247,7 +247,7 @@ class Gains:
                 except ValueError:
                     raise ChewbotError(f"--gain {key}={value:g}: the index must be a whole number (1-based)") from None
                 if size == 0 or not 0 <= i < target.size:
-                    raise ChewbotError(f"--gain {key}={value:g}: {base} has {max(target.size, 1)} entr{'ies' if target.size > 1 else 'y'}")
+                    raise ChewbotError(f"--gain {key}={value:g}: {base} has {np.size(target)} entr{'ies' if np.size(target) > 1 else 'y'}")
                 target = target.copy()
                 target[i] = value
             else:
