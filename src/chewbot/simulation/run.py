@@ -112,6 +112,10 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
         raise ChewbotError(f"--plant-set {', '.join(f'task.{k}' for k in plant_task)}: the task is the controller's and the "
                            "plant's; change it with --set")
     plant = load_model(options.plant or options.model, {**plant_base, **plant_overrides})
+    if options.contact == "unilateral" and not model.has_hkp:
+        from chewbot.errors import ChewbotError
+
+        raise ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts")
     if plant.mechanism != model.mechanism:
         from chewbot.errors import ChewbotError
 
