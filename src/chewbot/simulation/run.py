@@ -21,6 +21,7 @@ import numpy as np
 
 from chewbot.casadi_tools import evaluate, native, prepare_kernels
 from chewbot.command import pause_for_tests
+from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import kinematics_kernel
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
@@ -107,18 +108,12 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
     plant_base = model_overrides if options.plant is None else {}
     plant_overrides, plant_task = split_overrides(options.plant_overrides)
     if plant_task:
-        from chewbot.errors import ChewbotError
-
         raise ChewbotError(f"--plant-set {', '.join(f'task.{k}' for k in plant_task)}: the task is the controller's and the "
                            "plant's; change it with --set")
     plant = load_model(options.plant or options.model, {**plant_base, **plant_overrides})
     if options.contact == "unilateral" and not model.has_hkp:
-        from chewbot.errors import ChewbotError
-
         raise ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts")
     if plant.mechanism != model.mechanism:
-        from chewbot.errors import ChewbotError
-
         raise ChewbotError(f"--plant {options.plant}: a {plant.mechanism} model, but the controller's model {options.model} "
                            f"is a {model.mechanism}; the plant must be the same kind of robot")
     return model, plant, task_overrides
