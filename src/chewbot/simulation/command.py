@@ -119,20 +119,18 @@ def simulate(
 
 def _print_summary(stdout, results: dict, out: Path, compare: bool) -> None:
     """Where the report is, the tracking table, where a robot was stopped, the checks."""
-    from rich import box
     from rich.markup import escape
-    from rich.table import Table as RichTable
 
     from chewbot.report.simulation_html import METRICS_HEADER, metrics_rows
 
     rows = sum(r.table.n for r in results.values())
     stdout.print(f"wrote [bold]{escape(str(out))}[/] ({rows} rows); open {escape(str(out / 'report.html'))}", highlight=False)
-    table = RichTable(box=box.SIMPLE_HEAD, pad_edge=False)
-    for j, col in enumerate(METRICS_HEADER[:-1]):
-        table.add_column(escape(col), justify="left" if j == 0 else "right", no_wrap=True)
-    for row in metrics_rows(results):
-        table.add_row(*[escape(c) for c in row[:-1]])
-    stdout.print(table, width=max(stdout.width, 160))
+    # a plain aligned table: whole on any terminal width, and easy to read from a script
+    lines = [METRICS_HEADER[:-1]] + [row[:-1] for row in metrics_rows(results)]
+    widths = [max(len(line[j]) for line in lines) for j in range(len(lines[0]))]
+    for line in lines:
+        stdout.print("  ".join(c.ljust(w) if j == 0 else c.rjust(w) for j, (c, w) in enumerate(zip(line, widths))),
+                     highlight=False, markup=False)
     for label, r in results.items():
         stopped = r.metrics["stopped"]
         if stopped is not None:
