@@ -21,13 +21,15 @@ where w_k is what the step is given at the stage's time t0 + c_k h (the held tor
 reference a controller evaluates at the stage). They are solved by the simplified Newton iteration of RADAU5: the
 Jacobian of r with respect to (q_dot, q_ddot, N) at the start of the step gives the iteration matrix
 I3 x dr/dz + h A x dr/dv (dr/dq enters with h^2 A^2 and is left out: it changes the iteration's rate by about
-h^2 omega^2 ~ 1e-4, not its solution), a fixed number :data:`ITERATIONS` of corrections, then the residual at the
-answer, so that the caller can verify the step and split it where the iteration did not converge (near a stick-slip
+h^2 omega^2 ~ 1e-4, not its solution), at most :data:`SIMPLIFIED` corrections; where they have not converged,
+at most :data:`NEWTON` full Newton corrections with each stage's own Jacobian; then the residual at the answer, so
+that the caller can verify the step and split it where the iteration did not converge (near a stick-slip
 transition of the regularised Coulomb friction, where r turns sharply within a step). The whole step is one MX
 graph: the residual and its Jacobian are called as functions (compiled once each), the linear algebra is dense QR.
 
-Measured accuracy (docs/simulation.md): against the same method with 64 times smaller steps and against SciPy's
-adaptive Radau at tolerances of 1e-12.
+Measured accuracy (tests/test_simulation.py, docs/simulation.md): computed torque with the exact model evaluated at
+every stage follows the whole default task to about 1e-12 m and rad; without friction the energy balance over
+0.2 s holds to about 2e-10 of the work.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ A = np.array([[(88 - 7 * _S6) / 360, (296 - 169 * _S6) / 1800, (-2 + 3 * _S6) / 
 A2 = A @ A
 STAGES = 3
 # The iteration stops where the stages' residual is below TOLERANCE (N m: the torques are tenths of N m, rounding leaves
-# about 1e-15), after at most ITERATIONS corrections. Measured along the default task: without friction each
+# about 1e-15), after at most SIMPLIFIED + NEWTON corrections. Measured along the default task: without friction each
 # correction shrinks the residual about 300 times (2 or 3 corrections), with the default friction about 30 times away
 # from stick-slip transitions; where the corrections are not enough, the caller splits the step
 # (chewbot.simulation.plant).
