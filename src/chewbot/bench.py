@@ -72,6 +72,18 @@ def _recording_fit(model, kin):
     return fit_to_robot(model, kin.X[:, :3], matrix_from_euler_angles(kin.X[:, 3:]))
 
 
+def _simulate(model, kin):
+    """chewbot simulate's loop: computed torque (Hessian, exact model) at 1 kHz along the task, plant without friction."""
+    from chewbot.simulation.controllers import Gains, ModelBasedController
+    from chewbot.simulation.plant import Plant
+    from chewbot.simulation.reference import Reference
+    from chewbot.simulation.simulator import simulate
+
+    reference = Reference(kin.t, *kin.euler_angle_state(), kin.force, kin.side)
+    controller = ModelBasedController("computed-torque", model, reference, Gains.load(mechanism=model.mechanism))
+    return simulate(Plant(model), controller, reference, rate=1000.0)
+
+
 TASK_CASES: tuple[Case, ...] = (
     Case("hessian", partial(inverse_dynamics, method="hessian")),
     Case("liang", partial(inverse_dynamics, method="liang")),
@@ -87,6 +99,7 @@ TASK_CASES: tuple[Case, ...] = (
     Case("newton-euler G3 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",), EP),
     Case("G1 kernel, friction (EP)", _g1_kernel, ("target",), EP),
     Case("import-motion: fit to the robot", _recording_fit),
+    Case("simulate: computed torque at 1 kHz", _simulate),
     Case(f"reference: SciPy SLSQP G1 (timed on {SLSQP_SAMPLES} samples, scaled)", _slsqp, ("target",), EA, SLSQP_SAMPLES),
 )
 

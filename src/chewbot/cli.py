@@ -29,6 +29,7 @@ from chewbot.command import (  # noqa: F401  (the exit codes, for the commands a
 from chewbot.errors import ChewbotError
 from chewbot.identification.command import identify
 from chewbot.recordings.command import import_motion
+from chewbot.simulation.command import simulate
 
 app = typer.Typer(
     name="chewbot",
@@ -476,6 +477,7 @@ def track_incisor(
 
 app.command("import-motion")(import_motion)
 app.command("identify")(identify)
+app.command("simulate")(simulate)
 
 
 @app.command()

@@ -26,7 +26,7 @@ from chewbot.outputs import RESULTS_FOLDER, atomic_folder, to_json
 from chewbot.params import load_model, split_overrides
 from chewbot.report import dynamics_figures, figures
 from chewbot.report.html import write_report
-from chewbot.results import RESULTS_FORMAT, RunOptions, RunResult, kinematics_table
+from chewbot.results import RESULTS_FORMAT, RunOptions, RunResult, Table, kinematics_table
 from chewbot.task.base import Task
 
 __all__ = ["RunOptions", "RunResult", "compute", "input_files", "load_task", "run_json", "write"]
@@ -67,20 +67,19 @@ def compute(options: RunOptions, progress=None) -> RunResult:
     timings = {"kinematics_s": time.perf_counter() - t0}
     table = kinematics_table(kin)
     result = RunResult(options=options, model=model, task=task, kinematics=kin, table=table, info={"timings": timings})
-    _singularity_columns(result)
+    singularity_columns(result.table, kin)
     if options.method:
         _dynamics_stage(result, step)
     _checks_stage(result, step)
     return result
 
 
-def _singularity_columns(result: RunResult) -> None:
+def singularity_columns(table: Table, kin) -> None:
     """The transmission angles mu1..mu6 and kappa_J of the chains' Jacobian (docs/conventions.md)."""
-    kin = result.kinematics
-    result.table.add_block([f"mu{i + 1}" for i in range(6)], np.arcsin(np.clip(kin.transmission, 0.0, 1.0)), "rad",
-                           "transmission angle of chain i (90 deg best, 0 at the dead point)")
-    result.table.add("kappa_J", kin.kappa, "1",
-                     "reciprocal condition number of the chains' Jacobian J_theta1, columns scaled (0: singular)")
+    table.add_block([f"mu{i + 1}" for i in range(6)], np.arcsin(np.clip(kin.transmission, 0.0, 1.0)), "rad",
+                    "transmission angle of chain i (90 deg best, 0 at the dead point)")
+    table.add("kappa_J", kin.kappa, "1",
+              "reciprocal condition number of the chains' Jacobian J_theta1, columns scaled (0: singular)")
 
 
 def _checks_stage(result: RunResult, step) -> None:
@@ -160,21 +159,40 @@ def input_files(options: RunOptions) -> list[Path]:
 def run_json(result: RunResult) -> dict:
     """The run record (run.json): format, options, model and task identity, versions, platform, column units,
     the validity checks, info."""
-    m, task = result.model, result.task
     return {
         "chewbot_run": RESULTS_FORMAT,
         "options": vars(result.options),
-        "model": {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed),
-                  "parameters_sha256": vector_digest(m)},
+        "model": model_record(result.model),
         "overrides": dict(result.options.overrides),
-        "task": {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
-                 "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})},
-        "versions": _versions(),
-        "platform": platform.platform(),
-        "columns": {name: {"unit": result.table.units[name], **({"description": d} if (d := result.table.descriptions.get(name)) else {})} for name in result.table.columns},
+        "task": task_record(result.task),
+        **environment_record(),
+        "columns": columns_record(result.table),
         "checks": [c.as_dict() for c in result.checks],
         **result.info,
     }
+
+
+def model_record(m: Model) -> dict:
+    """A model's identity in run.json: name, mechanism, file and its hash, assumed keys, the parameters' hash."""
+    return {"name": m.name, "mechanism": m.mechanism, "file": m.source, "sha256": m.sha256, "assumed": list(m.assumed),
+            "parameters_sha256": vector_digest(m)}
+
+
+def task_record(task: Task) -> dict:
+    """A task's identity in run.json: name, source (and its hash), samples, side, what the generator recorded."""
+    return {"name": task.name, "source": task.source, **({"sha256": _sha256(task.source)} if Path(task.source).is_file() else {}),
+            "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})}
+
+
+def environment_record() -> dict:
+    """The versions of chewbot and its libraries, and the platform."""
+    return {"versions": _versions(), "platform": platform.platform()}
+
+
+def columns_record(table: Table) -> dict:
+    """Each column's unit and description."""
+    return {name: {"unit": table.units[name], **({"description": d} if (d := table.descriptions.get(name)) else {})}
+            for name in table.columns}
 
 
 def write(result: RunResult, out: Path, force: bool = False, progress=None) -> Path:

@@ -38,7 +38,8 @@ from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unkn
 from chewbot.export import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model_vector import cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.simulation.forward import NEWTON_ITERATIONS, forward_kernel
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
 # least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
@@ -76,16 +77,37 @@ def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_
         theta, q, dq, ddq = (ca.SX.sym(name, coeff.size1_in(i)) for i, name in enumerate(("theta", "q", "dq", "ddq")))
         F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
         D = coeff(theta, q, dq, ddq, F, B, *extra)[0]
-        Dsym, N = ca.SX.sym("D", D.numel()), ca.SX.sym("N", n_unknowns(model))
-        out = forces_sx(model, Dsym, N, 1.0)
-        J = ca.sumsqr(out["tau"])
+        tau, Nk, grad, newton_step, limits = distribution_function(model_or_mechanism, orientation, "min-torque", 1.0, iterations)(D, *extra)
+        return ca.Function("g1_target", [theta, q, dq, ddq, F, B, *extra], [tau, Nk, grad, newton_step, limits],
+                           ["theta", "q", "dq", "ddq", "F_B", "B", *extra_names], ["tau", "N", "grad", "step", "limits"], {"cse": True})
+
+    return KernelSpec("g1_target", build, graph_key(model_or_mechanism, orientation, iterations))
+
+
+def distribution_function(model_or_mechanism: Model | str, orientation: str, goal: str, friction: float,
+                          iterations: int = G1_ITERATIONS) -> ca.Function:
+    """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
+    (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
+    ``orientation``), ``friction`` 0.0 or 1.0 (a constant of the graph). The best piecewise least-squares start
+    (:func:`chewbot.dynamics.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
+    |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values."""
+    from chewbot.dynamics.newton_euler import goal_residual
+
+    def build():
+        model = symbols(model_or_mechanism)
+        extra, _ = parameter_input(model)
+        Dsym = ca.SX.sym("D", coefficients_kernel(model_or_mechanism, orientation).graph().size1_out(0))
+        N = ca.SX.sym("N", n_unknowns(model))
+        out = forces_sx(model, Dsym, N, friction)
+        r = goal_residual(model, goal, Dsym, N, friction)
+        J = ca.sumsqr(r)
         H, g = ca.hessian(J, N)
-        Jr = ca.jacobian(out["tau"], N)
+        Jr = ca.jacobian(r, N)
         H_gn = 2 * ca.mtimes(Jr.T, Jr) + 1e-12 * ca.SX.eye(2)
         convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
         p = -ca.solve(ca.if_else(convex, H, H_gn), g)
         slope = ca.dot(g, p)
-        value = ca.Function("g1_value", [Dsym, N, *extra], [J])
+        value = ca.Function("distribution_value", [Dsym, N, *extra], [J])
         Np = N  # no acceptable step: stay
         for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
             alpha = 0.5**k
@@ -94,20 +116,19 @@ def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_
         # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
         # is taken (the quadratic-convergence region), as the distribution solver does
         Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
-        step = ca.Function("g1_step", [Dsym, N, *extra], [Np])
-        start = ca.Function("g1_start", [Dsym, *extra], [start_sx(model, "min-torque", Dsym)])
+        step = ca.Function("distribution_step", [Dsym, N, *extra], [Np])
+        start = ca.Function("distribution_start", [Dsym, *extra], [start_sx(model, goal, Dsym)])
         dth = Dsym[-6:]
         lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
         # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
-        final = ca.Function("g1_final", [Dsym, N, *extra], [out["tau"], g, ca.norm_2(p), lim])
-        Nk = start(D, *extra)
+        final = ca.Function("distribution_final", [Dsym, N, *extra], [out["tau"], g, ca.norm_2(p), lim])
+        Nk = start(Dsym, *extra)
         for _ in range(iterations):
-            Nk = step(D, Nk, *extra)
-        tau, grad, newton_step, limits = final(D, Nk, *extra)
-        return ca.Function("g1_target", [theta, q, dq, ddq, F, B, *extra], [tau, Nk, grad, newton_step, limits],
-                           ["theta", "q", "dq", "ddq", "F_B", "B", *extra_names], ["tau", "N", "grad", "step", "limits"], {"cse": True})
+            Nk = step(Dsym, Nk, *extra)
+        tau, grad, newton_step, limits = final(Dsym, Nk, *extra)
+        return ca.Function("distribution", [Dsym, *extra], [tau, Nk, grad, newton_step, limits])
 
-    return KernelSpec("g1_target", build, graph_key(model_or_mechanism, orientation, iterations))
+    return cached_graph(model_or_mechanism, ("distribution", orientation, goal, friction, iterations), build)
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
@@ -143,6 +164,16 @@ def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray
             Kernel(coupling_kernel(m), f"Joint-space inertia M_A and MCI (seed 000, Eqs. 58-60) of the {m.mechanism}.",
                    coupling_in, coupling_out, sample[f"coupling_{tag}"]),
         ]
+    forward_in = {"q": torque_in["q"], "dq": torque_in["dq"], "tau": "N m", "B": torque_in["B"], "F_B": torque_in["F_B"],
+                  "friction": "0 (off) or 1 (the model's HKP and actuator friction)"}
+    for m in (target, sixrss):
+        tag = m.mechanism.replace("6rss", "sixrss")
+        out.append(Kernel(forward_kernel(m), f"Forward dynamics of the {m.mechanism}: the accelerations of the independent "
+                          f"coordinates{' and the HKP normal forces N_L, N_R' if m.has_hkp else ''} under the torques tau, "
+                          f"friction regularised as in the inverse dynamics; {NEWTON_ITERATIONS} Newton steps from the "
+                          "frictionless solution (exact without friction). Check residual (N m, ~1e-15 when converged).",
+                          forward_in, {"ddq": "m/s^2, rad/s^2", "N": "N (N_L, N_R along the planes' normal)",
+                                       "residual": "N m"}, sample[f"forward_{tag}"]))
     out.append(
         Kernel(g1_kernel(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
                f"{G1_ITERATIONS} safeguarded Newton steps from the best piecewise least-squares start; q in Euler "
@@ -168,6 +199,8 @@ def example_inputs(target: Model, sixrss: Model, t: float = EXAMPLE_T) -> dict[s
         B = m.molar("left")
         out[f"tau_{tag}"] = {"q": q, "dq": dq, "ddq": ddq, "B": B, "F_B": kin.force[k]}
         out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": q}
+        tau = np.asarray(torque_kernel(m).graph()(q, dq, ddq, B, kin.force[k])[0]).ravel()
+        out[f"forward_{tag}"] = {"q": q, "dq": dq, "tau": tau, "B": B, "F_B": kin.force[k], "friction": np.array([1.0])}
         if m.has_hkp:
             kp = solve_kinematics(m, task, G1_ORIENTATION)
             out["g1_target"] = {"theta": kp.theta[k], "q": kp.q[k], "dq": kp.dq[k], "ddq": kp.ddq[k], "F_B": kp.force[k], "B": B}

@@ -1,0 +1,141 @@
+"""``report.html`` of a simulation (``chewbot simulate``) and of a comparison of controllers (``--compare``).
+
+The page of :mod:`chewbot.report.html` with what a simulation adds: the simulated robot beside the reference one
+(each animated in 3D on the plant's model), the tracking figures (RMS and peak error, peak torque, time in
+saturation, where the robot was stopped), the validity checks of the simulated motion and every column of
+results.csv. The comparison's page puts the controllers' figures in one table and their errors in one plot.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from importlib import resources
+from pathlib import Path
+from string import Template
+
+import plotly.graph_objects as go
+import plotly.io as pio
+from plotly.offline import get_plotlyjs
+
+from chewbot.report.html import _checks_section, _e, _fmt, _plots_section, _table, plot_samples, robot_figure
+
+
+def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path) -> Path:
+    template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
+    page = template.substitute(
+        title=html.escape(title), subtitle=html.escape(subtitle), plotlyjs=get_plotlyjs(), body="\n".join(body),
+        figures="{" + ",".join(f"{json.dumps(k)}:{pio.to_json(f, validate=False)}" for k, f in figures.items()).replace("<", "\\u003c") + "}",
+    )
+    Path(path).write_text(page, encoding="utf-8")
+    return Path(path)
+
+
+def controller_label(result) -> str:
+    """The controller in words: its kind, its inverse dynamics, its rate."""
+    o = result.options
+    model_based = "" if o.controller == "pd" else f", inverse dynamics {o.method}" + (f" (goal {o.goal})" if o.goal else "") + (
+        ", with friction" if o.controller_friction else "")
+    rate = "continuous (every integrator stage)" if o.rate is None else f"{o.rate:g} Hz, torques held"
+    return f"{o.controller}{model_based}, {rate}"
+
+
+def write_simulation_report(result, path: Path, files: list[str] | None = None) -> Path:
+    """Write ``report.html`` for a computed simulation; ``files`` names the other files of its folder."""
+    figures: dict[str, go.Figure] = {}
+    body = [_robots_section(result, figures), _checks_section(result), _tracking_section({result.options.controller: result}),
+            _plots_section(result, figures), _run_section(result, files or [])]
+    return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",
+                 f"{controller_label(result)} · {result.table.n} rows · plant friction {result.options.friction}", body, figures, path)
+
+
+def _robots_section(result, figures: dict) -> str:
+    figures["robot"] = robot_figure(result.plant, result.kinematics)
+    figures["robot_reference"] = robot_figure(result.plant, result.reference_kinematics)
+    stopped = result.simulation.stopped
+    note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({_e(stopped["reason"])}): the motion ends '
+            "at the last pose inside.</span>" if stopped else "")
+    return ('<section id="robot-section"><h2>The simulated robot beside the reference</h2>'
+            '<p class="note">{S} coordinates in mm, both on the plant\'s model; left the simulated motion, right the reference '
+            f"(the task), each with its own time slider.{note}</p>"
+            '<div class="grid"><div><h3>simulated</h3><div id="robot" class="plot"></div></div>'
+            '<div><h3>reference</h3><div id="robot_reference" class="plot" style="height: 720px"></div></div></div></section>')
+
+
+def metrics_rows(results: dict) -> list[list[str]]:
+    """One row per controller: RMS and peak position and orientation error, peak torque, time in saturation,
+    stopped (the comparison's table, printed and in the report)."""
+    rows = []
+    for label, r in results.items():
+        m = r.metrics
+        stopped = m["stopped"]
+        rows.append([label, _fmt(m["rms_position_mm"]), _fmt(m["peak_position_mm"]), _fmt(m["rms_orientation_deg"]),
+                     _fmt(m["peak_orientation_deg"]), _fmt(m["peak_torque_Nm"]), _fmt(m["saturated_s"]),
+                     "" if stopped is None else f"at t = {stopped['t']:.4g} s: {stopped['reason']}"])
+    return rows
+
+
+METRICS_HEADER = ["controller", "RMS position [mm]", "peak position [mm]", "RMS orientation [deg]", "peak orientation [deg]",
+                  "peak torque [N·m]", "saturated [s]", "left the workspace"]
+
+
+def _tracking_section(results: dict) -> str:
+    rows = [[_e(c) for c in row] for row in metrics_rows(results)]
+    per = []
+    for label, r in results.items():
+        for name, v in r.metrics["per_coordinate"].items():
+            per.append([_e(label), _e(name), _fmt(v["rms"]), _fmt(v["peak"]), v["unit"]])
+    return ('<section id="summary"><h2>Tracking</h2>' + _table(METRICS_HEADER, rows)
+            + '<p class="note">Position: the norm of the translational errors (reference minus simulated), orientation: the norm '
+            "of the errors of the Euler angles, over the rows; peak torque: the largest applied abs(τ<sub>i</sub>); saturated: "
+            "how long a commanded torque was beyond the limit.</p><h3>Per coordinate</h3>"
+            + _table(["controller", "coordinate", "RMS", "peak", "unit"], per) + "</section>")
+
+
+def _run_section(result, files: list[str]) -> str:
+    o, sim = result.options, result.simulation
+    info = result.info["simulation"]
+    rows = [["controller", _e(controller_label(result)) + f" on the model {_e(result.model.name)} (<code>{_e(result.model.source)}</code>)"],
+            ["plant", f"{_e(result.plant.name)} (<code>{_e(result.plant.source)}</code>), friction {_e(o.friction)}"
+             + (f", --plant-set {_e(', '.join(f'{k}={v:g}' for k, v in o.plant_overrides.items()))}" if o.plant_overrides else "")],
+            ["bite force", "hidden from the controller (--bite-unknown)" if o.bite_unknown else "known to the controller"],
+            ["sensor", f"crank encoders with noise of {o.noise_rad:g} rad (seed {o.seed})" if o.noise_rad else "the plant's state"],
+            ["integrator", f"{_e(info['integrator']['method'])}; steps of at most {info['integrator']['max_step_s'] * 1e3:g} ms, "
+                           f"{info['integrator']['split_steps']} split; largest residual {_fmt(info['integrator']['largest_residual_Nm'], 3)} N·m"],
+            ["task", f"{_e(result.task.name)} from <code>{_e(result.task.source)}</code>, {sim.n} rows over {sim.t[-1] - sim.t[0]:.4g} s"],
+            ["timings", ", ".join(f"{_e(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items())]]
+    if files:
+        rows.append(["files", ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)])
+    return f'<section id="run"><h2>Run</h2>{_table(["", ""], rows).replace("<td>", "<td class=text>")}</section>'
+
+
+def write_comparison_report(results: dict, path: Path, files: list[str] | None = None) -> Path:
+    """The comparison's ``report.html``: the table of :func:`metrics_rows` and the controllers' errors and torques
+    plotted together; each controller's own report is in its folder."""
+    figures = {"errors": _comparison_figure(results)}
+    first = next(iter(results.values()))
+    links = ", ".join(f'<a href="{_e(c)}/report.html">{_e(c)}</a>' for c in results)
+    body = [_tracking_section(results),
+            '<section id="plots"><h2>Tracking error of the controllers</h2><p class="note">The norm of the translational errors '
+            f"(mm) against time, each controller until it was stopped. Each controller's report: {links}.</p>"
+            '<div id="errors" class="plot" style="height: 420px"></div></section>']
+    if files:
+        listed = ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)
+        body.append(f'<section id="run"><h2>Files</h2><p>{listed}</p></section>')
+    return _page(f"chewbot simulation: controllers compared on {first.plant.name}, {first.task.name}",
+                 f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path)
+
+
+def _comparison_figure(results: dict) -> go.Figure:
+    import numpy as np
+
+    fig = go.Figure()
+    for label, r in results.items():
+        idx = plot_samples(r.table.n)
+        names = [n for n in r.table.columns if n.startswith("e_") and r.table.units[n] == "m"]
+        err = np.linalg.norm(np.column_stack([r.table[n] for n in names]), axis=1)[idx] * 1e3
+        fig.add_trace(go.Scatter(x=r.table["t"][idx], y=err, mode="lines", name=label,
+                                 hovertemplate=f"{label}: %{{y:.3g}} mm<extra></extra>"))
+    fig.update_layout(template="plotly_white", xaxis_title="time t [s]", yaxis_title="position error [mm]", yaxis_type="log",
+                      margin=dict(l=60, r=20, t=10, b=40))
+    return fig

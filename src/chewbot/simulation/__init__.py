@@ -1,0 +1,1 @@
+"""Closed-loop simulation: forward dynamics, controllers, the loop at the control rate."""

@@ -1,0 +1,376 @@
+"""A simulation run: options -> the controller's model, the plant, the reference -> the closed loop -> a results folder.
+
+What ``chewbot simulate`` computes and writes, as :mod:`chewbot.pipeline` does for ``chewbot run``: the folder is
+written whole through :func:`chewbot.outputs.atomic_folder` (results.csv, run.json, figures, report.html) and is
+recognised later by its run.json (key ``chewbot_simulation``). ``--compare`` writes one such folder per controller
+inside one comparison folder, with the comparison's own run.json, table and report.
+
+The simulated motion is passed through the kinematics of the plant's model (:func:`solve_kinematics`), so that
+results.csv has the columns of ``chewbot run`` (pose, crank angles, transmission angles, kappa_J) and the validity
+checks of a run apply to it unchanged: the applied torques against the limits, the plant's normal forces N_L, N_R
+(``contact-pull``), its bearing loads, crank range and speed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.casadi_tools import evaluate, native, prepare_kernels
+from chewbot.command import pause_for_tests
+from chewbot.errors import ChewbotError
+from chewbot.kinematics.functions import kinematics_kernel
+from chewbot.kinematics.motion import Kinematics, solve_kinematics
+from chewbot.model import Model
+from chewbot.outputs import Marker, atomic_folder, to_json
+from chewbot.params import load_model, split_overrides
+from chewbot.pipeline import input_files as run_inputs
+from chewbot.pipeline import load_task, run_json, singularity_columns
+from chewbot.report.summary import crank_tips
+from chewbot.results import POSE_UNITS, RunOptions, Table, kinematics_table
+from chewbot.rotation import matrix_from_euler_angles
+from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
+from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
+from chewbot.simulation.plant import Plant
+from chewbot.simulation.reference import Reference
+from chewbot.simulation.sensor import CrankSensor
+from chewbot.simulation.simulator import DEFAULT_RATE, Simulation, simulate
+from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+
+SIMULATION_FORMAT = 1
+SIMULATION_FOLDER = Marker("simulation folder", "run.json", "chewbot_simulation")
+# Drift of the constraints in the simulated poses above this is reported as an error of the simulation (m): the plant
+# is integrated in independent coordinates, so what remains is rounding in the kinematics (about 1e-15 m).
+DRIFT_TOLERANCE_M = 1e-9
+
+
+@dataclass
+class SimulateOptions:
+    """Everything that defines a simulation (recorded in run.json). ``rate`` None: ``--rate continuous``;
+    ``friction`` the plant's ("on"/"off"); ``overrides`` the controller's model and the default task (``--set``),
+    ``plant_overrides`` the plant's only (``--plant-set``); ``noise_rad`` the standard deviation of the crank
+    encoders' noise (0: the controller sees the plant's state)."""
+
+    controller: str = "computed-torque"
+    model: str = "target"
+    task: str = "default"
+    side: str | None = None
+    method: str = "hessian"
+    goal: str | None = None
+    friction: str = "off"
+    contact: str = "bilateral"
+    rate: float | None = DEFAULT_RATE
+    noise_rad: float = 0.0
+    seed: int = 0
+    plant: str | None = None
+    overrides: dict[str, float] = field(default_factory=dict)
+    plant_overrides: dict[str, float] = field(default_factory=dict)
+    bite_unknown: bool = False
+    gains: str | None = None
+    gain_overrides: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def controller_friction(self) -> bool:
+        """Friction in the controller's model: only Newton-Euler has it, and only where the plant has it on."""
+        return self.method == "newton-euler" and self.friction == "on"
+
+
+@dataclass
+class SimulateResult:
+    """What a simulation computed, in memory (the folder holds the same). ``model`` is the controller's, ``plant``
+    the simulated robot's; ``kinematics`` the simulated motion's, ``reference_kinematics`` the reference's (both
+    on the plant's model); ``table`` results.csv; ``metrics`` the tracking figures (:func:`tracking_metrics`)."""
+
+    options: SimulateOptions
+    model: Model
+    plant: Model
+    task: Task
+    reference: Reference
+    simulation: Simulation
+    kinematics: Kinematics
+    reference_kinematics: Kinematics
+    table: Table
+    metrics: dict
+    gains: Gains
+    checks: list = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+    figures: list[Path] = field(default_factory=list)
+
+
+def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float]]:
+    """The controller's model (``--model`` with ``--set``), the plant's (``--plant`` or the controller's file, with
+    ``--set`` when the plant is the same file, then ``--plant-set``), and the default task's overrides."""
+    model_overrides, task_overrides = split_overrides(options.overrides)
+    model = load_model(options.model, model_overrides)
+    plant_base = model_overrides if options.plant is None else {}
+    plant_overrides, plant_task = split_overrides(options.plant_overrides)
+    if plant_task:
+        raise ChewbotError(f"--plant-set {', '.join(f'task.{k}' for k in plant_task)}: the task is the controller's and the "
+                           "plant's; change it with --set")
+    plant = load_model(options.plant or options.model, {**plant_base, **plant_overrides})
+    if options.contact == "unilateral" and not model.has_hkp:
+        raise ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts")
+    if plant.mechanism != model.mechanism:
+        raise ChewbotError(f"--plant {options.plant}: a {plant.mechanism} model, but the controller's model {options.model} "
+                           f"is a {model.mechanism}; the plant must be the same kind of robot")
+    return model, plant, task_overrides
+
+
+def build(options: SimulateOptions):
+    """The parts of a simulation: controller's model, plant model, task, reference, gains, the controller, the plant
+    and the sensor (None without noise)."""
+    model, plant_model, task_overrides = load_models(options)
+    task = load_task(options.task, model, options.side, task_overrides)
+    reference = Reference.from_task(model, task)
+    gains = Gains.load(options.gains, model.mechanism, options.gain_overrides)
+    controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
+                                      options.controller_friction, not options.bite_unknown)
+    plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+    sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
+    return model, plant_model, task, reference, gains, controller, plant, sensor
+
+
+def compute(options: SimulateOptions, progress=None) -> SimulateResult:
+    """Simulate in memory (no files). ``progress(message)`` is told each stage."""
+    step = progress or (lambda msg: None)
+    step("models and task")
+    model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
+    options = replace(options, side=task.side, goal=controller.goal)
+    step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})")
+    pause_for_tests("simulation")
+    t0 = time.perf_counter()
+    sim = simulate(plant, controller, reference, options.rate, sensor)
+    timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
+    step("kinematics of the simulated motion")
+    prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
+    kin = solve_kinematics(plant_model, motion_task(plant_model, task, sim.t, sim.q, sim.dq, sim.ddq, sim.force))
+    ref_kin = solve_kinematics(plant_model, motion_task(plant_model, task, sim.t, sim.q_ref, sim.dq_ref, sim.ddq_ref, sim.force,
+                                                        "reference"))
+    table = simulation_table(plant, sim, kin)
+    metrics = tracking_metrics(sim, coordinate_names(plant_model))
+    info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
+    result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
+    step("validity checks")
+    from chewbot.analysis.checks import run_checks
+
+    result.checks = run_checks(plant_model, table, None, options.contact)
+    return result
+
+
+def coordinate_names(model: Model) -> tuple[str, ...]:
+    """The independent coordinates of the mechanism, named as in task files."""
+    return TARGET_COORDS if model.has_hkp else FULL_COORDS
+
+
+def motion_task(model: Model, task: Task, t, q, dq, ddq, force, name: str = "simulated") -> Task:
+    """A motion in the independent coordinates as a task (for the kinematics of the plant's model)."""
+    return Task(f"{name} ({task.name})", t, coordinate_names(model), q, dq, ddq, force, task.side, task.source)
+
+
+def coordinate_units(names) -> list[str]:
+    """m or rad per coordinate name."""
+    return [POSE_UNITS[("X", "Y", "Z", "alpha", "beta", "gamma").index(n)] for n in names]
+
+
+def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics) -> Table:
+    """results.csv of a simulation: the kinematics columns of a run (the plant's motion), the applied and the
+    commanded torques, the reference and the tracking error in the independent coordinates, the plant's normal
+    forces, bearing loads, the residual of its equations of motion and the drift of its constraints."""
+    model = plant.model
+    table = kinematics_table(kin)
+    singularity_columns(table, kin)
+    table.add_block([f"tau{i + 1}" for i in range(6)], sim.tau, "N*m", "actuator torques applied to the plant (saturated at limits.torque_Nm)")
+    table.add_block([f"tau_cmd{i + 1}" for i in range(6)], sim.tau_cmd, "N*m", "actuator torques the controller commanded")
+    names = coordinate_names(model)
+    units = coordinate_units(names)
+    for j, (name, unit) in enumerate(zip(names, units)):
+        table.add(f"{name}_ref", sim.q_ref[:, j], unit, "reference coordinate (the task, quintic Hermite between its samples)")
+    for j, (name, unit) in enumerate(zip(names, units)):
+        table.add(f"e_{name}", sim.q_ref[:, j] - sim.q[:, j], unit, "tracking error: reference minus simulated coordinate")
+    fn = native(plant_outputs_kernel(model.mechanism))
+    _, _, axial, radial, _ = evaluate(fn, sim.q, sim.dq, sim.ddq, sim.N, model.molar(plant.side), sim.force,
+                                      float(plant.friction), model.vector())
+    if model.has_hkp:
+        table.add_block(["N_L", "N_R"], sim.N, "N", "normal force of the plane on the condyle, along n = (p1, 0, 1)/|.| (the plant's)")
+    table.add_block([f"FG{i + 1}_axial" for i in range(6)], axial, "N", "axial force at the crank bearing G_i (the plant's)")
+    table.add_block([f"FG{i + 1}_radial" for i in range(6)], radial, "N", "radial force at the crank bearing G_i (the plant's)")
+    table.add("residual", sim.residual, "N*m", "largest residual of the plant's equations of motion at the row's accelerations")
+    drift = constraint_drift(model, kin)
+    for name, values in drift.items():
+        table.add(name, values, "m", DRIFT_DESCRIPTIONS[name])
+    return table
+
+
+DRIFT_DESCRIPTIONS = {"drift_chains": "largest abs(|S_i M_i| - coupler length) of the simulated pose and crank angles",
+                      "drift_hkp": "largest distance of a condyle from its socket's plane in the simulated pose"}
+
+
+def constraint_drift(model: Model, kin: Kinematics) -> dict[str, np.ndarray]:
+    """How far the simulated poses are from satisfying the mechanism's constraints (m), computed from the points
+    themselves: each chain's coupler length between the crank tip S_i (from theta) and M_i (from the pose), and
+    (target) each condyle's distance from its plane p1 x + z + p2 = 0."""
+    R = matrix_from_euler_angles(kin.X[:, 3:6])
+    M = kin.X[:, None, :3] + np.einsum("nij,kj->nki", R, model.M)
+    S = crank_tips(model, kin.theta)
+    out = {"drift_chains": np.max(np.abs(np.linalg.norm(M - S, axis=2) - model.coupler_length), axis=1)}
+    if model.has_hkp:
+        h = model.hkp
+        dist = [np.abs(h.p1 * kin.points[k][:, 0] + kin.points[k][:, 2] + h.p2) / np.hypot(h.p1, 1.0) for k in ("T_L", "T_R")]
+        out["drift_hkp"] = np.maximum(*dist)
+    return out
+
+
+def held_durations(t: np.ndarray) -> np.ndarray:
+    """How long each row's torques act: until the next row (the last row: as long as the one before)."""
+    if len(t) < 2:
+        return np.zeros(len(t))
+    dt = np.diff(t)
+    return np.append(dt, dt[-1])
+
+
+def tracking_metrics(sim: Simulation, names) -> dict:
+    """RMS and peak tracking error of the position (the norm of the translational errors, mm) and of the orientation
+    (the norm of the angular errors, deg) and per coordinate, the peak applied torque, the time in saturation (s; a
+    row counts for as long as its torques are held), the samples simulated and where the robot was stopped."""
+    e = sim.q_ref - sim.q
+    linear = [j for j, n in enumerate(names) if n in ("X", "Y", "Z")]
+    angular = [j for j, n in enumerate(names) if n not in ("X", "Y", "Z")]
+    pos_mm = np.linalg.norm(e[:, linear], axis=1) * 1e3
+    ang_deg = np.degrees(np.linalg.norm(e[:, angular], axis=1))
+
+    def rms(x):
+        return float(np.sqrt(np.mean(x**2)))
+
+    per = {}
+    for j, n in enumerate(names):
+        scale, unit = (1e3, "mm") if j in linear else (180 / np.pi, "deg")
+        per[n] = {"rms": rms(e[:, j]) * scale, "peak": float(np.max(np.abs(e[:, j]))) * scale, "unit": unit}
+    saturated = sim.saturated.any(axis=1)
+    return {"rms_position_mm": rms(pos_mm), "peak_position_mm": float(pos_mm.max()), "rms_orientation_deg": rms(ang_deg),
+            "peak_orientation_deg": float(ang_deg.max()), "per_coordinate": per,
+            "peak_torque_Nm": float(np.max(np.abs(sim.tau))), "saturated_s": float(np.sum(held_durations(sim.t)[saturated])),
+            "samples": int(sim.n), "duration_s": float(sim.t[-1] - sim.t[0]), "stopped": sim.stopped}
+
+
+def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedController, sensor) -> dict:
+    """What run.json says about the loop: the integrator, the control rate, the controller's model, the plant's."""
+    from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
+    from chewbot.simulation.integrator import TOLERANCE
+    from chewbot.simulation.plant import MAX_STEP
+
+    return {"integrator": {"method": "Radau IIA, 3 stages (order 5, L-stable), compiled", "max_step_s": MAX_STEP,
+                           "stage_residual_tolerance_Nm": TOLERANCE, "split_steps": sim.splits,
+                           "largest_residual_Nm": float(np.max(sim.residual))},
+            "control": {"rate_Hz": sim.rate, "hold": "zero-order hold between ticks" if sim.rate else "evaluated at every integrator stage",
+                        "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
+            "controller": {"kind": controller.kind, "model": controller.model.name, "method": controller.method,
+                           "goal": controller.goal, "friction": controller.friction, "bite_force_known": controller.bite_known,
+                           "gains": controller.gains.as_dict()},
+            "plant": {"model": plant.model.name, "file": plant.model.source, "friction": plant.friction,
+                      "contact": "bilateral: both contacts stay closed, N_L and N_R of either sign (contact-pull reports N < 0)"
+                      if plant.model.has_hkp else None,
+                      "friction_smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
+                                             "delta_F_G_N": DELTA_F_G}},
+            "sensor": None if sensor is None else {"noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
+                                                   "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
+
+
+# --------------------------------------------------------------------------------------------- the folder
+
+
+def input_files(options: SimulateOptions) -> list[Path]:
+    """The files a simulation reads (task, parameter files, gains), which its output must not contain."""
+    files = run_inputs(RunOptions(model=options.model, task=options.task))
+    files += [Path(p) for p in (options.plant, options.gains) if p is not None]
+    return [p for p in files if p.suffix.lower() in (".toml", ".csv")]
+
+
+def simulation_json(result: SimulateResult) -> dict:
+    """run.json of a simulation: format, options, both models, task, versions, columns, checks, tracking, info."""
+    from chewbot.pipeline import columns_record, environment_record, model_record, task_record
+
+    return {
+        "chewbot_simulation": SIMULATION_FORMAT,
+        "options": vars(result.options),
+        "model": model_record(result.model),
+        "plant": model_record(result.plant),
+        "task": task_record(result.task),
+        **environment_record(),
+        "columns": columns_record(result.table),
+        "checks": [c.as_dict() for c in result.checks],
+        **result.info,
+    }
+
+
+def write_into(result: SimulateResult, folder: Path, progress=None) -> None:
+    """Write the files of a simulation into an existing (temporary) folder."""
+    from chewbot.report import dynamics_figures, figures, simulation_figures
+    from chewbot.report.simulation_html import controller_label, write_simulation_report
+
+    step = progress or (lambda msg: None)
+    step("writing results.csv")
+    result.table.to_csv(folder / "results.csv")
+    pause_for_tests("writing")
+    step("drawing figures")
+    result.figures = [
+        simulation_figures.tracking_error(result.table, folder / "tracking_error.png", controller_label(result)),
+        dynamics_figures.torques(result.table, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
+        simulation_figures.saturation(result.table, folder / "saturation.png", result.plant.limits.torque),
+        figures.task_space(result.table, folder / "task_space.png"),
+        figures.joint_space(result.table, folder / "joint_space.png"),
+    ]
+    (folder / "run.json").write_text(to_json(simulation_json(result)))
+    step("writing report.html")
+    write_simulation_report(result, folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
+
+
+def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
+    """Write the results folder ``out`` atomically (see :func:`chewbot.pipeline.write`)."""
+    out = Path(out)
+    with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(result.options)) as tmp:
+        write_into(result, tmp, progress)
+    result.figures = [out / p.name for p in result.figures]
+    return out
+
+
+def compare(options: SimulateOptions, progress=None) -> dict[str, SimulateResult]:
+    """The three controllers on the same task and plant (``options.controller`` is ignored)."""
+    return {kind: compute(replace(options, controller=kind), progress) for kind in CONTROLLERS}
+
+
+def comparison_table(results: dict[str, SimulateResult]) -> Table:
+    """comparison.csv: one row per controller (the index of CONTROLLERS), the figures of :func:`tracking_metrics`."""
+    table = Table()
+    table.add("controller", np.array([CONTROLLERS.index(k) for k in results], float), "1",
+              "controller: " + ", ".join(f"{i} {k}" for i, k in enumerate(CONTROLLERS)))
+    for key, unit, what in (("rms_position_mm", "mm", "RMS position error"), ("peak_position_mm", "mm", "peak position error"),
+                            ("rms_orientation_deg", "deg", "RMS orientation error"), ("peak_orientation_deg", "deg", "peak orientation error"),
+                            ("peak_torque_Nm", "N*m", "peak applied torque"), ("saturated_s", "s", "time in saturation")):
+        table.add(key.rsplit("_", 1)[0], np.array([r.metrics[key] for r in results.values()]), unit, what)
+    table.add("stopped_at", np.array([np.nan if r.metrics["stopped"] is None else r.metrics["stopped"]["t"] for r in results.values()]),
+              "s", "time the robot left the workspace (empty: it did not)")
+    return table
+
+
+def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool = False, progress=None) -> Path:
+    """The comparison folder: one simulation folder per controller, comparison.csv, the figure, run.json and the report."""
+    from chewbot.report.simulation_figures import comparison
+    from chewbot.report.simulation_html import write_comparison_report
+
+    out = Path(out)
+    first = next(iter(results.values()))
+    with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(first.options)) as tmp:
+        for kind, result in results.items():
+            (tmp / kind).mkdir()
+            write_into(result, tmp / kind, progress)
+        comparison_table(results).to_csv(tmp / "comparison.csv")
+        comparison({k: r.table for k, r in results.items()}, tmp / "comparison.png")
+        record = {"chewbot_simulation": SIMULATION_FORMAT, "comparison": {k: r.metrics for k, r in results.items()},
+                  "options": {k: v for k, v in vars(first.options).items() if k != "controller"},
+                  "folders": {k: k for k in results}}
+        (tmp / "run.json").write_text(to_json(record))
+        write_comparison_report(results, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))
+    return out
