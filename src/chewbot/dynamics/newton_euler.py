@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.indices import friction_share, performance_indices
-from chewbot.casadi_tools import KernelSpec, compiled, mapped
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
@@ -218,14 +218,11 @@ def forces_kernel(model_or_mechanism: Model | str) -> KernelSpec:
 
 
 def sample_data(model: Model, kin: Kinematics, side: str | None = None):
-    """Per-sample data D (kept in CasADi), ball-centre directions and velocities (N, 3, nN) along the task."""
+    """Per-sample data D (N, k), ball-centre directions and velocities (N, 3, nN) along the task."""
     B = model.molar(side or kin.side)
-    fn = compiled(coefficients_kernel(model.mechanism, kin.orientation))
-    args = [np.asarray(a, dtype=float).T for a in (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)]
-    D, vhat, v_T = mapped(fn, kin.n).call([*args, B, model.vector()])
-    nN = n_unknowns(model)
-    return (SampleData(D, model.vector()), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
-            v_T.full().reshape(3, kin.n, nN).transpose(1, 0, 2))
+    fn = native(coefficients_kernel(model.mechanism, kin.orientation))
+    D, vhat, v_T = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, B, model.vector())
+    return SampleData(D, model.vector()), vhat, v_T
 
 
 def limit_bounds(model: Model) -> np.ndarray:
@@ -325,19 +322,21 @@ def check_goal(goal: str) -> None:
 
 @register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
-                 friction: bool = True, strict: bool = False, **ignored) -> Dynamics:
+                 friction: bool = True, strict: bool = False, carry: dict | None = None, **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
 
     ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
     ``friction``: HKP and actuator friction on or off; ``strict``: raise
     :class:`~chewbot.errors.InfeasibleError` at a sample with no admissible distribution instead of recording
-    it in ``info["infeasible"]``. Columns of the table: see docs/newton_euler.md.
+    it in ``info["infeasible"]``; ``carry``: the previous chunk's ``Dynamics.carry`` (its last distribution, the
+    warm start of the SQP at this chunk's first sample). Columns of the table: see docs/newton_euler.md.
     """
     check_goal(goal)
     fl = 1.0 if friction else 0.0
     data, vhat, v_T = sample_data(model, kin, side)
-    sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict)
-    forces = compiled(forces_kernel(model.mechanism))
+    sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict,
+                previous=(carry or {}).get("x"))
+    forces = native(forces_kernel(model.mechanism))
     out = dict(zip(forces.name_out(), data(forces, sol.x, fl)))
     table = Table()
     table.add_block([f"tau_f{i + 1}" for i in range(6)], out["tau_f"], "N*m", "actuator friction torque (in tau)")
@@ -367,7 +366,7 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
             "constrained_samples": len(sol.constrained), "infeasible": sol.infeasible,
             "smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
                           "delta_F_G_N": DELTA_F_G}}
-    return Dynamics("newton-euler", out["tau"], table, info)
+    return Dynamics("newton-euler", out["tau"], table, info, carry={"x": sol.x[-1].copy()} if kin.n else {})
 
 
 def benchmark_cases() -> dict:

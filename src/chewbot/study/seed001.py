@@ -23,7 +23,7 @@ from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.symbolic import ORIENTATIONS
 from chewbot.params import load_model
 from chewbot.report import newton_euler_figures
-from chewbot.report.figures import _save, plt
+from chewbot.report.figures import _save, subplots
 from chewbot.results import kinematics_table
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.task.default import default_task
@@ -76,7 +76,7 @@ def _cell(value) -> str:
 
 def _fig14(rows: list[dict], path: Path) -> Path:
     """Computation time of each row, Euler parameters beside Euler angles (seed 001, Fig. 14)."""
-    fig, ax = plt.subplots(figsize=(9, 4))
+    fig, ax = subplots(figsize=(9, 4))
     labels = [f"{r['mechanism']} {r['goal']}" for r in rows if r["orientation"] == ORIENTATIONS[0]]
     xs = np.arange(len(labels))
     for k, orientation in enumerate(ORIENTATIONS):
