@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -13,6 +14,9 @@ import numpy as np
 import pytest
 from plotly.offline import get_plotlyjs
 
+from typer.testing import CliRunner
+
+from chewbot.cli import app
 from chewbot.outputs import OutputExistsError
 from chewbot.pipeline import RunOptions, compute, write
 from chewbot.report import html as report_html
@@ -24,6 +28,7 @@ from conftest import default_kinematics, model
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 # Debian's Chromium, or another build named by $CHEWBOT_CHROMIUM
 CHROMIUM = Path(os.environ.get("CHEWBOT_CHROMIUM", "/usr/bin/chromium"))
+runner = CliRunner()
 
 
 @pytest.fixture(scope="session")
@@ -165,6 +170,60 @@ def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_fol
         write(run_with_dynamics, out, force=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
     assert (out / "keep.txt").read_text() == "old result"
+
+
+# --- chewbot report DIR -----------------------------------------------------------------------------------
+
+
+def _contents(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_report_command_rebuilds_the_same_report_and_figures(tmp_path):
+    """`chewbot run` writes its folder chunk by chunk; `chewbot report DIR --force` draws the figures and the report
+    again from results.csv and run.json alone: the same bytes. results.csv and run.json are never written."""
+    out = tmp_path / "run"
+    assert runner.invoke(app, ["run", "--out", str(out), "-q"]).exit_code == 0
+    before = _contents(out)
+    stamps = {name: (out / name).stat().st_mtime_ns for name in ("results.csv", "run.json")}
+    refused = runner.invoke(app, ["report", str(out)])
+    assert refused.exit_code == 5 and "--force" in refused.output
+    assert _contents(out) == before
+    again = runner.invoke(app, ["report", str(out), "--force"])
+    assert again.exit_code == 0, again.output
+    assert _contents(out) == before
+    assert {name: (out / name).stat().st_mtime_ns for name in stamps} == stamps
+
+
+def test_a_batch_run_gets_its_figures_and_report_later(tmp_path):
+    out = tmp_path / "batch"
+    assert runner.invoke(app, ["run", "--out", str(out), "--no-figures", "--no-report", "-q"]).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "run.json"]
+    result = runner.invoke(app, ["report", str(out), "--no-figures"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["report.html", "results.csv", "run.json"]
+    assert 'href="task_space.png"' not in _page(out)
+    assert runner.invoke(app, ["report", str(out), "--no-report"]).exit_code == 0  # the figures: none existed
+    assert runner.invoke(app, ["report", str(out), "--no-figures", "--force"]).exit_code == 0
+    assert 'href="task_space.png"' in _page(out)  # now the folder has them: the report links to them
+
+
+def test_report_command_writes_only_into_chewbot_s_results_folders(tmp_path, run_folder):
+    assert runner.invoke(app, ["report", str(tmp_path / "missing")]).exit_code == 2
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "results.csv").write_text("t\n0\n")
+    result = runner.invoke(app, ["report", str(mine)])
+    assert result.exit_code == 5 and "not a results folder written by chewbot" in result.output
+    assert sorted(p.name for p in mine.iterdir()) == ["results.csv"]
+    # a run whose model has changed since: its parameters' SHA-256 no longer match
+    copy = tmp_path / "copy"
+    shutil.copytree(run_folder, copy)
+    record = json.loads((copy / "run.json").read_text())
+    record["model"]["parameters_sha256"] = "0" * 64
+    (copy / "run.json").write_text(json.dumps(record))
+    result = runner.invoke(app, ["report", str(copy), "--force"])
+    assert result.exit_code == 2 and "no longer has the run's parameters" in result.output
 
 
 # --- in a real browser ----------------------------------------------------------------------------------

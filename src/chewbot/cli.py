@@ -352,48 +352,39 @@ def report_command(
 
 @app.command()
 def bench(
-    repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
-    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per kernel for the one-sample timings."),
-    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file."),
+    repeats: int = typer.Option(11, "--repeats", min=3, help="Timed runs per case after the first, interleaved (median and spread reported)."),
+    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per in-loop kernel for the one-sample timings."),
+    long: bool = flag("--long", help="Also run tasks of 10,000 to 1,000,000 samples with every method: time per "
+                      "sample and peak memory (about half an hour)."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
+                                    "file written by chewbot bench with --force)."),
     force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
-    """Time every formulation on the default task (5001 samples), both mechanisms, and the real-time kernels.
+    """Time what a user waits for: chewbot run and --help, every formulation on the default task (5001 samples),
+    both mechanisms, the in-loop kernels and the exported C.
 
-    In one run: each formulation's first call (graph build + kernel load or compile), the median and minimum of
-    the further runs, per sample; the kernels for one sample from Python and from C; and the ratios of the
-    medians (Hessian vs Liang, target vs 6RSS, Euler parameters vs angles, each against the plain NumPy and
-    SciPy SLSQP references). Timings are not tests: pin to one core for single-core figures.
+    Every timing is repeated, and the variants a table compares run interleaved: medians with the interquartile
+    range of the runs; a ratio whose two spreads overlap is printed as "within noise". The machine and its load
+    average are written above the tables. Timings are not tests: pin to one core for single-core figures.
 
-    Example:
+    Examples:
 
-      taskset -c 0 chewbot bench --out bench.md
+      chewbot bench --out docs/benchmark.md --force
+
+      taskset -c 0 chewbot bench --long --out bench.md
     """
-    from chewbot.bench import bench_kernels, bench_task, machine, ratios
+    from chewbot.bench import benchmark
     from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
     with errors_reported():
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
-            timings = bench_task(repeats=repeats, progress=step)
-            step("kernels, one sample")
-            kernel_timings = bench_kernels(calls)
-        text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
+            text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
         stdout.print(text, markup=False, highlight=False)
         if out is not None:
             with atomic_file(out, force) as tmp:
                 tmp.write_text(marker_line("<!--", "chewbot bench") + "\n" + text)
-
-
-def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) -> str:
-    lines = [f"Machine: {machine_line}", "", f"Whole default task ({timings[0].samples} samples):", "",
-             "| mechanism | case | first call (s) | median (ms) | min (ms) | per sample (us) |", "|---|---|---|---|---|---|"]
-    lines += [f"| {t.mechanism} | {t.case} | {t.first_s:.3f} | {t.median_s * 1e3:.2f} | {t.min_s * 1e3:.2f} | {t.per_sample_us:.2f} |"
-              for t in timings]
-    lines += ["", "One sample, exported kernels:", "", "| kernel | call from Python (us, median) | call from C (ns, mean) |", "|---|---|---|"]
-    lines += [f"| {k.name} | {k.python_us:.2f} | {'-' if k.c_ns is None else f'{k.c_ns:.0f}'} |" for k in kernel_timings]
-    lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3g}" for name, value in ratio_values.items()]
-    return "\n".join(lines) + "\n"
 
 
 @app.command("export-c")

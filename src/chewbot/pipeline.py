@@ -121,12 +121,18 @@ def _kinematics(model: Model, task: Task, part: Task, offset: int, orientation: 
         if task.lines is not None and sample is not None:
             error = error.located(f"{task.source}: line {task.lines[sample]}")
         raise error from None
-    if theta_before is None:
-        return kin
-    # theta within the chunk is continuous from its first sample, which solve_kinematics puts in (-pi, pi]; the
-    # whole task's unwrap continues it from the sample before: shift by the whole turns that close the gap
-    turns = np.round((theta_before - kin.theta[0]) / (2 * np.pi))
-    return replace(kin, theta=kin.theta + 2 * np.pi * turns) if turns.any() else kin
+    theta = _continued(kin.theta, theta_before)
+    return kin if theta is kin.theta else replace(kin, theta=theta)
+
+
+def _continued(theta: np.ndarray, before: np.ndarray | None) -> np.ndarray:
+    """Angles (n, 6) continuous within a chunk, the first in (-pi, pi] (as solve_kinematics gives them), continued
+    from ``before``, the previous chunk's last angles: shifted by the whole turns that close the gap, as NumPy's
+    unwrap of the whole task continues them."""
+    if before is None:
+        return theta
+    turns = np.round((before - theta[0]) / (2 * np.pi))
+    return theta + 2 * np.pi * turns if turns.any() else theta
 
 
 def _singularity_columns(table: Table, kin) -> None:

@@ -173,6 +173,13 @@ def _view(buffer: np.ndarray, rows: int, cols: int) -> np.ndarray:
 LOOP_FLAGS = ("-O3",)
 
 
+def loop_spec(model_or_mechanism: Model | str, kind: str) -> KernelSpec:
+    """The kernel of :func:`loop_kernel`'s ``kind`` for a model (its numbers folded in) or a mechanism (p an input)."""
+    if kind not in LOOP_KERNELS:
+        raise ValueError(f"kind must be one of {', '.join(LOOP_KERNELS)}, not {kind!r}")
+    return {"tau": torque_kernel, "dynamics": dynamics_kernel, "coupling": coupling_kernel, "g1": g1_kernel}[kind](model_or_mechanism)
+
+
 def loop_kernel(model: Model, kind: str = "tau", side: str = "left", folded: bool = True, flags: tuple[str, ...] = LOOP_FLAGS) -> LoopKernel:
     """A :class:`LoopKernel` of one robot: ``kind`` "tau" (minimum-norm (target) or unique (6RSS) torques: inputs
     q, dq, ddq in Euler angles, B, F_B), "dynamics" (the same with J_theta1, M_f, C_f, G_f, Q_B), "coupling" (M_A,
@@ -182,11 +189,7 @@ def loop_kernel(model: Model, kind: str = "tau", side: str = "left", folded: boo
     ``folded``: the model's numbers folded into the compiled code (the fastest; compiled once per parameter set,
     kept in the kernel cache under their SHA-256); else the mechanism's kernel with p as its last input, set here.
     """
-    if kind not in LOOP_KERNELS:
-        raise ValueError(f"kind must be one of {', '.join(LOOP_KERNELS)}, not {kind!r}")
-    which = model if folded else model.mechanism
-    spec = {"tau": torque_kernel, "dynamics": dynamics_kernel, "coupling": coupling_kernel, "g1": g1_kernel}[kind](which)
-    k = LoopKernel(spec, flags)
+    k = LoopKernel(loop_spec(model if folded else model.mechanism, kind), flags)
     if "B" in k.inputs:
         k.B[:] = model.molar(side)
     if not folded:

@@ -190,14 +190,15 @@ class ViewBuilder:
     def _block(self, table: Table) -> None:
         start, m = self._done, table.n
         names = list(table.columns)
-        y = np.column_stack([table.columns[n] for n in names])
-        extra = self.derived(table.columns) if self.derived else {}
+        y = np.column_stack([table.columns[n] for n in names]) + 0.0  # -0.0 as 0.0, as results.csv has it
+        columns = dict(zip(names, y.T))
+        extra = self.derived(columns) if self.derived else {}
         if self._extra is None:
             self._extra = Table()
             for name, (values, unit) in extra.items():
                 self._extra.add(name, values[:0], unit)
             self._totals = ColumnTotals(len(names) + len(extra))
-        t = table.columns["t"]
+        t = columns["t"]
         every = np.column_stack([y] + [values for values, _ in extra.values()]) if extra else y
         self._totals.add(t, every)
         if start == 0:
@@ -207,8 +208,8 @@ class ViewBuilder:
         picked = self.row_samples[(self.row_samples >= start) & (self.row_samples < start + m)] - start
         self._rows.append(y[picked])
         mu = [f"mu{i}" for i in range(1, 7)]
-        if all(name in table.columns for name in mu):
-            self._near.update(start, t, np.degrees(np.column_stack([table.columns[name] for name in mu])))
+        if all(name in columns for name in mu):
+            self._near.update(start, t, np.degrees(np.column_stack([columns[name] for name in mu])))
         self._done += m
 
     def result(self) -> RunView:
