@@ -56,16 +56,21 @@ OPTIONS = [
     # torque limit below the peaks: the distribution's SQP at a few hundred samples, warm-started from the sample
     # before, across the chunks' boundaries too
     RunOptions(method="newton-euler", goal="min-torque", friction="on", overrides={"limits.torque_Nm": 0.28}),
+    # the unilateral contact: the minimum-norm formulations' fallback and the distribution's bounds on N
+    RunOptions(method="liang", contact="unilateral"),
+    RunOptions(method="newton-euler", goal="min-torque", friction="on", contact="unilateral"),
 ]
 
 
-@pytest.mark.parametrize("options", OPTIONS, ids=lambda o: f"{o.model}-{o.method}-{o.goal}-{o.orientation}-{len(o.overrides)}")
+@pytest.mark.parametrize("options", OPTIONS, ids=lambda o: f"{o.model}-{o.method}-{o.goal}-{o.orientation}-{o.contact}-{len(o.overrides)}")
 def test_chunks_give_the_whole_task(options):
     """Every column bit for bit; the checks' verdicts equal; the formulation's indices and the coupling means
     (means over the samples, summed chunk by chunk) to 1e-12 relative, their other entries equal."""
     whole = compute(options, chunk=None)
     parts = compute(options, chunk=CHUNK)
     _same_columns(parts.table, whole.table)
+    if options.model == "target":  # the normal forces are among the columns compared
+        assert {"N_L", "N_R"} <= set(whole.table.columns)
     assert [c.as_dict() for c in parts.checks] == [c.as_dict() for c in whole.checks]
     info = {k: v for k, v in whole.info.items() if k != "timings"}
     _same_numbers({k: v for k, v in parts.info.items() if k != "timings"}, info, rtol=1e-12)
@@ -74,23 +79,25 @@ def test_chunks_give_the_whole_task(options):
 
 
 def test_the_warm_start_is_carried_across_chunks(monkeypatch):
-    """A chunk that starts at a sample the SQP solves, after one it solved too: with the previous chunk's last
-    distribution as its warm start it gives the whole task's results; without it (the SQP started from the
-    sample's own unconstrained optimum) it does not, so the carry is what makes them equal."""
-    import chewbot.dynamics.base as base
+    """A chunk that starts at a sample the SQP solves, after one it solved too, gives the whole task's results,
+    and the distribution of each chunk is warm-started from the previous chunk's last solution (N_L, N_R of the
+    sample before), as the whole task's SQP is from the sample before."""
+    import chewbot.dynamics.newton_euler as ne
 
-    options = OPTIONS[-1]
+    options = OPTIONS[-3]  # the torque limit below the peaks
     whole = compute(options, chunk=None)
     tau = np.column_stack([whole.table[f"tau{i}"] for i in range(1, 7)])
     on_limit = np.abs(tau).max(axis=1) >= 0.28 * (1 - 1e-9)  # the samples the SQP solved
     pairs = np.flatnonzero(on_limit[1:] & on_limit[:-1]) + 1
     k = int(pairs[len(pairs) // 2])
+    starts = []
+    solve = ne.solve
+    monkeypatch.setattr(ne, "solve", lambda *a, previous=None, **o: starts.append(previous) or solve(*a, previous=previous, **o))
     _same_columns(compute(options, chunk=k).table, whole.table)
-
-    solve = base.METHODS["newton-euler"]
-    monkeypatch.setitem(base.METHODS, "newton-euler", lambda model, kin, **o: solve(model, kin, **{**o, "carry": None}))
-    forgetful = compute(options, chunk=k).table
-    assert not all(np.array_equal(forgetful[f"N_{s}"], whole.table[f"N_{s}"]) for s in "LR")
+    N = np.column_stack([whole.table["N_L"], whole.table["N_R"]])
+    assert starts[0] is None and len(starts) >= 2
+    for j, previous in enumerate(starts[1:], start=1):
+        assert np.array_equal(previous, N[j * k - 1])
 
 
 def test_theta_continues_across_chunks_as_unwrap_of_the_whole_task():

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import os
 import platform
-import shutil
 import statistics
 import subprocess
 import sys
@@ -259,7 +258,10 @@ def ratios(timings: dict[str, Timing]) -> dict[str, Comparison]:
 
 
 def _chewbot(*args: str) -> list[str]:
-    return [sys.executable, "-m", "chewbot.command", *args] if not shutil.which("chewbot") else [shutil.which("chewbot"), *args]
+    """The command line of ``chewbot ARGS`` as a user runs it: the installed script beside this Python, else
+    ``python -m chewbot``."""
+    script = Path(sys.executable).with_name("chewbot")
+    return [str(script), *args] if script.is_file() else [sys.executable, "-m", "chewbot", *args]
 
 
 def bench_commands(repeats: int = 7, progress=None) -> dict[str, Timing]:

@@ -153,7 +153,7 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
         raise ValueError(f"chunk size must be at least 1 sample, not {size}")
     prepare_kernels(run_kernels(model, options))
     o = options
-    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {})}
+    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {}), "contact": o.contact}
     theta_end, carry = None, None
     for start in range(0, max(task.n, 1), size):
         timings: dict[str, float] = {}
@@ -223,6 +223,8 @@ INFO_RULES: dict[str, Callable[[Parts], object]] = {
     "constrained_samples": lambda parts: sum(v for _, _, v in parts),
     "unconverged": _shifted_samples,
     "infeasible": _shifted_samples,
+    "contact": lambda parts: merge_info(parts),  # the contact model, its entries by these rules
+    "raised_samples": lambda parts: sum(v for _, _, v in parts),  # the unilateral fallback's raised N
 }
 
 
@@ -338,14 +340,14 @@ def run_json(result: RunResult) -> dict:
 # --- writing a folder --------------------------------------------------------------------------------------
 
 
-def _view_builder(model: Model, task: Task):
+def _view_builder(model: Model, t: np.ndarray, contact: str):
     from chewbot.report.view import ViewBuilder, report_columns
 
-    return ViewBuilder(task.t, derived=lambda columns: report_columns(model, columns))
+    return ViewBuilder(t, derived=lambda columns: report_columns(model, columns, contact))
 
 
 def _figures_and_report(record: Callable[[], dict], method: str | None, model: Model, view, folder: Path, figures: bool,
-                        report: bool, step, beside: Path | None = None) -> list[Path]:
+                        report: bool, step, beside: Path | None = None, contact: str = "") -> list[Path]:
     """Draw the figures and write report.html into ``folder`` (as asked); their paths. The figures are drawn beside
     the rest (:func:`chewbot.report.figures.drawn`): meanwhile ``record()`` gives the run's record as run.json has
     it (it may write what the figures do not need: the last rows, run.json), then the report is written from it
@@ -354,7 +356,7 @@ def _figures_and_report(record: Callable[[], dict], method: str | None, model: M
     from chewbot.report.figures import drawn, figure_jobs, figure_names
     from chewbot.report.html import write_report
 
-    jobs = figure_jobs(view, method, folder) if figures else []
+    jobs = figure_jobs(view, method, folder, contact) if figures else []
     written = [folder / name for name, _ in jobs]
     with drawn(jobs, step):
         content = record()
@@ -392,9 +394,10 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
         result.table.to_csv(tmp / "results.csv")
         pause_for_tests("writing")
         record = _write_record(run_json(result), tmp)
-        view = _view_builder(result.model, result.task)
+        view = _view_builder(result.model, result.task.t, result.options.contact)
         view.update(result.table)
-        written = _figures_and_report(lambda: record, result.options.method, result.model, view.result(), tmp, figures, report, step)
+        written = _figures_and_report(lambda: record, result.options.method, result.model, view.result(), tmp, figures, report, step,
+                                      contact=result.options.contact)
     result.figures = [out / p.name for p in written if p.suffix == ".png"]
     return out
 
@@ -415,7 +418,7 @@ def run(options: RunOptions, out: Path, force: bool = False, progress=None, figu
     out = Path(out)
     with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp:
         totals = Totals(model, options)
-        view = _view_builder(model, task)
+        view = _view_builder(model, task.t, options.contact)
         with CsvWriter(tmp / "results.csv") as csv:
 
             def rows(part: Chunk) -> None:
@@ -443,7 +446,8 @@ def run(options: RunOptions, out: Path, force: bool = False, progress=None, figu
                 return content
 
             step("figures and report", done=task.n)
-            written = _figures_and_report(record, options.method, model, view.result(), tmp, figures, report, step)
+            written = _figures_and_report(record, options.method, model, view.result(), tmp, figures, report, step,
+                                          contact=options.contact)
     return RunRecord(content, model, checks, view.result(), [out / "results.csv", out / "run.json", *(out / p.name for p in written)])
 
 
@@ -465,7 +469,6 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     from chewbot.outputs import RESULTS_FOLDER, atomic_members
     from chewbot.params import BUILTIN_MODELS, load_model, split_overrides
     from chewbot.report.figures import figure_names
-    from chewbot.report.view import ViewBuilder, report_columns
     from chewbot.results import READABLE_FORMATS, read_csv_chunks
 
     step = _stepper(progress)
@@ -496,7 +499,7 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     t = np.array([float(line.partition(",")[0]) for line in _data_lines(csv_path)])
     if t.size != record["task"]["samples"]:
         raise ChewbotError(f"{csv_path}: {t.size} rows, run.json says {record['task']['samples']} samples")
-    view = ViewBuilder(t, derived=lambda cols: report_columns(model, cols))
+    view = _view_builder(model, t, record["options"].get("contact", "bilateral"))
     units = {name: c.get("unit", "") for name, c in columns.items()}
     done = 0
     for part in read_csv_chunks(csv_path, units, chunk):
@@ -508,7 +511,8 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     method = record["options"].get("method")
     names = (figure_names(view.columns, method) if figures else []) + (["report.html"] if report else [])
     with atomic_members(folder, names, force) as tmp:
-        _figures_and_report(lambda: record, method, model, view, tmp, figures, report, step, beside=folder)
+        _figures_and_report(lambda: record, method, model, view, tmp, figures, report, step, beside=folder,
+                            contact=record["options"].get("contact", "bilateral"))
     return [folder / name for name in names]
 
 

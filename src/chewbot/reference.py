@@ -1,4 +1,4 @@
-"""A plain reference: Newton–Euler torques in NumPy and the friction-aware distribution by SciPy's SLSQP.
+"""A plain reference: Newton–Euler torques in NumPy and the friction-aware distributions by SciPy's SLSQP.
 
 Written the straightforward way, independently of the CasADi graphs: every body's Newton–Euler equations with
 vectors and matrices (batched over the samples for the frictionless torques), and the optimal distribution
@@ -128,14 +128,17 @@ def _sample_torques(model: Model, e: _Sample, k: int, N: np.ndarray, dtheta: np.
     return tau, F_G, dtau, dF_S
 
 
-def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None = None, side: str | None = None,
-                     eps_theta_dot: float = 1e-3, eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """Goal G1 with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other, each
-    warm-started from the previous one's solution, under the actuator limits (torque, power, axial and radial
-    load), with the exact gradients of the goal and the limits (:func:`_sample_torques`).
+def slsqp_distribution(model: Model, kin: Kinematics, goal: str = "min-torque", samples: np.ndarray | None = None,
+                       side: str | None = None, lower: float | None = None, eps_theta_dot: float = 1e-3,
+                       eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """An optimal distribution with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other,
+    each warm-started from the sample before where that was solved, under the actuator limits (torque, power, axial
+    and radial load), with the exact gradients of the goal and the limits (:func:`_sample_torques`).
 
-    ``samples``: indices to solve (default all). The friction regularisations are those of the Newton–Euler
-    model. Returns (tau (n, 6), N (n, 2)) for the samples solved.
+    ``goal``: ``min-torque`` (G1, sum tau_i^2), ``min-coupler-force`` (G2, sum abs(F_S,i)^2), ``min-hkp-force``
+    (G3, N_L^2 + N_R^2); ``lower``: N_L, N_R >= lower (a unilateral contact) or None; ``samples``: indices to solve
+    (default all). The friction regularisations are those of the Newton–Euler model. Returns (tau (n, 6), N (n, 2))
+    for the samples solved.
     """
     if not model.has_hkp:
         raise ValueError("the 6RSS has nothing to distribute")
@@ -143,9 +146,12 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
     idx = np.arange(kin.n) if samples is None else np.asarray(samples)
     lim = model.limits
     z = np.array([model.R_C0[i][:, 2] for i in range(6)])
+    weight = np.outer(model.crank_mass * model.g, [0.0, 0.0, 1.0])  # F_G = F_S + weight
     taus, Ns = [], []
-    x0 = np.zeros(2)
+    start = np.zeros(2) if lower is None else np.full(2, lower)
+    x0, previous = start, None
     for k in idx:
+        x0 = x0 if previous == k - 1 else start  # warm start from the sample before only
         dth = kin.dtheta[k]
         last: dict = {}
 
@@ -159,7 +165,13 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
                 daxial = np.einsum("ic,icj->ij", z, dF_G)
                 dradial = np.einsum("ic,icj->ij", across, dF_G) / radial[:, None]
                 power = tau * dth
-                last.update(N=N.copy(), tau=tau, J=float(tau @ tau), grad=2 * dtau.T @ tau,
+                if goal == "min-torque":
+                    J, grad = float(tau @ tau), 2 * dtau.T @ tau
+                elif goal == "min-coupler-force":  # F_S = F_G - weight, dF_S = dF_G
+                    J, grad = float(np.sum((F_G - weight) ** 2)), 2 * np.einsum("ic,icj->j", F_G - weight, dF_G)
+                else:
+                    J, grad = float(N @ N), 2 * N
+                last.update(N=N.copy(), tau=tau, J=J, grad=grad,
                             c=np.concatenate([lim.torque - np.abs(tau), lim.power - np.abs(power), lim.axial_load - np.abs(axial),
                                               lim.radial_load - radial]),
                             dc=-np.concatenate([np.sign(tau)[:, None] * dtau, np.sign(power)[:, None] * dth[:, None] * dtau,
@@ -167,11 +179,18 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
             return last
 
         res = minimize(lambda N, f=evaluate: f(N)["J"], x0, jac=lambda N, f=evaluate: f(N)["grad"], method="SLSQP",
+                       bounds=None if lower is None else [(lower, None)] * 2,
                        constraints=[{"type": "ineq", "fun": lambda N, f=evaluate: f(N)["c"], "jac": lambda N, f=evaluate: f(N)["dc"]}],
                        options={"ftol": 1e-16, "maxiter": 200})
         if not res.success:
             raise ChewbotError(f"SciPy SLSQP failed at sample {k} (t = {kin.t[k]:.6g} s): {res.message}")
-        x0 = res.x
+        x0, previous = res.x, k
         taus.append(evaluate(res.x)["tau"])
         Ns.append(res.x)
     return np.array(taus), np.array(Ns)
+
+
+def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None = None, side: str | None = None,
+                     **smoothing) -> tuple[np.ndarray, np.ndarray]:
+    """Goal G1 by :func:`slsqp_distribution` (the bilateral contact): the baseline of ``chewbot bench``."""
+    return slsqp_distribution(model, kin, "min-torque", samples, side, **smoothing)

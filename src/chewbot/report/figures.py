@@ -136,20 +136,21 @@ def figure_names(columns, method: str | None) -> list[str]:
     return names
 
 
-def figure_jobs(view, method: str | None, folder: Path) -> list[tuple[str, Callable[[], Path]]]:
+def figure_jobs(view, method: str | None, folder: Path, contact: str = "") -> list[tuple[str, Callable[[], Path]]]:
     """The figures of a run (:func:`figure_names`), each as (file name, a function that draws it from the
-    ``series`` of the run's view, :class:`chewbot.report.view.RunView`, into ``folder``)."""
+    ``series`` of the run's view, :class:`chewbot.report.view.RunView`, into ``folder``); ``contact``: the run's
+    contact model, named on the torques figure."""
     from chewbot.report import dynamics_figures, newton_euler_figures
 
     draw = {"task_space.png": task_space, "joint_space.png": joint_space, "bite_force.png": bite_force,
-            "torques.png": lambda table, path: dynamics_figures.torques(table, path, method or ""),
+            "torques.png": lambda table, path: dynamics_figures.torques(table, path, method or "", contact),
             "coupling.png": dynamics_figures.coupling_indices, **newton_euler_figures.FIGURES}
     return [(name, partial(draw[name], view.series, Path(folder) / name)) for name in figure_names(view.series.columns, method)]
 
 
-def write_figures(view, method: str | None, folder: Path) -> list[Path]:
+def write_figures(view, method: str | None, folder: Path, contact: str = "") -> list[Path]:
     """Draw the figures of a run (:func:`figure_jobs`) into ``folder``; their paths."""
-    jobs = figure_jobs(view, method, folder)
+    jobs = figure_jobs(view, method, folder, contact)
     with drawn(jobs):
         pass
     return [Path(folder) / name for name, _ in jobs]

@@ -36,7 +36,9 @@ from chewbot.model import Model
 from chewbot.report.summary import (
     INDEX_NAMES,
     NEAR_SINGULAR_DEG,
+    contact_note,
     infeasible_samples,
+    normal_force_stats,
     numbered_columns,
     performance_indices,
     solver_notes,
@@ -419,7 +421,9 @@ def dynamics_label(record: dict, model: Model) -> str:
     if not o.get("method"):
         return "inverse dynamics not run"
     if o["method"] != "newton-euler":
-        return f"inverse dynamics: {o['method']} (minimum-norm torques, no friction)"
+        fallback = (", N_L, N_R >= contact.preload_N: the unilateral fallback"
+                    if o.get("contact") == "unilateral" and model.has_hkp else "")
+        return f"inverse dynamics: {o['method']} (minimum-norm torques{fallback}, no friction)"
     goal = o["goal"] if model.has_hkp and o.get("goal") else "no redundancy to distribute (6RSS)"
     return f"inverse dynamics: newton-euler (goal {goal}, friction {o.get('friction') or 'on'})"
 
@@ -518,6 +522,14 @@ def _dynamics_summary(record: dict, model: Model, view: RunView) -> str:
                    f"{model.limits.torque:g} N·m are marked.</p>")
     else:
         out.append('<p class="note">Inverse dynamics did not run (<code>chewbot run --method ...</code> computes the torques).</p>')
+    contact = record["options"].get("contact", "bilateral")
+    preload = model.contact.preload if contact == "unilateral" else 0.0
+    forces = normal_force_stats(stats)
+    if forces:
+        rows = [[f.name, _fmt(f.low), f"{f.t_low:.3f}", _fmt(f.high), f"{f.t_high:.3f}", _fmt(f.below, 3)] for f in forces]
+        out.append("<h3>HKP normal forces</h3>" + _table(["", "min [N]", "at t [s]", "max [N]", "at t [s]", f"below {preload:g} N [%]"], rows)
+                   + f'<p class="note">N &gt; 0: the plane pushes the condyle, along n = (p<sub>1</sub>, 0, 1)/|n|. '
+                   f"Contact model: {_e(contact_note(contact, preload, info))}.</p>")
     mcis = numbered_columns(view.plot, "MCI")
     if mcis:
         rows = [[name, _fmt(stats[name].mean), _fmt(stats[name].min), _fmt(stats[name].max)] for name in mcis]

@@ -243,3 +243,47 @@ def infeasible_samples(info: dict, t: np.ndarray, samples: np.ndarray | None = N
 def solver_notes(info: dict) -> dict[str, object]:
     """The plain entries (text, numbers, flags) of a formulation's info, for a key/value listing."""
     return {k: v for k, v in info.items() if isinstance(v, (str, int, float, bool))}
+
+
+@dataclass(frozen=True)
+class NormalForceStats:
+    """One condyle's normal force along the task: smallest and largest (N) with their times, and the share of the
+    samples below ``bound`` (0, or the preload of a unilateral contact), percent."""
+
+    name: str
+    low: float
+    t_low: float
+    high: float
+    t_high: float
+    below: float
+
+
+def below_columns(columns, bound: float = 0.0) -> dict[str, tuple[np.ndarray, str]]:
+    """Per normal force N_L, N_R of ``columns`` (none for the 6RSS), 100 where it is below ``bound`` (0, or the
+    preload of a unilateral contact; the ``contact-pull`` check's tolerance allowed) and 0 elsewhere: their mean
+    over the task is the share of the samples below, percent (:func:`normal_force_stats`)."""
+    from chewbot.analysis.checks import PULL_TOLERANCE_N
+
+    return {f"{name}_below": (100.0 * (np.asarray(columns[name]) < bound - PULL_TOLERANCE_N), "%")
+            for name in ("N_L", "N_R") if name in columns}
+
+
+def normal_force_stats(stats: Mapping[str, ColumnStats]) -> list[NormalForceStats]:
+    """:class:`NormalForceStats` of N_L and N_R from the statistics of the whole task's columns, those of
+    :func:`below_columns` among them (none where the run has no normal forces: the 6RSS)."""
+    return [NormalForceStats(name, stats[name].min, stats[name].t_min, stats[name].max, stats[name].t_max,
+                             stats[f"{name}_below"].mean) for name in ("N_L", "N_R") if name in stats]
+
+
+def contact_note(contact: str, preload: float, info: dict) -> str:
+    """The contact model of a run in words, with how the formulation obtained N (its ``info["contact"]``)."""
+    c = info.get("contact", {})
+    how = c.get("distribution") or c.get("normal_forces") or ""
+    if contact == "unilateral":
+        head = f"unilateral (a ball pressed on a plane: N >= contact.preload_N = {preload:g} N)"
+        raised = c.get("raised_samples")
+        if raised is not None:
+            how += f"; the bound raised N at {raised} sample(s)"
+    else:
+        head = "bilateral (a ball held in a slot: the plane may push or pull; a pull is reported, not a failure)"
+    return f"{head}{'; ' + how if how else ''}"

@@ -231,12 +231,16 @@ class ViewBuilder:
         return self._view
 
 
-def report_columns(model, columns: Mapping[str, np.ndarray]) -> dict[str, tuple[np.ndarray, str]]:
-    """The further columns whose statistics the report shows: the incisor point I in {S} (from the pose) and the
-    bite force's magnitude."""
+def report_columns(model, columns: Mapping[str, np.ndarray], contact: str = "bilateral") -> dict[str, tuple[np.ndarray, str]]:
+    """The further columns whose statistics the report shows: the incisor point I in {S} (from the pose), the
+    bite force's magnitude, and where the run has normal forces, whether each is below what ``contact`` admits
+    (:func:`chewbot.report.summary.below_columns`)."""
+    from chewbot.report.summary import below_columns
     from chewbot.rotation import matrix_from_euler_angles
 
     R = matrix_from_euler_angles(np.column_stack([columns[name] for name in ("alpha", "beta", "gamma")]))
     incisor = np.column_stack([columns[name] for name in ("X", "Y", "Z")]) + R @ model.incisor
     force = np.sqrt(sum(np.asarray(columns[name]) ** 2 for name in ("Fx", "Fy", "Fz")))
-    return {**{f"incisor_{a}": (incisor[:, j], "m") for j, a in enumerate("xyz")}, "bite_force": (force, "N")}
+    bound = model.contact.preload if contact == "unilateral" else 0.0
+    return {**{f"incisor_{a}": (incisor[:, j], "m") for j, a in enumerate("xyz")}, "bite_force": (force, "N"),
+            **below_columns(columns, bound)}
