@@ -10,7 +10,7 @@ import pytest
 from conftest import default_kinematics, model
 
 from chewbot.analysis.coupling import coupling
-from chewbot.casadi_tools import c_compiler
+from chewbot.casadi_tools import FLAGS, c_compiler
 from chewbot.dynamics import inverse_dynamics
 from chewbot.realtime import g1_distribution, loop_kernel
 
@@ -49,12 +49,16 @@ def _fill(k, kin, i: int) -> None:
             array[:] = values[name][: array.size]
 
 
-@pytest.mark.parametrize("folded", [True, False], ids=["folded", "p-input"])
-@pytest.mark.parametrize("name, kind", [("target", "tau"), ("6rss", "tau"), ("target", "coupling"), ("6rss", "coupling"),
-                                        ("target", "g1")])
+# Every kind with p as an input and the batch API's compiler flags (the batch API's own compiled kernel, from the
+# cache: the test costs no compilation), and one kind as a controller uses it: the model folded in, -O3.
+CASES = [(name, kind, False) for name, kind in (("target", "tau"), ("6rss", "tau"), ("target", "coupling"),
+                                                 ("6rss", "coupling"), ("target", "g1"))] + [("target", "tau", True)]
+
+
+@pytest.mark.parametrize("name, kind, folded", CASES, ids=lambda v: {True: "folded", False: "p-input"}.get(v, v) if isinstance(v, bool) else v)
 def test_in_loop_calls_equal_the_batch_api(name, kind, folded):
     m = model(name)
-    k = loop_kernel(m, kind, folded=folded)
+    k = loop_kernel(m, kind, folded=folded) if folded else loop_kernel(m, kind, folded=False, flags=FLAGS)
     kin = default_kinematics(name, "left", "euler-parameters" if kind == "g1" else "euler-angles")
     whole = batch(name, kind)
     arrays = {key: id(a) for key, a in {**k.inputs, **k.outputs}.items()}
@@ -71,7 +75,7 @@ def test_the_dynamics_kernel_gives_the_torques_and_the_terms():
     """kind "dynamics" (the torques with J_theta1, M_f, C_f, G_f, Q_B) gives the torques of kind "tau"."""
     m = model("6rss")
     kin = default_kinematics("6rss")
-    k, tau = loop_kernel(m, "dynamics"), loop_kernel(m, "tau")
+    k, tau = (loop_kernel(m, kind, folded=False, flags=FLAGS) for kind in ("dynamics", "tau"))
     for i in SAMPLES:
         for kernel in (k, tau):
             _fill(kernel, kin, i)
@@ -80,7 +84,7 @@ def test_the_dynamics_kernel_gives_the_torques_and_the_terms():
 
 
 def test_the_arrays_are_written_in_place_not_replaced():
-    k = loop_kernel(model("target"), "tau")
+    k = loop_kernel(model("target"), "tau", folded=False, flags=FLAGS)
     with pytest.raises(AttributeError, match=r"q\[:\] = "):
         k.q = np.zeros(6)
     out = k.tau
