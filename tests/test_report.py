@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
 import shutil
 import tempfile
@@ -12,16 +14,21 @@ import numpy as np
 import pytest
 from plotly.offline import get_plotlyjs
 
-from chewbot import pipeline
+from typer.testing import CliRunner
+
+from chewbot.cli import app
 from chewbot.outputs import OutputExistsError
 from chewbot.pipeline import RunOptions, compute, write
 from chewbot.report import html as report_html
+from chewbot.report import view as report_view
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
-from chewbot.results import Table
+from chewbot.results import Table, kinematics_table
 from conftest import default_kinematics, model
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
-CHROMIUM = Path("/usr/bin/chromium")
+# Debian's Chromium, or another build named by $CHEWBOT_CHROMIUM
+CHROMIUM = Path(os.environ.get("CHEWBOT_CHROMIUM", "/usr/bin/chromium"))
+runner = CliRunner()
 
 
 @pytest.fixture(scope="session")
@@ -47,7 +54,7 @@ def test_crank_tips_and_mandible_points_close_every_chain():
     """
     m, kin = model("target"), default_kinematics()
     idx = np.arange(0, kin.n, 7)
-    pos = report_html.robot_positions(m, kin, idx)
+    pos = report_html.robot_positions(m, _rows(kinematics_table(kin), idx))
     assert np.abs(np.linalg.norm(pos["S"] - m.G, axis=2) - m.crank_length).max() < 1e-9
     assert np.abs(np.linalg.norm(pos["S"] - pos["body"][:, :6], axis=2) - m.coupler_length).max() < 1e-9
 
@@ -55,18 +62,23 @@ def test_crank_tips_and_mandible_points_close_every_chain():
 def test_mandible_points_agree_with_the_kinematics():
     """T_L, T_R, I, B_L, B_R from the pose (NumPy) equal Kinematics.points (CasADi graph) to 1e-12 m."""
     m, kin = model("target"), default_kinematics()
-    idx = np.arange(kin.n)
-    body = report_html.robot_positions(m, kin, idx)["body"]
+    body = report_html.robot_positions(m, kinematics_table(kin))["body"]
     for j, name in enumerate(report_html.MANDIBLE_POINTS):
         assert np.abs(body[:, 6 + j] - kin.points[name]).max() < 1e-12, name
 
 
+def _rows(table: Table, idx: np.ndarray) -> Table:
+    out = Table(units=dict(table.units))
+    out.columns = {name: values[idx] for name, values in table.columns.items()}
+    return out
+
+
 def test_frames_cover_the_task_within_the_budget():
     t = np.arange(0, 60.0, 1e-3)  # a minute: longer than MAX_FRAMES frames at FRAME_STEP_S
-    idx = report_html.frame_samples(t)
+    idx = report_view.frame_samples(t)
     assert idx[0] == 0 and idx[-1] == len(t) - 1
-    assert len(idx) <= report_html.MAX_FRAMES + 1  # + the last sample
-    short = report_html.frame_samples(np.arange(0, 5.0005, 1e-3))
+    assert len(idx) <= report_view.MAX_FRAMES + 1  # + the last sample
+    short = report_view.frame_samples(np.arange(0, 5.0005, 1e-3))
     assert np.diff(short).min() == 40  # 40 ms at 1 kHz
 
 
@@ -145,7 +157,7 @@ def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_fol
     def broken(*args, **kwargs):
         raise RuntimeError("report failed")
 
-    monkeypatch.setattr(pipeline, "write_report", broken)
+    monkeypatch.setattr(report_html, "write_report", broken)
     with pytest.raises(RuntimeError):
         write(run_with_dynamics, out)
     assert list(tmp_path.iterdir()) == []
@@ -158,6 +170,60 @@ def test_a_failure_while_writing_the_report_leaves_nothing_and_keeps_the_old_fol
         write(run_with_dynamics, out, force=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
     assert (out / "keep.txt").read_text() == "old result"
+
+
+# --- chewbot report DIR -----------------------------------------------------------------------------------
+
+
+def _contents(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_report_command_rebuilds_the_same_report_and_figures(tmp_path):
+    """`chewbot run` writes its folder chunk by chunk; `chewbot report DIR --force` draws the figures and the report
+    again from results.csv and run.json alone: the same bytes. results.csv and run.json are never written."""
+    out = tmp_path / "run"
+    assert runner.invoke(app, ["run", "--out", str(out), "-q"]).exit_code == 0
+    before = _contents(out)
+    stamps = {name: (out / name).stat().st_mtime_ns for name in ("results.csv", "run.json")}
+    refused = runner.invoke(app, ["report", str(out)])
+    assert refused.exit_code == 5 and "--force" in refused.output
+    assert _contents(out) == before
+    again = runner.invoke(app, ["report", str(out), "--force"])
+    assert again.exit_code == 0, again.output
+    assert _contents(out) == before
+    assert {name: (out / name).stat().st_mtime_ns for name in stamps} == stamps
+
+
+def test_a_batch_run_gets_its_figures_and_report_later(tmp_path):
+    out = tmp_path / "batch"
+    assert runner.invoke(app, ["run", "--out", str(out), "--no-figures", "--no-report", "-q"]).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "run.json"]
+    result = runner.invoke(app, ["report", str(out), "--no-figures"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["report.html", "results.csv", "run.json"]
+    assert 'href="task_space.png"' not in _page(out)
+    assert runner.invoke(app, ["report", str(out), "--no-report"]).exit_code == 0  # the figures: none existed
+    assert runner.invoke(app, ["report", str(out), "--no-figures", "--force"]).exit_code == 0
+    assert 'href="task_space.png"' in _page(out)  # now the folder has them: the report links to them
+
+
+def test_report_command_writes_only_into_chewbot_s_results_folders(tmp_path, run_folder):
+    assert runner.invoke(app, ["report", str(tmp_path / "missing")]).exit_code == 2
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "results.csv").write_text("t\n0\n")
+    result = runner.invoke(app, ["report", str(mine)])
+    assert result.exit_code == 5 and "not a results folder written by chewbot" in result.output
+    assert sorted(p.name for p in mine.iterdir()) == ["results.csv"]
+    # a run whose model has changed since: its parameters' SHA-256 no longer match
+    copy = tmp_path / "copy"
+    shutil.copytree(run_folder, copy)
+    record = json.loads((copy / "run.json").read_text())
+    record["model"]["parameters_sha256"] = "0" * 64
+    (copy / "run.json").write_text(json.dumps(record))
+    result = runner.invoke(app, ["report", str(copy), "--force"])
+    assert result.exit_code == 2 and "no longer has the run's parameters" in result.output
 
 
 # --- in a real browser ----------------------------------------------------------------------------------

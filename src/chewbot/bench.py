@@ -1,16 +1,20 @@
-"""Timing of every inverse-dynamics formulation and of the real-time kernels (``chewbot bench``).
+"""Timing of every inverse-dynamics formulation, of a whole run and of the real-time kernels (``chewbot bench``).
 
-Everything is measured in one process, one run, on the default task (5001 samples), so the medians and the
-ratios compare like with like. A case is one entry of :data:`TASK_CASES`: a label, the mechanisms and the
-orientation it runs on, and a callable ``(model, kinematics)`` that computes the whole task. Adding a
-formulation to the benchmark is adding one entry. The kinematics are computed once per (mechanism,
-orientation) and left out of the timings; the first call of a case (graph build, kernel compile or load) is
-reported apart from the median of the further calls.
+Every timing is repeated, and the variants a table compares are run interleaved (one run of each in turn, then
+again), so that a change of the machine's load meets them all alike; each is given as the median of its runs
+with their interquartile range (the spread), and a ratio is given as the ratio of the medians with the range of
+the ratios of the runs paired by their turn. Where the spreads of two timings overlap, the ratio says nothing
+the noise could not have said: it is printed as "within noise" (:func:`compare`). The studies judge their timing
+claims by the same rule.
 
-The plain references are the straightforward ways: the Newton–Euler torques in NumPy, vectorised
-(:func:`chewbot.reference.frictionless_torques`), and the friction-aware distribution by SciPy's SLSQP, sample
-by sample (:func:`chewbot.reference.slsqp_min_torque`, timed on a stretch of :data:`SLSQP_SAMPLES` samples
-and scaled to the task).
+Tables (:func:`benchmark`): the formulations on the whole default task (5001 samples, the kinematics computed
+once and left out, the first call apart), with the plain references: the Newton–Euler torques in vectorised
+NumPy (:func:`chewbot.reference.frictionless_torques`) and the friction-aware G1 distribution by SciPy's SLSQP
+with exact gradients, warm-started sample after sample (:func:`chewbot.reference.slsqp_min_torque`, timed on a
+stretch of :data:`SLSQP_SAMPLES` samples inside a bite and scaled to the task); ``chewbot run`` and ``chewbot
+--help`` as a user waits for them (separate processes, warm kernel cache); the in-loop kernels
+(:func:`chewbot.realtime.loop_kernel`) and the exported C (its example program, built with the flags of its
+Makefile). With ``long``: runs of 10,000 to 1,000,000 samples, their time per sample and peak memory.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import os
 import platform
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -28,17 +33,103 @@ from typing import Callable
 
 import numpy as np
 
-from chewbot.casadi_tools import c_compiler, native
-from chewbot.dynamics import inverse_dynamics
-from chewbot.dynamics.core6rss import core_terms
-from chewbot.kinematics.motion import solve_kinematics
-from chewbot.params import load_model
-from chewbot.reference import frictionless_torques, slsqp_min_torque
-from chewbot.task.default import default_task
-
-SLSQP_SAMPLES = 100  # consecutive samples from t = 2 s (inside a bite), SLSQP costs milliseconds each
+SLSQP_SAMPLES = 50  # consecutive samples from t = 2 s (inside a bite); SLSQP costs milliseconds each
 BOTH = ("target", "6rss")
 EA, EP = "euler-angles", "euler-parameters"
+RUN_CASES = {"run, hessian": ["run"], "run, newton-euler G1 with friction": ["run", "--method", "newton-euler"]}
+LONG_SAMPLES = (10_000, 100_000, 1_000_000)
+LONG_METHODS = ("hessian", "lagrange", "liang", "6rss-core", "newton-euler")
+
+
+# --- repeated, interleaved, paired --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Repeated runs of one case: ``first_s`` (the first call: graph build, kernel load or compile), ``times`` (the
+    further runs, in seconds, in their turn's order), ``samples`` it stands for (a per-sample time divides by it)."""
+
+    label: str
+    times: tuple[float, ...]
+    first_s: float = float("nan")
+    samples: int = 1
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.times)
+
+    @property
+    def spread(self) -> tuple[float, float]:
+        """The interquartile range of the runs (their middle half)."""
+        q1, _, q3 = np.percentile(self.times, [25, 50, 75])
+        return float(q1), float(q3)
+
+    def per_sample(self, unit: float = 1e6) -> str:
+        q1, q3 = self.spread
+        return f"{self.median / self.samples * unit:.3g} ({q1 / self.samples * unit:.3g}–{q3 / self.samples * unit:.3g})"
+
+
+def interleaved(runs: dict[str, Callable[[], object]], repeats: int, samples: dict[str, int] | None = None,
+                scale: dict[str, float] | None = None, progress=None) -> dict[str, Timing]:
+    """Time each of ``runs`` once (its first call), then ``repeats`` times in turn: one run of each, in an order
+    rotated from turn to turn, so that the runs of one turn are paired. ``scale``: a factor on a case's times (a
+    part of the task timed for the whole); ``samples``: what each case computes."""
+    step = progress or (lambda msg: None)
+    first, times = {}, {label: [] for label in runs}
+    for label, fn in runs.items():
+        step(f"{label}: first call")
+        first[label] = _seconds(fn) * (scale or {}).get(label, 1.0)
+    labels = list(runs)
+    for turn in range(repeats):
+        step(f"turn {turn + 1} of {repeats}")
+        for label in labels[turn % len(labels):] + labels[:turn % len(labels)]:
+            times[label].append(_seconds(runs[label]) * (scale or {}).get(label, 1.0))
+    return {label: Timing(label, tuple(times[label]), first[label], (samples or {}).get(label, 1)) for label in labels}
+
+
+def _seconds(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """``a`` against ``b``: the ratio of the medians, the range of the ratios of the paired runs, and whether the
+    two spreads overlap (then the difference is within the noise of the runs)."""
+
+    a: Timing
+    b: Timing
+
+    @property
+    def ratio(self) -> float:
+        return self.a.median / self.b.median
+
+    @property
+    def within_noise(self) -> bool:
+        (a1, a3), (b1, b3) = self.a.spread, self.b.spread
+        return a1 <= b3 and b1 <= a3
+
+    @property
+    def paired(self) -> tuple[float, float]:
+        ratios = np.array(self.a.times) / np.array(self.b.times)
+        return float(np.percentile(ratios, 25)), float(np.percentile(ratios, 75))
+
+    def text(self) -> str:
+        lo, hi = self.paired
+        value = "within noise" if self.within_noise else f"{self.ratio:.3g}"
+        return f"{value} (medians {self.ratio:.3g}, paired runs {lo:.3g}–{hi:.3g})"
+
+
+def compare(a: Timing, b: Timing) -> Comparison:
+    """The rule by which chewbot judges a timing claim: ``a`` is faster or slower than ``b`` only where their
+    spreads (interquartile ranges of the interleaved runs) do not overlap; else "within noise"."""
+    if len(a.times) != len(b.times):
+        raise ValueError("compared timings must come from the same interleaved runs")
+    return Comparison(a, b)
+
+
+# --- the formulations on the whole task --------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -54,6 +145,8 @@ class Case:
 
 
 def _slsqp(model, kin):
+    from chewbot.reference import slsqp_min_torque
+
     start = int(np.searchsorted(kin.t, 2.0))
     return slsqp_min_torque(model, kin, np.arange(start, start + SLSQP_SAMPLES))
 
@@ -72,6 +165,27 @@ def _recording_fit(model, kin):
     return fit_to_robot(model, kin.X[:, :3], matrix_from_euler_angles(kin.X[:, 3:]))
 
 
+def _dynamics(method: str, **options):
+    from chewbot.dynamics import inverse_dynamics
+
+    return partial(inverse_dynamics, method=method, **options)
+
+
+def _core_terms(model, kin):
+    from chewbot.dynamics.core6rss import core_terms
+
+    return core_terms(model, kin)
+
+
+def _numpy_reference(model, kin):
+    from chewbot.reference import frictionless_torques
+
+    return frictionless_torques(model, kin)
+
+
+SLSQP_LABEL = f"reference: SciPy SLSQP G1, exact gradients, warm start (timed on {SLSQP_SAMPLES} samples, scaled)"
+
+
 def _simulate(model, kin):
     """chewbot simulate's loop: computed torque (Hessian, exact model) at 1 kHz along the task, plant without friction."""
     from chewbot.simulation.controllers import Gains, ModelBasedController
@@ -85,22 +199,22 @@ def _simulate(model, kin):
 
 
 TASK_CASES: tuple[Case, ...] = (
-    Case("hessian", partial(inverse_dynamics, method="hessian")),
-    Case("liang", partial(inverse_dynamics, method="liang")),
-    Case("lagrange", partial(inverse_dynamics, method="lagrange")),
-    Case("6rss-core", partial(inverse_dynamics, method="6rss-core")),
-    Case("6rss-core with M_f, C_f, G_f", core_terms),
-    Case("reference: NumPy Newton-Euler", frictionless_torques),
-    Case("newton-euler G1 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-torque")),
-    Case("newton-euler G1 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-torque"), orientation=EP),
-    Case("newton-euler G2 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-coupler-force"), ("target",)),
-    Case("newton-euler G2 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-coupler-force"), ("target",), EP),
-    Case("newton-euler G3 (EA)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",)),
-    Case("newton-euler G3 (EP)", partial(inverse_dynamics, method="newton-euler", goal="min-hkp-force"), ("target",), EP),
+    Case("hessian", _dynamics("hessian")),
+    Case("liang", _dynamics("liang")),
+    Case("lagrange", _dynamics("lagrange")),
+    Case("6rss-core", _dynamics("6rss-core")),
+    Case("6rss-core with M_f, C_f, G_f", _core_terms),
+    Case("reference: NumPy Newton-Euler", _numpy_reference),
+    Case("newton-euler G1 (EA)", _dynamics("newton-euler", goal="min-torque")),
+    Case("newton-euler G1 (EP)", _dynamics("newton-euler", goal="min-torque"), orientation=EP),
+    Case("newton-euler G2 (EA)", _dynamics("newton-euler", goal="min-coupler-force"), ("target",)),
+    Case("newton-euler G2 (EP)", _dynamics("newton-euler", goal="min-coupler-force"), ("target",), EP),
+    Case("newton-euler G3 (EA)", _dynamics("newton-euler", goal="min-hkp-force"), ("target",)),
+    Case("newton-euler G3 (EP)", _dynamics("newton-euler", goal="min-hkp-force"), ("target",), EP),
     Case("G1 kernel, friction (EP)", _g1_kernel, ("target",), EP),
     Case("import-motion: fit to the robot", _recording_fit),
     Case("simulate: computed torque at 1 kHz", _simulate),
-    Case(f"reference: SciPy SLSQP G1 (timed on {SLSQP_SAMPLES} samples, scaled)", _slsqp, ("target",), EA, SLSQP_SAMPLES),
+    Case(SLSQP_LABEL, _slsqp, ("target",), EA, SLSQP_SAMPLES),
 )
 
 # (numerator, denominator) of the ratios printed, per mechanism where both ran.
@@ -114,119 +228,186 @@ RATIOS = (
     ("hessian", "reference: NumPy Newton-Euler"),
     ("6rss-core", "reference: NumPy Newton-Euler"),
     ("6rss-core with M_f, C_f, G_f", "reference: NumPy Newton-Euler"),
-    ("G1 kernel, friction (EP)", f"reference: SciPy SLSQP G1 (timed on {SLSQP_SAMPLES} samples, scaled)"),
-    ("newton-euler G1 (EA)", f"reference: SciPy SLSQP G1 (timed on {SLSQP_SAMPLES} samples, scaled)"),
+    ("G1 kernel, friction (EP)", SLSQP_LABEL),
+    ("newton-euler G1 (EA)", SLSQP_LABEL),
 )
 
 
-@dataclass(frozen=True)
-class Timing:
-    """One case on one mechanism: ``first_s`` (graph build + kernel load or compile + run), ``median_s`` and
-    ``min_s`` over ``repeats`` further runs, scaled to the ``samples`` of the whole task."""
+def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: str = "left", progress=None) -> dict[str, Timing]:
+    """Time every case on its mechanisms on the default task, interleaved (:func:`interleaved`); keys
+    ``"MECHANISM: LABEL"``. Models are loaded fresh, so the first call of a case includes building its graph and
+    loading (or compiling) its kernel."""
+    from chewbot.kinematics.motion import solve_kinematics
+    from chewbot.params import load_model
+    from chewbot.task.default import default_task
 
-    mechanism: str
-    case: str
-    samples: int
-    first_s: float
-    median_s: float
-    min_s: float
-    repeats: int
-
-    @property
-    def per_sample_us(self) -> float:
-        return 1e6 * self.median_s / self.samples
-
-
-def _time(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
-
-
-def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: str = "left", progress=None) -> list[Timing]:
-    """Time every case on its mechanisms on the default task; models are loaded fresh, so the first call of a
-    case includes building its graph and loading (or compiling) its kernel."""
     models = {name: load_model(name) for name in BOTH}
     kins: dict[tuple[str, str], object] = {}
-    out = []
+    runs, samples, scale = {}, {}, {}
     for case in cases:
         for name in case.mechanisms:
-            if progress:
-                progress(f"{case.label} ({name})")
-            model = models[name]
             key = (name, case.orientation)
             if key not in kins:
-                kins[key] = solve_kinematics(model, default_task(model, side), case.orientation)
-            kin = kins[key]
-            run = partial(case.run, model, kin)
-            scale = kin.n / (case.samples or kin.n)
-            first = _time(run)
-            times = [scale * _time(run) for _ in range(repeats if case.samples is None else max(1, repeats // 5))]
-            out.append(Timing(name, case.label, kin.n, first, statistics.median(times), min(times), len(times)))
-    return out
+                kins[key] = solve_kinematics(models[name], default_task(models[name], side), case.orientation)
+            label = f"{name}: {case.label}"
+            runs[label] = partial(case.run, models[name], kins[key])
+            samples[label] = kins[key].n
+            scale[label] = kins[key].n / (case.samples or kins[key].n)
+    return interleaved(runs, repeats, samples, scale, progress)
 
 
-def ratios(timings: list[Timing]) -> dict[str, float]:
-    """Median ratios: each pair of :data:`RATIOS` per mechanism, and target over 6RSS per case."""
-    med = {(t.mechanism, t.case): t.median_s for t in timings}
+def ratios(timings: dict[str, Timing]) -> dict[str, Comparison]:
+    """The comparisons of :data:`RATIOS` per mechanism, and target against 6RSS per case."""
     out = {}
     for mech in BOTH:
         for a, b in RATIOS:
-            if (mech, a) in med and (mech, b) in med:
-                out[f"{mech}: {a} / {b}"] = med[mech, a] / med[mech, b]
-    for case in dict.fromkeys(t.case for t in timings):
-        if ("target", case) in med and ("6rss", case) in med:
-            out[f"{case}: target / 6rss"] = med["target", case] / med["6rss", case]
+            if f"{mech}: {a}" in timings and f"{mech}: {b}" in timings:
+                out[f"{mech}: {a} / {b}"] = compare(timings[f"{mech}: {a}"], timings[f"{mech}: {b}"])
+    for case in dict.fromkeys(label.split(": ", 1)[1] for label in timings):
+        if f"target: {case}" in timings and f"6rss: {case}" in timings:
+            out[f"{case}: target / 6rss"] = compare(timings[f"target: {case}"], timings[f"6rss: {case}"])
     return out
+
+
+# --- what a user waits for: chewbot run, chewbot --help ------------------------------------------------------
+
+
+def _chewbot(*args: str) -> list[str]:
+    """The command line of ``chewbot ARGS`` as a user runs it: the installed script beside this Python, else
+    ``python -m chewbot``."""
+    script = Path(sys.executable).with_name("chewbot")
+    return [str(script), *args] if script.is_file() else [sys.executable, "-m", "chewbot", *args]
+
+
+def bench_commands(repeats: int = 7, progress=None) -> dict[str, Timing]:
+    """Wall time of ``chewbot run`` on the default task (Hessian; Newton–Euler G1 with friction), all outputs,
+    warm kernel cache, and of ``chewbot --help``: separate processes, interleaved."""
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {label: partial(_quiet, _chewbot(*args, "--out", str(Path(tmp) / f"run{k}"), "--force", "-q"))
+                for k, (label, args) in enumerate(RUN_CASES.items())}
+        runs["chewbot --help"] = partial(_quiet, _chewbot("--help"))
+        return interleaved(runs, repeats, progress=progress)
+
+
+def _quiet(command: list[str]) -> None:
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+# --- one sample: the in-loop kernels and the exported C -----------------------------------------------------
+
+
+def bench_loop(calls: int = 20000, repeats: int = 11) -> dict[str, Timing]:
+    """One call of each in-loop kernel (:func:`chewbot.realtime.loop_kernel`) of the target on a sample inside a
+    bite, per call over ``calls // repeats`` calls per turn; beside it a :class:`~chewbot.casadi_tools.NativeFunction`
+    call of the same compiled kernel (inputs given as arrays and copied in, outputs copied out), interleaved."""
+    from chewbot.casadi_tools import native
+    from chewbot.params import load_model
+    from chewbot.realtime import LOOP_FLAGS, example_inputs, loop_kernel, loop_spec
+
+    target = load_model("target")
+    ex = example_inputs(target, load_model("6rss"))
+    per_turn = max(calls // repeats, 1)
+    runs, samples = {}, {}
+    for kind, sample in (("tau", ex["tau_target"]), ("dynamics", ex["tau_target"]), ("g1", ex["g1_target"])):
+        k = loop_kernel(target, kind)
+        for name, value in sample.items():
+            k.inputs[name][:] = np.ravel(value, order="F")
+        fn = native(loop_spec(target, kind), LOOP_FLAGS)
+        args = [sample[name] for name in k.inputs]
+        runs[f"in-loop {kind}"] = partial(_repeat, k, per_turn)
+        runs[f"NativeFunction call {kind}"] = partial(_repeat, partial(fn, *args), per_turn)
+        samples[f"in-loop {kind}"] = samples[f"NativeFunction call {kind}"] = per_turn
+    return interleaved(runs, repeats, samples)
+
+
+def _repeat(fn, n: int) -> None:
+    for _ in range(n):
+        fn()
+
+
+def bench_export(calls: int = 200000, repeats: int = 7) -> tuple[str, list[Timing]]:
+    """The exported C (:func:`chewbot.export.export_c`) built by its own Makefile and its example program run
+    ``repeats`` times with ``calls`` calls of each kernel: (the compiler and flags, a timing per kernel, in ns per
+    call)."""
+    from chewbot.casadi_tools import c_compiler
+    from chewbot.export import export_c
+    from chewbot.params import load_model
+    from chewbot.realtime import kernels
+
+    cc = c_compiler()
+    if cc is None:
+        return "no C compiler", []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = export_c(kernels(load_model("target"), load_model("6rss")), Path(tmp) / "kernels")
+        subprocess.run(["make", "-s", "-C", str(folder), "example"], check=True, capture_output=True, env={**os.environ, "CC": cc})
+        flags = (folder / "Makefile").read_text().split("CFLAGS ?= ", 1)[1].splitlines()[0]
+        runs: dict[str, list[float]] = {}
+        for _ in range(repeats):
+            out = subprocess.run([str(folder / "example"), str(calls)], check=True, capture_output=True, text=True).stdout
+            for line in out.splitlines():
+                if line.startswith("time "):
+                    _, name, ns, _ = line.split()
+                    runs.setdefault(name, []).append(float(ns))
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    return f"{version}, {flags}", [Timing(name, tuple(values)) for name, values in runs.items()]
+
+
+# --- long runs -----------------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class KernelTiming:
-    """One per-sample kernel: a call from Python (ctypes, median over ``calls``) and, where a C compiler is
-    found, a call from C (mean over ``calls`` in the exported example program)."""
+class LongRun:
+    """``chewbot run`` of a task of ``samples`` samples: its wall time, the time of its stages over the samples
+    (run.json's timings: kinematics, dynamics, coupling, checks, results.csv; the part that grows with the task),
+    and the peak memory (maximum resident set) of its processes."""
 
-    name: str
-    python_us: float
-    c_ns: float | None
-    calls: int
+    method: str
+    samples: int
+    wall_s: float
+    stages_s: float
+    peak_mb: float
+
+    @property
+    def per_sample_us(self) -> float:
+        return 1e6 * self.stages_s / self.samples
 
 
-def bench_kernels(calls: int = 20000) -> list[KernelTiming]:
-    """Time the exported kernels (:func:`chewbot.realtime.kernels`) for one sample, from Python and from C."""
-    from chewbot.export import export_c
-    from chewbot.realtime import kernels
+def long_cycles(samples: int) -> int:
+    """Chewing cycles of the default task (1 s of rest, 0.8 s per cycle at 1 kHz) that give about ``samples``."""
+    return max(1, round((samples - 1001) / 800))
 
-    target, sixrss = load_model("target"), load_model("6rss")
-    ks = kernels(target, sixrss)
-    c_times: dict[str, float] = {}
-    if c_compiler():
-        with tempfile.TemporaryDirectory() as tmp:
-            folder = export_c(ks, Path(tmp) / "kernels")
-            exe = folder / "example"
-            subprocess.run([c_compiler(), "-O3", "-std=c99", "-o", str(exe), str(folder / "example.c"),
-                            str(folder / "chewbot_kernels.c"), "-lm"], check=True, capture_output=True)
-            lines = subprocess.run([str(exe), str(calls)], check=True, capture_output=True, text=True).stdout.splitlines()
-            for line in lines:
-                if line.startswith("time "):
-                    _, name, ns, _ = line.split()
-                    c_times[name] = float(ns)
+
+def bench_long(sizes=LONG_SAMPLES, methods=LONG_METHODS, progress=None) -> list[LongRun]:
+    """Each method on default tasks of ``sizes`` samples (more chewing cycles), figures and report included."""
+    import json
+
+    step = progress or (lambda msg: None)
     out = []
-    for k in ks:
-        fn = native(k.function)
-        args = [k.example[k.function.name_in(i)] for i in range(k.function.n_in())]
-        for _ in range(200):
-            fn(*args)
-        ts = []
-        for _ in range(calls // 4):
-            t0 = time.perf_counter()
-            fn(*args)
-            ts.append(time.perf_counter() - t0)
-        out.append(KernelTiming(k.name, 1e6 * statistics.median(ts), c_times.get(k.name), calls))
+    with tempfile.TemporaryDirectory() as tmp:
+        for samples in sizes:
+            for method in methods:
+                step(f"{method}, {samples} samples")
+                folder = Path(tmp) / "run"
+                command = _chewbot("run", "--method", method, "--set", f"task.cycles={long_cycles(samples)}", "--out", str(folder),
+                                   "--force", "-q", "--allow-violations")
+                t0 = time.perf_counter()
+                process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                _, status, usage = os.wait4(process.pid, 0)
+                wall = time.perf_counter() - t0
+                process.returncode = os.waitstatus_to_exitcode(status)
+                if process.returncode != 0:
+                    raise RuntimeError(f"{' '.join(command)} ended with {process.returncode}")
+                record = json.loads((folder / "run.json").read_text())
+                stages = sum(v for k, v in record["timings"].items())
+                out.append(LongRun(method, record["task"]["samples"], wall, stages, usage.ru_maxrss / 1024))
     return out
 
 
+# --- the page ------------------------------------------------------------------------------------------------
+
+
 def machine() -> str:
-    """The CPU model and the cores this process may use."""
+    """The CPU model, the cores this process may use, Python, and the load average when asked."""
     model = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -237,3 +418,83 @@ def machine() -> str:
         pass
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return f"{model}, {cores} core(s) available, Python {platform.python_version()}"
+
+
+def load() -> str:
+    try:
+        return ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progress=None) -> str:
+    """Run every table of the benchmark and return them as Markdown, with the machine and its load."""
+    step = progress or (lambda msg: None)
+    started = load()
+    t0 = time.perf_counter()
+    step("chewbot run and --help")
+    commands = bench_commands(max(3, repeats // 2), progress)
+    step("the formulations on the whole task")
+    task = bench_task(repeats, progress=progress)
+    step("the in-loop kernels")
+    loop = bench_loop(calls, repeats)
+    step("the exported C")
+    compiler, c_timings = bench_export()
+    runs = bench_long(progress=progress) if long else []
+    minutes = (time.perf_counter() - t0) / 60
+    lines = [f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end "
+             f"({minutes:.1f} min). Medians with the interquartile range of the runs in brackets; the variants of a "
+             "table ran interleaved; a ratio whose two spreads overlap is printed as \"within noise\".", ""]
+    lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + _loop_table(loop)
+    lines += _export_table(compiler, c_timings)
+    if runs:
+        lines += _long_table(runs)
+    return "\n".join(lines) + "\n"
+
+
+def _commands_table(timings: dict[str, Timing]) -> list[str]:
+    lines = ["What a user waits for (separate processes, warm kernel cache, default task, all outputs):", "",
+             "| command | wall time (s) | runs |", "|---|---|---|"]
+    lines += [f"| `chewbot {' '.join(RUN_CASES.get(t.label, ['--help']))}` | {t.per_sample(1)} | {len(t.times)} |" for t in timings.values()]
+    return lines + [""]
+
+
+def _task_table(timings: dict[str, Timing]) -> list[str]:
+    some = next(iter(timings.values()))
+    lines = [f"Whole default task ({some.samples} samples), kinematics left out:", "",
+             "| mechanism | case | first call (s) | median (ms) | per sample (us) |", "|---|---|---|---|---|"]
+    for label, t in timings.items():
+        mech, case = label.split(": ", 1)
+        q1, q3 = t.spread
+        lines.append(f"| {mech} | {case} | {t.first_s:.3f} | {t.median * 1e3:.2f} ({q1 * 1e3:.2f}–{q3 * 1e3:.2f}) | {t.per_sample()} |")
+    return lines + [""]
+
+
+def _ratio_lines(comparisons: dict[str, Comparison]) -> list[str]:
+    return ["Ratios (time of the first over the second):", ""] + [f"- {name}: {c.text()}" for name, c in comparisons.items()] + [""]
+
+
+def _loop_table(timings: dict[str, Timing]) -> list[str]:
+    lines = ["One sample from Python, target (`chewbot.realtime.loop_kernel`: preallocated arrays, no copy; a "
+             "`NativeFunction` call: inputs given as arrays, outputs returned as new ones):", "",
+             "| kernel | in-loop call (us) | NativeFunction call (us) |", "|---|---|---|"]
+    for kind in ("tau", "dynamics", "g1"):
+        lines.append(f"| {kind} | {timings[f'in-loop {kind}'].per_sample()} | {timings[f'NativeFunction call {kind}'].per_sample()} |")
+    return lines + [""]
+
+
+def _export_table(compiler: str, timings: list[Timing]) -> list[str]:
+    lines = [f"Exported C, one call (its example program, {compiler}):", "", "| kernel | ns per call |", "|---|---|"]
+    for t in timings:
+        q1, q3 = t.spread
+        lines.append(f"| {t.label} | {t.median:.0f} ({q1:.0f}–{q3:.0f}) |")
+    return lines + [""]
+
+
+def _long_table(runs: list[LongRun]) -> list[str]:
+    lines = ["Long tasks (`chewbot run --set task.cycles=N`, figures and report included): the time per sample of the "
+             "stages that grow with the task (run.json's timings), the whole wall time, the peak memory:", "",
+             "| method | samples | per sample (us) | wall (s) | peak memory (MB) |", "|---|---|---|---|---|"]
+    lines += [f"| {r.method} | {r.samples} | {r.per_sample_us:.3g} | {r.wall_s:.1f} | {r.peak_mb:.0f} |" for r in runs]
+    return lines + [""]
+

@@ -429,6 +429,26 @@ class NativeFunction:
         self._w = (ctypes.c_double * max(fn.sz_w(), 1))()
         self._lock = threading.Lock()
 
+    def name_out(self) -> list[str]:
+        """The names of the outputs, as the CasADi function's."""
+        return self.function.name_out()
+
+    @property
+    def input_buffers(self) -> list[np.ndarray]:
+        """The arrays the kernel reads its inputs from (flat, matrices column-major), one per input."""
+        return self._in
+
+    @property
+    def output_buffers(self) -> list[np.ndarray]:
+        """The arrays the kernel writes its outputs to (flat, matrices column-major), one per output."""
+        return self._out
+
+    def bound_call(self):
+        """A function of no argument that evaluates the kernel on :attr:`input_buffers` into
+        :attr:`output_buffers` (nothing converted, nothing copied, no lock) and returns the kernel's status
+        (0: success). For one thread: the buffers and work arrays are this object's."""
+        return functools.partial(self._c, self._arg, self._res, self._iw, self._w, 0)
+
     def _check_count(self, inputs) -> None:
         if len(inputs) != self.function.n_in():
             raise ValueError(f"{self.name}: {len(inputs)} inputs given, it takes {self.function.n_in()} "

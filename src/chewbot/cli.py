@@ -50,7 +50,7 @@ app = typer.Typer(
 console = Console(stderr=True, soft_wrap=True)  # progress, warnings, errors: standard error, paths unwrapped
 stdout = Console(soft_wrap=True)  # results: standard output, for scripts
 
-RUN_STEPS = 8  # task, kinematics, inverse dynamics, coupling, checks, results.csv, figures, report.html
+PROGRESS_DELAY_S = 1.0  # a run shows its progress bar once it has taken this long
 FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything else is never replaced)."
 
 
@@ -214,6 +214,8 @@ def run(
     allow_violations: bool = flag("--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
     quiet: bool = flag("--quiet", "-q", help="Print nothing but errors."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP),
+    no_figures: bool = flag("--no-figures", help="Write no PNG figures (chewbot report DIR draws them later)."),
+    no_report: bool = flag("--no-report", help="Write no report.html (chewbot report DIR writes it later)."),
 ) -> None:
     """Compute the kinematics and inverse dynamics of a task, check every sample, and write a results folder.
 
@@ -221,7 +223,8 @@ def run(
     MCI1..MCI6 included), run.json (model, options, versions, units, the validity checks), figures and report.html.
     The folder is always written in full; the exit code is then 4 if a validity check failed (torque, power or
     bearing limits, crank range, speed, an infeasible distribution, and under --contact unilateral a normal force
-    below contact.preload_N), unless --allow-violations.
+    below contact.preload_N), unless --allow-violations. A long task is processed in chunks, in constant memory;
+    --no-figures and --no-report leave out the drawings (chewbot report draws them later).
 
     Examples:
 
@@ -238,9 +241,12 @@ def run(
       chewbot run --task runs/left/results.csv --method liang --out runs/left-liang
 
       chewbot run --set chains.crank_length_mm[3]=12 --set task.force_z_N=-100 --out runs/longer-crank
+
+      chewbot run --task long_recording.csv --no-figures --no-report --out runs/batch
     """
     from chewbot.outputs import RESULTS_FOLDER, check_output
-    from chewbot.pipeline import RunOptions, compute, input_files, write
+    from chewbot.pipeline import RunOptions, input_files
+    from chewbot.pipeline import run as run_to_folder
 
     overrides = _overrides(set_)
     if method is None:
@@ -263,107 +269,145 @@ def run(
                          goal=goal and goal.value, friction=friction and friction.value, contact=contact.value, overrides=overrides)
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
-        with progress(quiet, "run", total=RUN_STEPS) as step:
-            result = compute(options, progress=step)
-            write(result, out, force=force, progress=step)
+        with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:
+            done = run_to_folder(options, out, force=force, progress=step, figures=not no_figures, report=not no_report)
     if not quiet:
-        _print_run_summary(result, out)
-    exit_after_checks(result.checks, allow_violations, quiet)
+        _print_run_summary(done, out)
+    exit_after_checks(done.checks, allow_violations, quiet)
 
 
 @contextmanager
-def progress(quiet: bool, label: str, total: int | None = None):
-    """A progress bar that advances one step per call of the yielded callback and names the current step
-    (nothing with --quiet, nor where standard error is not a terminal: a log gets no bar). ``total``: the number
-    of steps if known; otherwise the bar pulses. Each step also stops the command if a signal arrived that a
-    library swallowed (:func:`chewbot.command.check_interrupted`)."""
+def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0.0):
+    """A progress bar that names the current step (nothing with --quiet, nor where standard error is not a
+    terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None)`` starts a step:
+    with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by one
+    step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
+    the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
+    arrived that a library swallowed (:func:`chewbot.command.check_interrupted`)."""
     if quiet or not console.is_terminal:
-        yield lambda msg: check_interrupted()
+        yield lambda msg, done=None, total=None: check_interrupted()
         return
+    import time
+
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn()]
-    columns += [MofNCompleteColumn()] if total else []
-    with Progress(*columns, TimeElapsedColumn(), console=console, transient=True) as bar:
-        task = bar.add_task(label, total=total)
-        started = False
+    bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                   console=console, transient=True)
+    task = bar.add_task(label, total=total)
+    start, shown, started = time.monotonic(), False, False
 
-        def step(msg: str) -> None:
-            nonlocal started
-            check_interrupted()
+    def step(msg: str, done: int | None = None, total: int | None = None) -> None:
+        nonlocal shown, started
+        check_interrupted()
+        if total is not None:
+            bar.update(task, total=total)
+        if done is not None:
+            bar.update(task, description=f"{label}: {msg}", completed=done)
+        else:
             bar.update(task, description=f"{label}: {msg}", advance=1 if started else 0)
-            started = True
+        started = True
+        if not shown and time.monotonic() - start >= delay:
+            bar.start()
+            shown = True
 
+    try:
         yield step
-        bar.update(task, completed=total or 0)
+    finally:
+        bar.stop()
 
 
-def _print_run_summary(result, out: Path) -> None:
+def _print_run_summary(done, out: Path) -> None:
     """The lines a person wants after a run: where the report is and the peak torque (the checks follow)."""
-    from chewbot.report.summary import column_stats, contact_note, normal_force_stats, numbered_columns
+    from chewbot.report.summary import contact_note, normal_force_stats, numbered_columns
 
-    stdout.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
-                 f"open {escape(str(out / 'report.html'))}", highlight=False)
-    taus = numbered_columns(result.table, "tau")
+    view = done.view
+    report = out / "report.html"
+    where = f"open {escape(str(report))}" if any(p.name == "report.html" for p in done.files) else f"chewbot report {escape(str(out))} draws the report"
+    stdout.print(f"wrote [bold]{escape(str(out))}[/] ({view.n} samples, {len(view.columns)} columns); {where}", highlight=False)
+    taus = numbered_columns(view.rows, "tau")
     if taus:
-        top = max(column_stats(result.table, taus), key=lambda s: abs(s.peak))
+        top = max((view.stats[name] for name in taus), key=lambda s: abs(s.peak))
         stdout.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
-    contact = result.options.contact
-    preload = result.model.contact.preload if contact == "unilateral" else 0.0
-    forces = normal_force_stats(result.table, preload)
+    contact = done.record["options"].get("contact", "bilateral")
+    preload = done.model.contact.preload if contact == "unilateral" else 0.0
+    forces = normal_force_stats(view.stats)
     if forces:
-        stdout.print(f"contact model: {contact_note(contact, preload, result.info.get('dynamics', {}))}", highlight=False)
+        stdout.print(f"contact model: {contact_note(contact, preload, done.record.get('dynamics', {}))}", highlight=False)
         stdout.print("normal forces: " + ", ".join(f"{f.name} from {f.low:.4g} to {f.high:.4g} N ({f.below:.3g} % of the samples "
                                                     f"below {preload:g} N)" for f in forces), highlight=False)
-    passed = sum(c.passed and c.samples is not None for c in result.checks)
-    stdout.print(f"validity checks: {passed} passed, {sum(not c.passed for c in result.checks)} failed, "
-                 f"{sum(c.samples is None for c in result.checks)} not evaluated (run.json, \"checks\")", highlight=False)
+    checks = done.checks
+    passed = sum(c.passed and c.samples is not None for c in checks)
+    stdout.print(f"validity checks: {passed} passed, {sum(not c.passed for c in checks)} failed, "
+                 f"{sum(c.samples is None for c in checks)} not evaluated (run.json, \"checks\")", highlight=False)
+
+
+@app.command("report")
+def report_command(
+    folder: Path = typer.Argument(..., help="A results folder written by chewbot run."),
+    force: bool = flag("--force", help="Replace the folder's figures and report.html if they exist (results.csv and run.json are never written)."),
+    no_figures: bool = flag("--no-figures", help="Write report.html only."),
+    no_report: bool = flag("--no-report", help="Draw the figures only."),
+    quiet: bool = flag("--quiet", "-q", help="Print nothing but errors."),
+) -> None:
+    """Draw the figures and write report.html of a results folder from its results.csv and run.json.
+
+    What chewbot run writes at its end, later: after a run with --no-figures or --no-report, or to draw a run again.
+    Only the figures and report.html are written into the folder (all or none, each complete before it replaces
+    an older one; an existing one only with --force); results.csv and run.json are only read. The model is read
+    from the parameter file run.json names and must still have the run's parameters.
+
+    Examples:
+
+      chewbot run --no-figures --no-report --out runs/batch && chewbot report runs/batch
+
+      chewbot report runs/default --force
+    """
+    from chewbot.pipeline import redraw
+
+    if no_figures and no_report:
+        fail(ChewbotError("--no-figures and --no-report together leave nothing to write"), EXIT_BAD_INPUT)
+    with errors_reported():
+        with progress(quiet, "report", delay=PROGRESS_DELAY_S) as step:
+            written = redraw(folder, force=force, figures=not no_figures, report=not no_report, progress=step)
+    if not quiet:
+        stdout.print(f"wrote {', '.join(p.name for p in written)} in [bold]{escape(str(folder))}[/]", highlight=False)
 
 
 @app.command()
 def bench(
-    repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
-    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per kernel for the one-sample timings."),
-    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file."),
+    repeats: int = typer.Option(11, "--repeats", min=3, help="Timed runs per case after the first, interleaved (median and spread reported)."),
+    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per in-loop kernel for the one-sample timings."),
+    long: bool = flag("--long", help="Also run tasks of 10,000 to 1,000,000 samples with every method: time per "
+                      "sample and peak memory (about half an hour)."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
+                                    "file written by chewbot bench with --force)."),
     force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
-    """Time every formulation on the default task (5001 samples), both mechanisms, and the real-time kernels.
+    """Time what a user waits for: chewbot run and --help, every formulation on the default task (5001 samples),
+    both mechanisms, the in-loop kernels and the exported C.
 
-    In one run: each formulation's first call (graph build + kernel load or compile), the median and minimum of
-    the further runs, per sample; the kernels for one sample from Python and from C; and the ratios of the
-    medians (Hessian vs Liang, target vs 6RSS, Euler parameters vs angles, each against the plain NumPy and
-    SciPy SLSQP references). Timings are not tests: pin to one core for single-core figures.
+    Every timing is repeated, and the variants a table compares run interleaved: medians with the interquartile
+    range of the runs; a ratio whose two spreads overlap is printed as "within noise". The machine and its load
+    average are written above the tables. Timings are not tests: pin to one core for single-core figures.
 
-    Example:
+    Examples:
 
-      taskset -c 0 chewbot bench --out bench.md
+      chewbot bench --out docs/benchmark.md --force
+
+      taskset -c 0 chewbot bench --long --out bench.md
     """
-    from chewbot.bench import bench_kernels, bench_task, machine, ratios
+    from chewbot.bench import benchmark
     from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
     with errors_reported():
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
-            timings = bench_task(repeats=repeats, progress=step)
-            step("kernels, one sample")
-            kernel_timings = bench_kernels(calls)
-        text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
+            text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
         stdout.print(text, markup=False, highlight=False)
         if out is not None:
             with atomic_file(out, force) as tmp:
                 tmp.write_text(marker_line("<!--", "chewbot bench") + "\n" + text)
-
-
-def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) -> str:
-    lines = [f"Machine: {machine_line}", "", f"Whole default task ({timings[0].samples} samples):", "",
-             "| mechanism | case | first call (s) | median (ms) | min (ms) | per sample (us) |", "|---|---|---|---|---|---|"]
-    lines += [f"| {t.mechanism} | {t.case} | {t.first_s:.3f} | {t.median_s * 1e3:.2f} | {t.min_s * 1e3:.2f} | {t.per_sample_us:.2f} |"
-              for t in timings]
-    lines += ["", "One sample, exported kernels:", "", "| kernel | call from Python (us, median) | call from C (ns, mean) |", "|---|---|---|"]
-    lines += [f"| {k.name} | {k.python_us:.2f} | {'-' if k.c_ns is None else f'{k.c_ns:.0f}'} |" for k in kernel_timings]
-    lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3g}" for name, value in ratio_values.items()]
-    return "\n".join(lines) + "\n"
 
 
 @app.command("export-c")

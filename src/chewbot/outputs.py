@@ -288,6 +288,64 @@ def atomic_file(path: Path, force: bool = False, inputs=()):
 
 
 @contextmanager
+def atomic_members(folder: Path, names: list[str], force: bool = False, marker: Marker = RESULTS_FOLDER):
+    """Yield a new temporary folder inside ``folder`` to write the files ``names`` into; when the block ends without
+    an error each becomes ``folder/NAME``, all or none: files added to an output of ``marker``'s kind that chewbot
+    wrote (a results folder's figures and report), every other file of it left as it is.
+
+    ``folder`` must carry ``marker`` (else :class:`OutputError`: chewbot writes into its own folders only); a file
+    of ``names`` that exists is replaced only with ``force`` (else :class:`OutputExistsError`), moved aside until
+    the new one is in place and put back if that fails. On an error or a signal the temporary folder is removed
+    and ``folder`` stays as it was. The block must write every file of ``names`` (a missing one is a bug).
+    """
+    folder = Path(folder)
+    remove_stale(folder)
+    if not marker.present(folder):
+        raise OutputError(f"{folder}: not a {marker.kind} written by chewbot (no {marker.file} of chewbot's); chewbot adds "
+                          f"files to its own {marker.kind}s only")
+    existing = [name for name in names if (folder / name).exists() or (folder / name).is_symlink()]
+    if existing and not force:
+        raise OutputExistsError(f"{folder}: {', '.join(existing)} exist(s); pass --force to replace "
+                                f"{'it' if len(existing) == 1 else 'them'}")
+    staging = _temporary(folder / "members", "partial")
+    try:
+        staging.mkdir()
+    except OSError as exc:
+        raise cannot_write(folder, exc, "create a temporary folder in it") from exc
+    aside: dict[Path, Path] = {}
+    placed: list[Path] = []
+    try:
+        yield staging
+        missing = [name for name in names if not (staging / name).is_file()]
+        if missing:
+            raise RuntimeError(f"{folder}: the command did not write {', '.join(missing)}")
+        with shield():
+            for name in names:
+                out = folder / name
+                if out.exists() or out.is_symlink():
+                    aside[out] = _temporary(out, "replaced")
+                    os.replace(out, aside[out])
+            for name in names:
+                os.replace(staging / name, folder / name)
+                placed.append(folder / name)
+    except BaseException as exc:
+        with shield():
+            for out in placed:
+                _remove(out)
+            for out, old in aside.items():
+                if not (out.exists() or out.is_symlink()):
+                    os.replace(old, out)
+            _remove(staging)
+        if isinstance(exc, OSError):
+            raise cannot_write(folder, exc, "write into it") from exc
+        raise
+    with shield():
+        _remove(staging)
+        for old in aside.values():
+            _remove(old)
+
+
+@contextmanager
 def _committed(pairs: list[tuple[Path, Path]], force: bool, marker: Marker):
     """Run the block, then rename each (temporary, output) pair into place, moving an existing output aside
     first; on any error or signal remove the temporaries and the outputs placed so far, and put back what was

@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.coupling import coupling_kernel
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.casadi_tools import FLAGS, KernelSpec, evaluate, native
 from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
 from chewbot.dynamics.distribution import MEASURABLE
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns, start_sx
@@ -137,6 +137,85 @@ def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> d
     fn = native(g1_kernel(model.mechanism, kin.orientation))
     out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side), model.vector())
     return dict(zip(("tau", "N", "grad", "step", "limits"), out))
+
+
+# --- one sample at a time, from a Python control loop ---------------------------------------------------------
+
+LOOP_KERNELS = ("tau", "dynamics", "coupling", "g1")
+
+
+class LoopKernel:
+    """A compiled per-sample kernel for a control loop in Python: built once, then each call evaluates one sample
+    from preallocated input arrays into preallocated output arrays, with nothing allocated, converted or copied.
+
+    ``inputs`` and ``outputs`` map the kernel's names to its arrays (vectors flat, matrices with their shape,
+    views of column-major buffers); each is also an attribute (``k.q``, ``k.tau``). Calling ``k()`` evaluates
+    the kernel on what the input arrays hold.
+
+    Aliasing rule: the arrays are the kernel's own and stay the same objects for its lifetime. Write inputs into
+    them (``k.q[:] = q``; ``k.q = q`` raises: it would leave the kernel reading the old array); an output array
+    is overwritten by the next call: copy it (``k.tau.copy()``) to keep a sample's value. One object per thread.
+    """
+
+    def __init__(self, kernel: KernelSpec, flags: tuple[str, ...] = FLAGS):
+        from chewbot.casadi_tools import NativeFunction
+
+        fn = native(kernel, flags)
+        if not isinstance(fn, NativeFunction):
+            raise RuntimeError(f"{kernel.name}: the in-loop kernels need a C compiler (set $CC) and the kernel cache")
+        graph = fn.function
+        self.name = fn.name
+        self.inputs = {name: _view(buf, graph.size1_in(i), graph.size2_in(i)) for i, (name, buf) in enumerate(zip(graph.name_in(), fn.input_buffers))}
+        self.outputs = {name: _view(buf, graph.size1_out(j), graph.size2_out(j)) for j, (name, buf) in enumerate(zip(graph.name_out(), fn.output_buffers))}
+        clash = set(self.inputs) & set(self.outputs)
+        if clash:
+            raise ValueError(f"{self.name}: {sorted(clash)} name both an input and an output")
+        self._native = fn  # keeps the library and the buffers alive
+        self._run = fn.bound_call()
+        self.__dict__.update(self.inputs)
+        self.__dict__.update(self.outputs)
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in getattr(self, "inputs", {}) or name in getattr(self, "outputs", {}):
+            raise AttributeError(f"{name} is one of the kernel's arrays: assign into it ({name}[:] = ...), see LoopKernel")
+        object.__setattr__(self, name, value)
+
+    def __call__(self) -> None:
+        if self._run():
+            raise RuntimeError(f"kernel {self.name} failed")
+
+
+def _view(buffer: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """A flat column-major buffer as a vector (one column) or a matrix, without a copy."""
+    return buffer if cols == 1 else buffer.reshape((rows, cols), order="F")
+
+
+# Compiler flags of the in-loop kernels: measured in docs/realtime.md ("The in-loop kernels").
+LOOP_FLAGS = ("-O3",)
+
+
+def loop_spec(model_or_mechanism: Model | str, kind: str) -> KernelSpec:
+    """The kernel of :func:`loop_kernel`'s ``kind`` for a model (its numbers folded in) or a mechanism (p an input)."""
+    if kind not in LOOP_KERNELS:
+        raise ValueError(f"kind must be one of {', '.join(LOOP_KERNELS)}, not {kind!r}")
+    return {"tau": torque_kernel, "dynamics": dynamics_kernel, "coupling": coupling_kernel, "g1": g1_kernel}[kind](model_or_mechanism)
+
+
+def loop_kernel(model: Model, kind: str = "tau", side: str = "left", folded: bool = True, flags: tuple[str, ...] = LOOP_FLAGS) -> LoopKernel:
+    """A :class:`LoopKernel` of one robot: ``kind`` "tau" (minimum-norm (target) or unique (6RSS) torques: inputs
+    q, dq, ddq in Euler angles, B, F_B), "dynamics" (the same with J_theta1, M_f, C_f, G_f, Q_B), "coupling" (M_A,
+    MCI from theta, q) or "g1" (the friction-aware G1 distribution of the target: inputs theta, q, dq, ddq in Euler
+    parameters, F_B, B). The bite point B is set to the molar of ``side``.
+
+    ``folded``: the model's numbers folded into the compiled code (the fastest; compiled once per parameter set,
+    kept in the kernel cache under their SHA-256); else the mechanism's kernel with p as its last input, set here.
+    """
+    k = LoopKernel(loop_spec(model if folded else model.mechanism, kind), flags)
+    if "B" in k.inputs:
+        k.B[:] = model.molar(side)
+    if not folded:
+        k.inputs["p"][:] = model.vector()
+    return k
 
 
 def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray]] | None = None) -> list[Kernel]:

@@ -2,7 +2,8 @@
 
 Written the straightforward way, independently of the CasADi graphs: every body's Newton–Euler equations with
 vectors and matrices (batched over the samples for the frictionless torques), and the optimal distribution
-solved sample by sample with ``scipy.optimize.minimize(method="SLSQP")`` and finite-difference gradients.
+solved sample by sample with ``scipy.optimize.minimize(method="SLSQP")`` with the exact gradients of the goal and of the
+limits, each sample warm-started from the previous one's solution.
 It serves two purposes: an independent route for the tests, and the baseline of ``chewbot bench``.
 
 The equations (seed 001, Sects. 4.1–4.4; :mod:`chewbot.dynamics.newton_euler` has the derivation):
@@ -101,28 +102,38 @@ def frictionless_torques(model: Model, kin: Kinematics, side: str | None = None)
 
 
 def _sample_torques(model: Model, e: _Sample, k: int, N: np.ndarray, dtheta: np.ndarray,
-                    eps_theta_dot: float, eps_v: float, delta: float) -> tuple[np.ndarray, np.ndarray]:
-    """Torques and the bearing forces F_G (6, 3) of sample k with friction, for the normal forces N (2,)."""
+                    eps_theta_dot: float, eps_v: float, delta: float):
+    """Torques (6,) and the bearing forces F_G (6, 3) of sample k with friction, for the normal forces N (2,), and
+    their exact derivatives with respect to N: dtau (6, 2) and dF_G (6, 3, 2)."""
     fr = model.friction
     wrench = e.w[k] - e.P[k] @ N
+    dwrench = -e.P[k].copy()  # (6, nN)
     for j in range(N.size):
         v = e.v_T[k, j]
         vhat = v / np.sqrt(v @ v + eps_v**2)
-        f_T = -(fr.hkp_coulomb * np.sqrt(N[j] ** 2 + delta**2) * vhat + fr.hkp_viscous * v)
+        size = np.sqrt(N[j] ** 2 + delta**2)
+        f_T = -(fr.hkp_coulomb * size * vhat + fr.hkp_viscous * v)
         wrench = wrench - np.concatenate([f_T, np.cross(e.r_T[k, j], f_T)])
-    kax = np.linalg.solve(e.A[k], wrench)
-    F_S = e.F_rest[k] + kax[:, None] * e.u[k]
+        dwrench[:, j] += fr.hkp_coulomb * N[j] / size * np.concatenate([vhat, np.cross(e.r_T[k, j], vhat)])
+    kax = np.linalg.solve(e.A[k], np.column_stack([wrench, dwrench]))
+    F_S = e.F_rest[k] + kax[:, :1] * e.u[k]
+    dF_S = e.u[k][:, :, None] * kax[:, None, 1:]  # (6, 3, nN): the axial force's share
     F_G = F_S + np.outer(model.crank_mass * model.g, [0.0, 0.0, 1.0])
     sgn = dtheta / np.sqrt(dtheta**2 + eps_theta_dot**2)
-    tau_f = fr.actuator_arm * fr.actuator_coulomb * np.sqrt(np.sum(F_G**2, axis=1) + delta**2) * sgn + fr.actuator_viscous * dtheta
-    return e.inertial[k] + np.sum(e.lever[k] * F_S, axis=1) + tau_f, F_G
+    size_G = np.sqrt(np.sum(F_G**2, axis=1) + delta**2)
+    arm = fr.actuator_arm * fr.actuator_coulomb * sgn
+    tau_f = arm * size_G + fr.actuator_viscous * dtheta
+    tau = e.inertial[k] + np.sum(e.lever[k] * F_S, axis=1) + tau_f
+    dtau = np.einsum("ic,icj->ij", e.lever[k], dF_S) + (arm / size_G)[:, None] * np.einsum("ic,icj->ij", F_G, dF_S)
+    return tau, F_G, dtau, dF_S
 
 
 def slsqp_distribution(model: Model, kin: Kinematics, goal: str = "min-torque", samples: np.ndarray | None = None,
                        side: str | None = None, lower: float | None = None, eps_theta_dot: float = 1e-3,
                        eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """An optimal distribution with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other,
-    each warm-started from the sample before where that was solved, under the actuator limits (torque, power, axial and radial load).
+    each warm-started from the sample before where that was solved, under the actuator limits (torque, power, axial
+    and radial load), with the exact gradients of the goal and the limits (:func:`_sample_torques`).
 
     ``goal``: ``min-torque`` (G1, sum tau_i^2), ``min-coupler-force`` (G2, sum abs(F_S,i)^2), ``min-hkp-force``
     (G3, N_L^2 + N_R^2); ``lower``: N_L, N_R >= lower (a unilateral contact) or None; ``samples``: indices to solve
@@ -142,29 +153,39 @@ def slsqp_distribution(model: Model, kin: Kinematics, goal: str = "min-torque", 
     for k in idx:
         x0 = x0 if previous == k - 1 else start  # warm start from the sample before only
         dth = kin.dtheta[k]
+        last: dict = {}
 
-        def torques(N, k=k, dth=dth):
-            return _sample_torques(model, e, k, N, dth, eps_theta_dot, eps_v, delta)
+        def evaluate(N, k=k, dth=dth, last=last):
+            """The sample's torques, limits and their derivatives at N, computed once per N."""
+            if last.get("N") is None or not np.array_equal(last["N"], N):
+                tau, F_G, dtau, dF_G = _sample_torques(model, e, k, N, dth, eps_theta_dot, eps_v, delta)
+                axial = np.sum(F_G * z, axis=1)
+                across = F_G - axial[:, None] * z
+                radial = np.linalg.norm(across, axis=1)
+                daxial = np.einsum("ic,icj->ij", z, dF_G)
+                dradial = np.einsum("ic,icj->ij", across, dF_G) / radial[:, None]
+                power = tau * dth
+                if goal == "min-torque":
+                    J, grad = float(tau @ tau), 2 * dtau.T @ tau
+                elif goal == "min-coupler-force":  # F_S = F_G - weight, dF_S = dF_G
+                    J, grad = float(np.sum((F_G - weight) ** 2)), 2 * np.einsum("ic,icj->j", F_G - weight, dF_G)
+                else:
+                    J, grad = float(N @ N), 2 * N
+                last.update(N=N.copy(), tau=tau, J=J, grad=grad,
+                            c=np.concatenate([lim.torque - np.abs(tau), lim.power - np.abs(power), lim.axial_load - np.abs(axial),
+                                              lim.radial_load - radial]),
+                            dc=-np.concatenate([np.sign(tau)[:, None] * dtau, np.sign(power)[:, None] * dth[:, None] * dtau,
+                                                np.sign(axial)[:, None] * daxial, dradial]))
+            return last
 
-        def cost(N, torques=torques):
-            if goal == "min-hkp-force":
-                return float(N @ N)
-            tau, F_G = torques(N)
-            return float(np.sum(tau**2) if goal == "min-torque" else np.sum((F_G - weight) ** 2))
-
-        def limits(N, torques=torques, dth=dth):
-            tau, F_G = torques(N)
-            axial = np.sum(F_G * z, axis=1)
-            radial = np.linalg.norm(F_G - axial[:, None] * z, axis=1)
-            return np.concatenate([lim.torque - np.abs(tau), lim.power - np.abs(tau * dth),
-                                   lim.axial_load - np.abs(axial), lim.radial_load - radial])
-
-        res = minimize(cost, x0, method="SLSQP", bounds=None if lower is None else [(lower, None)] * 2,
-                       constraints=[{"type": "ineq", "fun": limits}], options={"ftol": 1e-16, "maxiter": 200})
+        res = minimize(lambda N, f=evaluate: f(N)["J"], x0, jac=lambda N, f=evaluate: f(N)["grad"], method="SLSQP",
+                       bounds=None if lower is None else [(lower, None)] * 2,
+                       constraints=[{"type": "ineq", "fun": lambda N, f=evaluate: f(N)["c"], "jac": lambda N, f=evaluate: f(N)["dc"]}],
+                       options={"ftol": 1e-16, "maxiter": 200})
         if not res.success:
             raise ChewbotError(f"SciPy SLSQP failed at sample {k} (t = {kin.t[k]:.6g} s): {res.message}")
         x0, previous = res.x, k
-        taus.append(torques(res.x)[0])
+        taus.append(evaluate(res.x)["tau"])
         Ns.append(res.x)
     return np.array(taus), np.array(Ns)
 

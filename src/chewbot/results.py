@@ -7,21 +7,25 @@ This module sits below both the pipeline that computes a run and the report that
 from __future__ import annotations
 
 import csv
-import io
+import hashlib
+import itertools
 import json
+import platform
 import re
 from dataclasses import dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from chewbot.errors import ChewbotError
-from chewbot.kinematics.motion import Kinematics
 
 if TYPE_CHECKING:
     from chewbot.analysis.checks import CheckResult
+    from chewbot.kinematics.motion import Kinematics
     from chewbot.model import Model
+    from chewbot.report.view import RunView
     from chewbot.task.base import Task
 
 # Version of the results folder's format, the value of run.json's "chewbot_run" (CHANGELOG.md): 2 puts each
@@ -80,36 +84,129 @@ class Table:
     def __contains__(self, name: str) -> bool:
         return name in self.columns
 
+    def rows(self, start: int, stop: int) -> Table:
+        """Samples ``start`` to ``stop - 1`` (views of the columns, no copy)."""
+        part = Table(units=dict(self.units), descriptions=dict(self.descriptions))
+        part.columns = {name: values[start:stop] for name, values in self.columns.items()}
+        return part
+
+    @classmethod
+    def concat(cls, parts: list[Table]) -> Table:
+        """The tables one after the other (equal columns in equal order): a task's chunks as one table."""
+        first = parts[0]
+        for part in parts[1:]:
+            if list(part.columns) != list(first.columns):
+                raise ValueError("tables with different columns cannot be concatenated")
+        whole = cls(units=dict(first.units), descriptions=dict(first.descriptions))
+        whole.columns = {name: np.concatenate([p.columns[name] for p in parts]) for name in first.columns}
+        return whole
+
     def to_csv(self, path: Path, first_line: str | None = None) -> None:
-        """Write as CSV: a header of ``name [unit]``, one row per sample, each float in its shortest form that
-        reads back exactly (and 0.0 for -0.0). ``first_line``: a comment line above the header (e.g. chewbot's
-        marker, :func:`chewbot.outputs.marker_line`)."""
-        names = list(self.columns)
-        data = np.column_stack([self.columns[n] for n in names]) + 0.0  # + 0.0 turns -0.0 into 0.0
-        buf = io.StringIO()
-        if first_line:
-            buf.write(first_line + "\n")
-        buf.write(",".join(f"{n} [{self.units[n]}]" if self.units[n] else n for n in names) + "\n")
-        for row in data.tolist():  # Python floats: repr is the shortest string that reads back exactly
-            buf.write(",".join(map(repr, row)) + "\n")
-        Path(path).write_text(buf.getvalue())
+        """Write as CSV (:class:`CsvWriter`): a header of ``name [unit]``, one row per sample, each float in its
+        shortest form that reads back exactly (and 0.0 for -0.0). ``first_line``: a comment line above the header
+        (e.g. chewbot's marker, :func:`chewbot.outputs.marker_line`)."""
+        with CsvWriter(path, first_line) as writer:
+            writer.write(self)
 
     @classmethod
     def read_csv(cls, path: Path, units: dict[str, str] | None = None) -> Table:
         """Read a table written by :meth:`to_csv`: units from the header (``name [unit]``), else from ``units``
         (e.g. the ``columns`` of a version-1 run.json), else empty. Lines starting with ``#`` are skipped."""
-        with open(path, newline="") as f:
-            rows = [row for row in csv.reader(f) if row and not row[0].startswith("#")]
-        cells = [HEADER_CELL.match(c) for c in rows[0]]
+        parts = list(read_csv_chunks(path, units))
+        return cls.concat(parts) if len(parts) > 1 else parts[0]
+
+
+class CsvWriter:
+    """A results table written chunk after chunk (:meth:`write` per chunk of rows, in order), in the format of
+    :meth:`Table.to_csv`; the header comes from the first chunk, and every chunk must have the same columns."""
+
+    def __init__(self, path: Path, first_line: str | None = None):
+        self.path = Path(path)
+        self._file = open(self.path, "w", encoding="utf-8", newline="")
+        self._names: list[str] | None = None
+        if first_line:
+            self._file.write(first_line + "\n")
+
+    def write(self, table: Table) -> None:
+        names = list(table.columns)
+        if self._names is None:
+            self._names = names
+            self._file.write(",".join(f"{n} [{table.units[n]}]" if table.units[n] else n for n in names) + "\n")
+        elif names != self._names:
+            raise ValueError(f"{self.path}: a chunk with columns {names} after {self._names}")
+        if not table.n:
+            return
+        data = np.column_stack([table.columns[n] for n in names]) + 0.0  # + 0.0 turns -0.0 into 0.0
+        # Python floats: repr is the shortest string that reads back exactly
+        self._file.write("\n".join([",".join(map(repr, row)) for row in data.tolist()]) + "\n")
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> CsvWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def read_csv_chunks(path: Path, units: dict[str, str] | None = None, rows: int = 10_000):
+    """A table written by :meth:`Table.to_csv` read ``rows`` rows at a time (a generator of :class:`Table`), in
+    constant memory; units as :meth:`Table.read_csv` takes them. A table without rows gives one empty chunk.
+    Lines starting with ``#`` and blank lines are skipped; a row that is not a number per column is named by its
+    line."""
+    path = Path(path)
+    try:
+        f = open(path, newline="", encoding="utf-8")
+    except OSError as exc:
+        raise ChewbotError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    with f:
+        numbered = ((k, text) for k, text in enumerate(f, start=1) if text.strip() and not text.lstrip().startswith("#"))
+        first = next(numbered, None)
+        if first is None:
+            raise ChewbotError(f"{path}: no header line (an empty results table)")
+        header = next(csv.reader([first[1]]))
+        cells = [HEADER_CELL.match(c) for c in header]
         if not all(cells):
-            bad = next(c for c, m in zip(rows[0], cells) if m is None)
+            bad = next(c for c, m in zip(header, cells) if m is None)
             raise ChewbotError(f"{path}: cannot read the column name {bad!r} (expected NAME or NAME [unit])")
-        data = np.array([[float(x) for x in row] for row in rows[1:]]).reshape(len(rows) - 1, len(cells))
-        table = cls()
-        for j, m in enumerate(cells):
-            name = m.group(1)
-            table.add(name, data[:, j], m.group(2) if m.group(2) is not None else (units or {}).get(name, ""))
-        return table
+        names = [m.group(1) for m in cells]
+        unit_of = {m.group(1): m.group(2) if m.group(2) is not None else (units or {}).get(m.group(1), "") for m in cells}
+        yielded = False
+        while True:
+            block = list(itertools.islice(numbered, rows))
+            if not block and yielded:
+                return
+            data = _numbers(path, block, len(names))
+            table = Table()
+            for j, name in enumerate(names):
+                table.add(name, data[:, j], unit_of[name])
+            yielded = True
+            yield table
+            if len(block) < rows:
+                return
+
+
+def _numbers(path: Path, block: list[tuple[int, str]], width: int) -> np.ndarray:
+    """The rows of ``block`` (line number, text) as an (n, width) array; a bad row is named by its line."""
+    if not block:
+        return np.zeros((0, width))
+    try:
+        data = np.loadtxt([text for _, text in block], delimiter=",", dtype=float, ndmin=2)
+        if data.shape[1] == width:
+            return data
+    except ValueError:
+        pass
+    for line, text in block:
+        row = text.rstrip("\r\n").split(",")
+        if len(row) != width:
+            raise ChewbotError(f"{path}: line {line}: {len(row)} cells, the header has {width} columns")
+        for cell in row:
+            try:
+                float(cell)
+            except ValueError:
+                raise ChewbotError(f"{path}: line {line}: {cell.strip()!r} is not a number") from None
+    raise ChewbotError(f"{path}: the rows from line {block[0][0]} cannot be read")
 
 
 def kinematics_table(kin: Kinematics) -> Table:
@@ -158,6 +255,73 @@ class RunResult:
     info: dict = field(default_factory=dict)
     dynamics: object | None = None
     checks: list[CheckResult] = field(default_factory=list)
+
+
+@dataclass
+class RunRecord:
+    """A run as its folder holds it, without its rows: ``record`` (run.json's content), the model, the validity
+    checks, ``view`` (the decimated columns and their statistics, :class:`chewbot.report.view.RunView`) and the
+    files written. What ``chewbot run`` returns for a task written chunk by chunk."""
+
+    record: dict
+    model: Model
+    checks: list[CheckResult]
+    view: RunView
+    files: list[Path] = field(default_factory=list)
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("chewbot", "numpy", "scipy", "casadi", "pydantic", "matplotlib", "plotly"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def model_record(model: Model) -> dict:
+    """A model's identity in run.json: name, mechanism, file and its hash, assumed keys, the parameters' hash."""
+    from chewbot.model_vector import vector_digest
+
+    return {"name": model.name, "mechanism": model.mechanism, "file": model.source, "sha256": model.sha256,
+            "assumed": list(model.assumed), "parameters_sha256": vector_digest(model)}
+
+
+def task_record(task: Task) -> dict:
+    """A task's identity in run.json: name, source (and its hash), samples, side, what the generator recorded."""
+    source = Path(task.source)
+    return {"name": task.name, "source": task.source,
+            **({"sha256": hashlib.sha256(source.read_bytes()).hexdigest()} if source.is_file() else {}),
+            "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})}
+
+
+def environment_record() -> dict:
+    """The versions of chewbot and its libraries, and the platform."""
+    return {"versions": _versions(), "platform": platform.platform()}
+
+
+def columns_record(columns: Table) -> dict:
+    """Each column's unit and description (``columns``: any chunk of the results table)."""
+    return {name: {"unit": columns.units[name], **({"description": d} if (d := columns.descriptions.get(name)) else {})}
+            for name in columns.columns}
+
+
+def run_record(options: RunOptions, model: Model, task: Task, columns: Table, checks: list[CheckResult], info: dict) -> dict:
+    """The run record (run.json): format, options, model and task identity, versions, platform, the unit and
+    description of every column of ``columns`` (any chunk of the results table), the validity checks, ``info``
+    (timings, the formulation's info, the coupling means)."""
+    return {
+        "chewbot_run": RESULTS_FORMAT,
+        "options": vars(options),
+        "model": model_record(model),
+        "overrides": dict(options.overrides),
+        "task": task_record(task),
+        **environment_record(),
+        "columns": columns_record(columns),
+        "checks": [c.as_dict() for c in checks],
+        **info,
+    }
 
 
 def read_results(folder: Path) -> tuple[dict, Table]:

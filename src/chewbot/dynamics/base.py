@@ -3,6 +3,11 @@
 A formulation is a function ``f(model, kin, **options) -> Dynamics``: the model, the kinematics of the
 whole task (:class:`~chewbot.kinematics.motion.Kinematics`), and options of its own (side, friction, goal, ...).
 Adding a formulation is adding one module that calls :func:`register`.
+
+A run may give a long task in chunks of consecutive samples (:mod:`chewbot.pipeline`), one call per chunk. A
+formulation whose samples depend on earlier ones (a solver warm-started from the previous sample's solution) takes
+the option ``carry``, the previous chunk's :attr:`Dynamics.carry` (None for the task's first chunk), and returns
+in ``carry`` what the next chunk needs: the chunks then give the results of the whole task in one call.
 """
 
 from __future__ import annotations
@@ -23,12 +28,15 @@ class Dynamics:
 
     ``tau``: (N, 6) actuator torques, N m. ``table``: further named columns with units (forces, friction,
     multipliers ...) that go into ``results.csv``. ``info``: scalars and notes for run.json and reports.
+    ``carry``: the state the next chunk of the same task starts from (see the module docstring), e.g. the last
+    sample's solution as a warm start; empty for a formulation whose samples are independent.
     """
 
     method: str
     tau: np.ndarray
     table: Table = field(default_factory=Table)
     info: dict = field(default_factory=dict)
+    carry: dict = field(default_factory=dict)
 
 
 Formulation = Callable[..., Dynamics]

@@ -28,7 +28,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, compiled, mapped
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.command import check_interrupted
 from chewbot.errors import InfeasibleError
 
@@ -66,7 +66,8 @@ class Problem:
     """A distribution problem: the goal's residual and the limits, as compiled per-sample CasADi functions,
     each taking the model's parameters p last (where the graph has them as an input).
 
-    ``objective``: (D, x, friction, p) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian;
+    ``objective``: (D, x, friction, p) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian (compiled
+    kernels, :func:`chewbot.casadi_tools.native`);
     ``value``: (D, x, friction, p) -> J alone (for the line search);
     ``limits``: (D, x, friction, p) -> c (|c| <= the bound :func:`solve` is given); ``limit_names``: a label per
     entry of c; ``start``: (D, p) -> x, where Newton starts with friction (None: the friction-free optimum);
@@ -74,12 +75,12 @@ class Problem:
     the graph when the kernels are in the cache).
     """
 
-    objective: ca.Function
-    value: ca.Function
-    limits: ca.Function
+    objective: object
+    value: object
+    limits: object
     limit_names: list[str]
     nx: int
-    start: ca.Function | None = None
+    start: object | None = None
     _graph: Callable[[], ProblemGraph] | None = field(repr=False, default=None)
     _nlp: object = field(repr=False, default=None)
 
@@ -130,7 +131,7 @@ def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_n
     :func:`problem_kernels`; the graph is then built only for kernels missing from the cache), or None for a
     graph defined outside chewbot (built, and its kernels keyed by their serialised form)."""
     kernels = problem_kernels(name, graph, () if key is None else key, has_start)
-    loaded = [compiled(k if key is not None else k.build()) for k in kernels]
+    loaded = [native(k if key is not None else k.build()) for k in kernels]
     return Problem(*loaded[:3], list(limit_names), nx, loaded[3] if has_start else None, graph)
 
 
@@ -146,39 +147,31 @@ class Solution:
 
 
 class SampleData:
-    """The per-sample data of a whole task as a CasADi matrix (one column per sample), kept in CasADi, and the
-    model's parameters p that every function takes last (none: ``p`` empty).
+    """The per-sample data of a whole task (N, k), samples first, and the model's parameters p that every function
+    takes last (none: ``p`` empty). ``D`` may be given as a CasADi matrix with one column per sample.
 
-    Copying a (k, N) array between NumPy and CasADi costs about 0.1 us per entry, as much as evaluating the
-    compiled kernels on it: the data is converted once, only the small unknowns and results cross over.
-    Selecting a subset of the columns costs as much as converting them, so every call runs on all samples
-    (a compiled kernel costs about 1 us per sample).
+    Each call runs a compiled kernel over every sample in one C loop (:func:`chewbot.casadi_tools.evaluate`, no
+    conversion through CasADi's matrices: a kernel mapped by CasADi over the samples costs 40 times as much).
     """
 
-    def __init__(self, D: ca.DM, p: np.ndarray | None = None):
-        self.D = D
-        self.n = D.size2()
-        self.p = [] if p is None else [ca.DM(np.asarray(p, dtype=float))]
+    def __init__(self, D, p: np.ndarray | None = None):
+        self.D = np.ascontiguousarray(D.full().T if isinstance(D, ca.DM) else D, dtype=float)
+        self.n = self.D.shape[0]
+        self.p = [] if p is None else [np.asarray(p, dtype=float)]
 
     def take(self, rows: np.ndarray) -> SampleData:
-        """The samples ``rows`` alone (one conversion of their columns, then calls cost as many samples)."""
-        sub = SampleData(self.D[:, [int(k) for k in rows]])
+        """The samples ``rows`` alone (then calls cost as many samples)."""
+        sub = SampleData(self.D[np.asarray(rows, dtype=int)])
         sub.p = self.p
         return sub
 
     def column(self, k: int) -> np.ndarray:
-        return np.asarray(self.D[:, k]).ravel()
+        return self.D[k]
 
-    def __call__(self, fn: ca.Function, *args) -> list[np.ndarray]:
+    def __call__(self, fn, *args) -> list[np.ndarray]:
         """``fn(D, *args)`` on every sample; args (N, k) or scalars; outputs as
         :func:`chewbot.casadi_tools.evaluate` gives them: (N, rows) or (N, rows, cols)."""
-        ins = [self.D] + [np.atleast_2d(np.asarray(a, dtype=float).T) if np.ndim(a) else a for a in args] + self.p
-        out = []
-        for j, o in enumerate(mapped(fn, self.n).call(ins)):
-            r, c = fn.size1_out(j), fn.size2_out(j)
-            o = o.full()
-            out.append(o.T if c == 1 else o.reshape(r, self.n, c).transpose(1, 0, 2))
-        return out
+        return evaluate(fn, self.D, *args, *self.p)
 
 
 def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float, bound: np.ndarray,
@@ -190,10 +183,11 @@ def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: f
 
 
 def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bound: np.ndarray, strict: bool = False,
-          lower: np.ndarray | None = None, lower_names: list[str] | None = None) -> Solution:
+          lower: np.ndarray | None = None, lower_names: list[str] | None = None, previous: np.ndarray | None = None) -> Solution:
     """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports;
     ``bound``: the limits' bounds, |c| <= bound; ``lower``: lower bounds on x (nx,), constraints of the problem like
-    the limits (None: x is free), named ``lower_names`` where a sample breaks them."""
+    the limits (None: x is free), named ``lower_names`` where a sample breaks them; ``previous``: the solution of
+    the sample before the first one (a task solved in chunks), the SQP's warm start there."""
     bound = np.asarray(bound, dtype=float)
     if lower is not None:
         lower = np.broadcast_to(np.asarray(lower, dtype=float), (problem.nx,))
@@ -216,7 +210,7 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bo
     constrained, infeasible = [], []
     status = {}
     if problem.nx and rows.size:
-        x, constrained, status = _constrained(problem, data, x, friction, rows, bound, lower)
+        x, constrained, status = _constrained(problem, data, x, friction, rows, bound, lower, previous)
         broken = broken_limits(problem, data, x, friction, bound, lower)
         rows = np.flatnonzero(broken.any(axis=1))
     for k in rows:
@@ -290,9 +284,10 @@ def _on_bounds(problem: Problem, data: SampleData, x, friction, lower, below):
     return x
 
 
-def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, lower):
+def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, lower, previous=None):
     """SQP with the limits (and the lower bounds on x), sample after sample in time order, each warm-started from
-    the previous one."""
+    the previous one (the first sample from ``previous``, the solution before it, where given; else from its own
+    optimum without the limits)."""
     x = x.copy()
     solver = problem.nlp
     status = {}
@@ -300,7 +295,7 @@ def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, l
     lbx = -np.inf if lower is None else lower
     for k in rows:
         check_interrupted()  # CasADi's solver may catch a SIGINT and return a failure status: stop here
-        x0 = x[k - 1] if k > 0 else x[k]
+        x0 = x[k - 1] if k > 0 else x[k] if previous is None else previous
         sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound, lbx=lbx)
         xk = np.asarray(sol["x"]).ravel()
         c = np.asarray(sol["g"]).ravel()

@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.indices import friction_share, performance_indices
-from chewbot.casadi_tools import KernelSpec, compiled, mapped
+from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.contact import add_normal_forces, bound_names, check_contact
 from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
@@ -219,14 +219,11 @@ def forces_kernel(model_or_mechanism: Model | str) -> KernelSpec:
 
 
 def sample_data(model: Model, kin: Kinematics, side: str | None = None):
-    """Per-sample data D (kept in CasADi), ball-centre directions and velocities (N, 3, nN) along the task."""
+    """Per-sample data D (N, k), ball-centre directions and velocities (N, 3, nN) along the task."""
     B = model.molar(side or kin.side)
-    fn = compiled(coefficients_kernel(model.mechanism, kin.orientation))
-    args = [np.asarray(a, dtype=float).T for a in (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)]
-    D, vhat, v_T = mapped(fn, kin.n).call([*args, B, model.vector()])
-    nN = n_unknowns(model)
-    return (SampleData(D, model.vector()), vhat.full().reshape(3, kin.n, nN).transpose(1, 0, 2),
-            v_T.full().reshape(3, kin.n, nN).transpose(1, 0, 2))
+    fn = native(coefficients_kernel(model.mechanism, kin.orientation))
+    D, vhat, v_T = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, B, model.vector())
+    return SampleData(D, model.vector()), vhat, v_T
 
 
 def limit_bounds(model: Model) -> np.ndarray:
@@ -326,14 +323,16 @@ def check_goal(goal: str) -> None:
 
 @register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
-                 friction: bool = True, contact: str = "bilateral", strict: bool = False, **ignored) -> Dynamics:
+                 friction: bool = True, contact: str = "bilateral", strict: bool = False, carry: dict | None = None,
+                 **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
 
     ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
     ``friction``: HKP and actuator friction on or off; ``contact``: ``"unilateral"`` adds N_L, N_R >=
     ``model.contact.preload`` to the distribution's constraints (:mod:`chewbot.dynamics.contact`); ``strict``: raise
     :class:`~chewbot.errors.InfeasibleError` at a sample with no admissible distribution instead of recording
-    it in ``info["infeasible"]``. Columns of the table: see docs/newton_euler.md.
+    it in ``info["infeasible"]``; ``carry``: the previous chunk's ``Dynamics.carry`` (its last distribution, the
+    warm start of the SQP at this chunk's first sample). Columns of the table: see docs/newton_euler.md.
     """
     check_goal(goal)
     check_contact(contact)
@@ -342,8 +341,9 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
     unilateral = contact == "unilateral" and model.has_hkp
     preload = model.contact.preload
     sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict,
-                lower=np.full(2, preload) if unilateral else None, lower_names=bound_names(preload))
-    forces = compiled(forces_kernel(model.mechanism))
+                lower=np.full(2, preload) if unilateral else None, lower_names=bound_names(preload),
+                previous=(carry or {}).get("x"))
+    forces = native(forces_kernel(model.mechanism))
     out = dict(zip(forces.name_out(), data(forces, sol.x, fl)))
     table = Table()
     table.add_block([f"tau_f{i + 1}" for i in range(6)], out["tau_f"], "N*m", "actuator friction torque (in tau)")
@@ -377,7 +377,7 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
         info["contact"] = ({"model": "unilateral", "preload_N": preload,
                             "distribution": f"goal {goal} with N_L, N_R >= contact.preload_N as constraints"} if unilateral
                            else {"model": "bilateral", "normal_forces": "N_L, N_R are unknowns of the distribution"})
-    return Dynamics("newton-euler", out["tau"], table, info)
+    return Dynamics("newton-euler", out["tau"], table, info, carry={"x": sol.x[-1].copy()} if kin.n else {})
 
 
 def benchmark_cases() -> dict:

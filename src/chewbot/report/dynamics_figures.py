@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.report.figures import _save, plt
+from chewbot.report.figures import _save, subplots
 from chewbot.results import Table
 
 JOINTS = range(1, 7)
@@ -33,7 +33,7 @@ def torques(table: Table, path: Path, method: str = "", contact: str = "") -> Pa
     """Actuator torques over time with the bite force below them (seed 000, Fig. 6a), and the HKP normal forces
     N_L, N_R where the run has them (the target), titled with the ``contact`` model."""
     hkp = "N_L" in table
-    fig, axes = plt.subplots(3 if hkp else 2, 1, figsize=(11, 8.5 if hkp else 6), sharex=True,
+    fig, axes = subplots(3 if hkp else 2, 1, figsize=(11, 8.5 if hkp else 6), sharex=True,
                              height_ratios=(2, 1, 1) if hkp else (2, 1))
     ax, axf = axes[0], axes[1]
     t = table["t"]
@@ -59,7 +59,7 @@ def _lines(ax, t, series: dict, ylabel: str) -> None:
 
 def coupling_indices(table: Table, path: Path) -> Path:
     """MCI_i of the six joints over time (seed 000, Fig. 7, one column)."""
-    fig, ax = plt.subplots(figsize=(11, 4))
+    fig, ax = subplots(figsize=(11, 4))
     _per_joint(ax, table["t"], _columns(table, "MCI"), "MCI", "-")
     ax.set_xlabel("time t [s]")
     ax.set_title("Inertia coupling index MCI_i (Eq. 60)")
@@ -69,7 +69,7 @@ def coupling_indices(table: Table, path: Path) -> Path:
 def torque_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
     """Torques or torque differences (N, 6), one panel per entry, e.g. left, differences between methods, right
     (seed 000, Fig. 6)."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, squeeze=False)
+    fig, axes = subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, squeeze=False)
     for ax, (title, tau) in zip(axes[:, 0], panels.items()):
         _per_joint(ax, t, tau, "τ", "N·m")
         ax.set_title(title)
@@ -79,7 +79,7 @@ def torque_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) 
 
 def mci_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
     """MCI_i over time, one panel per mechanism (seed 000, Fig. 7)."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, sharey=True, squeeze=False)
+    fig, axes = subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, sharey=True, squeeze=False)
     for ax, (title, values) in zip(axes[:, 0], panels.items()):
         _per_joint(ax, t, values, "MCI", "-")
         ax.set_title(title)
@@ -89,7 +89,7 @@ def mci_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> 
 
 def mci_means(means: dict[str, np.ndarray], path: Path) -> Path:
     """Mean MCI_i over the task as grouped bars, one colour per mechanism (seed 000, Fig. 8)."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = subplots(figsize=(8, 4))
     width = 0.8 / len(means)
     x = np.arange(6)
     for k, (label, values) in enumerate(means.items()):

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.report.dynamics_figures import JOINTS, _columns, _per_joint
-from chewbot.report.figures import _save, plt
+from chewbot.report.figures import _save, subplots
 from chewbot.results import Table
 
 
 def torques_and_contacts(table: Table, path: Path) -> Path:
     """Actuating torques, actuator friction torques, HKP normal and friction forces (seed 001, Fig. 10)."""
     hkp = "N_L" in table
-    fig, axes = plt.subplots(4 if hkp else 2, 1, figsize=(11, 11 if hkp else 6), sharex=True)
+    fig, axes = subplots(4 if hkp else 2, 1, figsize=(11, 11 if hkp else 6), sharex=True)
     t = table["t"]
     _per_joint(axes[0], t, _columns(table, "tau"), "τ", "N·m")
     _per_joint(axes[1], t, _columns(table, "tau_f"), "τ_f", "N·m")
@@ -40,7 +40,7 @@ def torques_and_contacts(table: Table, path: Path) -> Path:
 
 def friction_share(table: Table, path: Path) -> Path:
     """Friction share of each actuator, percent of its torque, on a log axis (seed 001, Fig. 11, Eq. 75)."""
-    fig, ax = plt.subplots(figsize=(11, 4))
+    fig, ax = subplots(figsize=(11, 4))
     share = _columns(table, "friction_share")
     share = np.where(np.isfinite(share) & (share > 0), share, np.nan)
     _per_joint(ax, table["t"], share, "share", "%")
@@ -64,7 +64,7 @@ def crank_moments(table: Table, path: Path) -> Path:
 
 
 def _per_chain(table, path, pattern, comps, label, unit, title) -> Path:
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
+    fig, axes = subplots(3, 2, figsize=(11, 8), sharex=True)
     t = table["t"]
     for i, ax in zip(JOINTS, axes.ravel()):
         for c in comps:
@@ -78,10 +78,6 @@ def _per_chain(table, path, pattern, comps, label, unit, title) -> Path:
     return _save(fig, path)
 
 
-def run_figures(table: Table, folder: Path) -> list[Path]:
-    """All Newton–Euler figures of a run, written into ``folder``."""
-    folder = Path(folder)
-    return [torques_and_contacts(table, folder / "ne_torques_contacts.png"),
-            friction_share(table, folder / "ne_friction_share.png"),
-            coupler_forces(table, folder / "ne_coupler_forces.png"),
-            crank_moments(table, folder / "ne_crank_moments.png")]
+# The Newton-Euler figures of a run: file name -> drawing function.
+FIGURES = {"ne_torques_contacts.png": torques_and_contacts, "ne_friction_share.png": friction_share,
+           "ne_coupler_forces.png": coupler_forces, "ne_crank_moments.png": crank_moments}

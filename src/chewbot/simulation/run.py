@@ -290,7 +290,7 @@ def input_files(options: SimulateOptions) -> list[Path]:
 
 def simulation_json(result: SimulateResult) -> dict:
     """run.json of a simulation: format, options, both models, task, versions, columns, checks, tracking, info."""
-    from chewbot.pipeline import columns_record, environment_record, model_record, task_record
+    from chewbot.results import columns_record, environment_record, model_record, task_record
 
     return {
         "chewbot_simulation": SIMULATION_FORMAT,

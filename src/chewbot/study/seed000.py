@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.analysis.coupling import coupling
-from chewbot.bench import TASK_CASES, bench_task, ratios
+from chewbot.bench import TASK_CASES, Comparison, bench_task, ratios
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.dynamics import inverse_dynamics
 from chewbot.kinematics.motion import solve_kinematics
@@ -50,9 +50,9 @@ def _burst_correlation(tau: np.ndarray, force: np.ndarray) -> float:
     return float(np.corrcoef(np.linalg.norm(tau, axis=1), np.linalg.norm(force, axis=1))[0, 1])
 
 
-def claims(results: dict, timings: dict[str, float], spread: dict[tuple[str, str], tuple[float, float]]) -> list[Claim]:
-    """The claims table from the solved models (``results[name] = (model, kin, tau, coupling)``), the bench
-    ratios and, per (mechanism, case), the (fastest, median) run time."""
+def claims(results: dict, timings: dict[str, Comparison]) -> list[Claim]:
+    """The claims table from the solved models (``results[name] = (model, kin, tau, coupling)``) and the bench's
+    comparisons (:func:`chewbot.bench.ratios`: interleaved runs, "within noise" where the spreads overlap)."""
     rows = []
     for variant, (tname, sname) in VARIANTS.items():
         res = {mech: results[name] for mech, name in (("target", tname), ("6rss", sname))}
@@ -62,26 +62,25 @@ def claims(results: dict, timings: dict[str, float], spread: dict[tuple[str, str
                           f"max relative difference {diff_lag:.1e} (both mechanisms, both sides)", diff_lag <= AGREEMENT))
         if variant == "default":
             h_l = {m: timings[f"{m}: hessian / liang"] for m in ("target", "6rss")}
-            # Liang faster where even the fastest Hessian run is slower than Liang's median, slower in the
-            # reverse case; otherwise the difference is inside the spread of the repeated runs
-            verdict = {m: "faster" if spread[m, "hessian"][0] > spread[m, "liang"][1] else
-                       "slower" if spread[m, "liang"][0] > spread[m, "hessian"][1] else "within the spread"
-                       for m in ("target", "6rss")}
+            # the bench's rule (chewbot.bench.compare): a difference only where the two spreads do not overlap
+            verdict = {m: "within noise" if c.within_noise else "faster" if c.ratio > 1 else "slower" for m, c in h_l.items()}
             faster = diff_liang <= AGREEMENT and all(v == "faster" for v in verdict.values())
             slower = diff_liang > AGREEMENT or any(v == "slower" for v in verdict.values())
             rows.append(Claim(2, variant, "Liang's method gives the same torques and is faster than the Hessian method "
                               "(MATLAB: 27.87/21.79 = 1.28 target, 2.64/2.44 = 1.08 6RSS)",
-                              f"max relative difference {diff_liang:.1e}; time Hessian/Liang {h_l['target']:.2f} target, "
-                              f"{h_l['6rss']:.2f} 6RSS (Liang {verdict['target']} on the target, {verdict['6rss']} on the 6RSS)",
+                              f"max relative difference {diff_liang:.1e}; time Hessian/Liang {h_l['target'].text()} target, "
+                              f"{h_l['6rss'].text()} 6RSS (Liang {verdict['target']} on the target, {verdict['6rss']} on the 6RSS)",
                               True if faster else False if slower else None,
                               "" if faster else "both are one compiled C kernel of exact AD expressions; the cost of "
                               "deriving J_dot and C is paid once when the graph is built, not per sample, so the "
                               "derivation route changes the run time by no more than the graphs' sizes differ"))
             t_s = {c: timings[f"{c}: target / 6rss"] for c in ("hessian", "liang")}
+            # "far more": at least twice, and outside the noise of the runs
+            far = all(c.ratio > 2 and not c.within_noise for c in t_s.values())
             rows.append(Claim(3, variant, "the target costs far more than the 6RSS (x9.56 Hessian, x7.93 Liang)",
-                              f"target/6RSS time x{t_s['hessian']:.2f} Hessian, x{t_s['liang']:.2f} Liang",
-                              min(t_s.values()) > 2,
-                              "" if min(t_s.values()) > 2 else "with compiled kernels the parasitic Z, gamma are a few "
+                              f"target/6RSS time {t_s['hessian'].text()} Hessian, {t_s['liang'].text()} Liang",
+                              far,
+                              "" if far else "with compiled kernels the parasitic Z, gamma are a few "
                               "more operations and the 4x6 pseudo-inverse is a batched QR: the target's graph is "
                               "smaller (4 task coordinates instead of 6), not larger"))
         t = res["target"]
@@ -151,10 +150,11 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
     step("timing the formulations")
     measured = bench_task(repeats=11, cases=tuple(c for c in TASK_CASES if c.label in ("hessian", "liang")))
     timings = ratios(measured)
-    rows = claims(results, timings, {(t.mechanism, t.case): (t.min_s, t.median_s) for t in measured})
+    rows = claims(results, timings)
     with atomic_folder(out, force, STUDY_FOLDER) as tmp:
         write_claims(rows, tmp)
-        summary = {"chewbot_study": STUDY_FORMAT, "study": "seed000", "timing_ratios": timings,
+        summary = {"chewbot_study": STUDY_FORMAT, "study": "seed000", "timing_ratios": {name: {"ratio_of_medians": c.ratio, "paired_runs_iqr": c.paired,
+                                                                   "within_noise": c.within_noise} for name, c in timings.items()},
                    "coupling_means": {name: r[3].means() for name, r in results.items()},
                    "peak_torque_N_m": {name: {s: np.abs(r[2][s, "hessian"]).max(axis=0).tolist() for s in SIDES}
                                        for name, r in results.items()}}

@@ -20,7 +20,8 @@ class Task:
     from the HKPs) or ``("X", "Y", "Z", "alpha", "beta", "gamma")`` (all six, as the 6RSS needs).
     Arrays are samples first: ``t`` (N,) s; ``q``, ``dq``, ``ddq`` (N, k) in m, rad and their rates;
     ``force`` (N, 3) the bite force F_B on the mandible in {S}, N; ``side`` the molar it acts on; ``lines``:
-    for a task read from a file, the file's line of each sample.
+    for a task read from a file, the file's line of each sample. The arrays are kept read-only: an array given
+    read-only (float64) is kept as it is, any other copied.
     """
 
     name: str
@@ -48,8 +49,10 @@ class Task:
         if np.shape(self.force) != (n, 3):
             raise TaskError(f"task {self.name!r}: force has shape {np.shape(self.force)}, expected {(n, 3)}")
         for name in ("t", "q", "dq", "ddq", "force"):
-            a = np.array(getattr(self, name), dtype=float)
-            a.setflags(write=False)
+            a = getattr(self, name)
+            if not (isinstance(a, np.ndarray) and a.dtype == np.float64 and not a.flags.writeable):
+                a = np.array(a, dtype=float)  # a copy: the caller's array stays writeable and cannot change the task
+                a.setflags(write=False)
             object.__setattr__(self, name, a)
 
     @property
@@ -58,3 +61,10 @@ class Task:
 
     def column(self, name: str) -> np.ndarray:
         return self.q[:, self.coords.index(name)]
+
+    def window(self, start: int, stop: int) -> Task:
+        """The samples ``start`` to ``stop - 1`` as a task of their own (a chunk of a long task)."""
+        part = slice(start, stop)
+        return Task(name=self.name, t=self.t[part], coords=self.coords, q=self.q[part], dq=self.dq[part],
+                    ddq=self.ddq[part], force=self.force[part], side=self.side, source=self.source, meta=self.meta,
+                    lines=None if self.lines is None else self.lines[part])

@@ -21,6 +21,7 @@ task does not take (theta1, tau1, MCI1, ...) are skipped, and the bite force's s
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import re
 from pathlib import Path
@@ -110,60 +111,83 @@ def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUM
     return names, np.array(factors), kept
 
 
-def _read_rows(path: Path) -> tuple[int, list[str], list[tuple[int, list[str]]]]:
-    """(header line, header cells, [(line, cells)]) skipping blank and comment lines."""
+# Rows parsed at a time: a block's cells are Python strings (about 60 bytes each), the file's numbers are kept as
+# floats only, so a long recording (an hour at 1 kHz) is read in the memory of its numbers.
+BLOCK_ROWS = 65_536
+
+
+def _rows(path: Path, f):
+    """(line, cells) of each row of an open CSV file, skipping blank and comment lines; a malformed file (bad
+    quoting, a NUL byte) is named with its line."""
+    reader = csv.reader(f)
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise TaskError(f"{path}: no such task file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+        for cells in reader:
+            if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#"):
+                yield reader.line_num, cells
+    except csv.Error as exc:
+        raise TaskError(f"{path}: line {reader.line_num}: {exc}") from None
+    except UnicodeDecodeError as exc:
         raise TaskError(f"{path}: cannot read the task file ({exc})") from None
-    reader = csv.reader(text.splitlines())
-    rows = [(reader.line_num, cells) for cells in reader if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#")]
-    if not rows:
-        raise TaskError(f"{path}: empty task file (expected a header such as 't,X,Y,alpha,beta' and one row per sample)")
-    (header_line, header), body = rows[0], rows[1:]
-    return header_line, header, body
 
 
-def _to_float(path: Path, names: list[str], lines: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def _to_float(path: Path, names: list[str], lines: list[int], cells: list[list[str]]) -> np.ndarray:
+    """The block's cells as numbers (rows, columns); a cell that is not a number is named by line and column."""
     try:
-        return cells.astype(float)
+        return np.array(cells, dtype=float).reshape(len(cells), len(names))
     except ValueError:
-        for j, name in enumerate(names):
-            for i, cell in enumerate(cells[:, j]):
+        for i, row in enumerate(cells):
+            for j, cell in enumerate(row):
                 try:
                     float(cell)
                 except ValueError:
-                    raise TaskError(f"{path}: line {lines[i]}, column {name!r}: {cell.strip()!r} is not a number") from None
+                    raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {cell.strip()!r} is not a number") from None
         raise
 
 
 def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str, outputs: frozenset[str] = frozenset()):
     """Parse, check and convert to SI a file of signals over time: (names, header, lines, col) with col the
     columns by name (SI, (N,) each), header the cells of the columns read. Columns in ``outputs`` that are not in
-    ``columns`` are skipped. Every defect is a TaskError naming the file and the line or column."""
-    header_line, header, body = _read_rows(path)
-    names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
-    missing = [c for c in required if c not in names]
-    if missing:
-        raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
-    for n in names:
-        kind, order = columns[n]
-        if order and n[order:] not in names:
-            raise TaskError(f"{path}: column {n!r} is a rate of {n[order:]!r}, which the file does not give")
-    if len(body) < MIN_ROWS:
-        raise TaskError(f"{path}: {len(body)} data row(s); {what} needs at least {MIN_ROWS}")
-    lines = np.array([line for line, _ in body])
-    for line, cells in body:
-        if len(cells) != len(header):
-            raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(header)} columns")
-    data = _to_float(path, names, lines, np.array([cells for _, cells in body], dtype=object).astype(str)[:, kept])
+    ``columns`` are skipped. Every defect is a TaskError naming the file and the line or column. The file is read
+    in blocks of :data:`BLOCK_ROWS` rows, keeping only the numbers."""
+    try:
+        f = open(path, encoding="utf-8-sig", newline="")
+    except FileNotFoundError:
+        raise TaskError(f"{path}: no such task file") from None
+    except OSError as exc:
+        raise TaskError(f"{path}: cannot read the task file ({exc})") from None
+    with f:
+        rows = _rows(path, f)
+        first = next(rows, None)
+        if first is None:
+            raise TaskError(f"{path}: empty task file (expected a header such as 't,X,Y,alpha,beta' and one row per sample)")
+        header_line, header = first
+        names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
+        missing = [c for c in required if c not in names]
+        if missing:
+            raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
+        for n in names:
+            kind, order = columns[n]
+            if order and n[order:] not in names:
+                raise TaskError(f"{path}: column {n!r} is a rate of {n[order:]!r}, which the file does not give")
+        blocks, lines = [], []
+        while block := list(itertools.islice(rows, BLOCK_ROWS)):
+            numbers = [line for line, _ in block]
+            for line, cells in block:
+                if len(cells) != len(header):
+                    raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(header)} columns")
+            blocks.append(_to_float(path, names, numbers, [[cells[j] for j in kept] for _, cells in block]))
+            lines.append(np.array(numbers, dtype=np.int64))
+    n = sum(b.shape[0] for b in blocks)
+    if n < MIN_ROWS:
+        raise TaskError(f"{path}: {n} data row(s); {what} needs at least {MIN_ROWS}")
+    data = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+    del blocks
+    lines = np.concatenate(lines)
     bad = np.argwhere(~np.isfinite(data))
     if bad.size:
         i, j = bad[0]
         raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {data[i, j]} is not a finite number")
-    data = data * factors
+    data *= factors
     col = {n: data[:, j] for j, n in enumerate(names)}
     t = col["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
@@ -247,5 +271,7 @@ def read_task_csv(path: str | Path, side: str | None = None, mechanism: str = "t
     meta = _meta(path, names, header, estimated)
     if run:
         meta["results_of_run"] = {"options": run.get("options", {}), "skipped_columns": len(outputs - set(names))}
+    for a in (col["t"], q, dq, ddq, force):  # the task keeps them without a copy (a long file's numbers, once)
+        a.setflags(write=False)
     return Task(name=name or path.stem, t=col["t"], coords=coords, q=q, dq=dq, ddq=ddq, force=force,
                 side=side, source=str(path), meta=meta, lines=lines)
