@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.report.dynamics_figures import _columns, _per_joint
-from chewbot.report.figures import _save, plt
+from chewbot.report.figures import _save, subplots
 from chewbot.results import Table
 
 # Display of a coordinate's error: lengths in mm, angles in deg.
@@ -22,7 +22,7 @@ def error_columns(table: Table) -> list[str]:
 def tracking_error(table: Table, path: Path, title: str = "") -> Path:
     """The tracking error of each independent coordinate over time, lengths in mm and angles in deg."""
     names = error_columns(table)
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 1), sharex=True, squeeze=False)
+    fig, axes = subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 1), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         scale, unit = _DISPLAY[table.units[name]]
         ax.plot(table["t"], table[name] * scale, lw=0.9)
@@ -36,7 +36,7 @@ def tracking_error(table: Table, path: Path, title: str = "") -> Path:
 
 def saturation(table: Table, path: Path, limit: float) -> Path:
     """The commanded torques with the actuators' limit; the applied ones are these clipped at it."""
-    fig, ax = plt.subplots(figsize=(11, 4.5))
+    fig, ax = subplots(figsize=(11, 4.5))
     t = table["t"]
     _per_joint(ax, t, _columns(table, "tau_cmd"), "τ_cmd", "N·m")
     for sign in (-1, 1):
@@ -52,7 +52,7 @@ def saturation(table: Table, path: Path, limit: float) -> Path:
 def comparison(tables: dict[str, Table], path: Path) -> Path:
     """The controllers of a comparison together: the norm of the translational (mm) and of the angular (deg) tracking
     errors, and the largest abs(tau_i) (N m), over time."""
-    fig, axes = plt.subplots(3, 1, figsize=(11, 8), sharex=True)
+    fig, axes = subplots(3, 1, figsize=(11, 8), sharex=True)
     for label, table in tables.items():
         t = table["t"]
         names = error_columns(table)

@@ -14,21 +14,41 @@ from importlib import resources
 from pathlib import Path
 from string import Template
 
-import plotly.graph_objects as go
-import plotly.io as pio
-from plotly.offline import get_plotlyjs
+import numpy as np
 
-from chewbot.report.html import _checks_section, _e, _fmt, _plots_section, _table, plot_samples, robot_figure
+from chewbot.report.html import (
+    _checks_section,
+    _e,
+    _f4,
+    _fmt,
+    _json_value,
+    _plotly_file,
+    _plots_section,
+    _table,
+    robot_figure,
+)
+from chewbot.report.view import PLOT_POINTS, RunView, ViewBuilder, every_kth
+from chewbot.results import Table, kinematics_table
 
 
 def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path) -> Path:
+    """The page of :func:`chewbot.report.html.write_report` with these sections and figures (plotly.js's JSON)."""
     template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
     page = template.substitute(
-        title=html.escape(title), subtitle=html.escape(subtitle), plotlyjs=get_plotlyjs(), body="\n".join(body),
-        figures="{" + ",".join(f"{json.dumps(k)}:{pio.to_json(f, validate=False)}" for k, f in figures.items()).replace("<", "\\u003c") + "}",
+        title=html.escape(title), subtitle=html.escape(subtitle), plotlyjs=_plotly_file("plotly.min.js"), body="\n".join(body),
+        # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
+        figures=json.dumps({"template": json.loads(_plotly_file("templates/plotly_white.json")), "figures": figures},
+                           separators=(",", ":"), default=_json_value, allow_nan=False).replace("<", "\\u003c"),
     )
     Path(path).write_text(page, encoding="utf-8")
     return Path(path)
+
+
+def _view(table: Table) -> RunView:
+    """The report's view of a whole table (decimated plots, the animation's frames)."""
+    builder = ViewBuilder(table["t"])
+    builder.update(table)
+    return builder.result()
 
 
 def controller_label(result) -> str:
@@ -42,16 +62,22 @@ def controller_label(result) -> str:
 
 def write_simulation_report(result, path: Path, files: list[str] | None = None) -> Path:
     """Write ``report.html`` for a computed simulation; ``files`` names the other files of its folder."""
-    figures: dict[str, go.Figure] = {}
-    body = [_robots_section(result, figures), _checks_section(result), _tracking_section({result.options.controller: result}),
-            _plots_section(result, figures), _run_section(result, files or [])]
+    from chewbot.outputs import to_json
+    from chewbot.simulation.run import simulation_json
+
+    figures: dict[str, dict] = {}
+    view = _view(result.table)
+    record = json.loads(to_json(simulation_json(result)))  # as run.json has it
+    body = [_robots_section(result, view, figures), _checks_section(record), _tracking_section({result.options.controller: result}),
+            _plots_section(view, figures), _run_section(result, files or [])]
     return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",
                  f"{controller_label(result)} · {result.table.n} rows · plant friction {result.options.friction}", body, figures, path)
 
 
-def _robots_section(result, figures: dict) -> str:
-    figures["robot"] = robot_figure(result.plant, result.kinematics)
-    figures["robot_reference"] = robot_figure(result.plant, result.reference_kinematics)
+def _robots_section(result, view: RunView, figures: dict) -> str:
+    side = result.options.side
+    figures["robot"] = robot_figure(result.plant, view, side)
+    figures["robot_reference"] = robot_figure(result.plant, _view(kinematics_table(result.reference_kinematics)), side)
     stopped = result.simulation.stopped
     note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({_e(stopped["reason"])}): the motion ends '
             "at the last pose inside.</span>" if stopped else "")
@@ -126,16 +152,13 @@ def write_comparison_report(results: dict, path: Path, files: list[str] | None =
                  f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path)
 
 
-def _comparison_figure(results: dict) -> go.Figure:
-    import numpy as np
-
-    fig = go.Figure()
+def _comparison_figure(results: dict) -> dict:
+    data = []
     for label, r in results.items():
-        idx = plot_samples(r.table.n)
+        idx = every_kth(r.table.n, PLOT_POINTS)
         names = [n for n in r.table.columns if n.startswith("e_") and r.table.units[n] == "m"]
         err = np.linalg.norm(np.column_stack([r.table[n] for n in names]), axis=1)[idx] * 1e3
-        fig.add_trace(go.Scatter(x=r.table["t"][idx], y=err, mode="lines", name=label,
-                                 hovertemplate=f"{label}: %{{y:.3g}} mm<extra></extra>"))
-    fig.update_layout(template="plotly_white", xaxis_title="time t [s]", yaxis_title="position error [mm]", yaxis_type="log",
-                      margin=dict(l=60, r=20, t=10, b=40))
-    return fig
+        data.append({"type": "scatter", "x": _f4(r.table["t"][idx]), "y": _f4(err), "mode": "lines", "name": label,
+                     "hovertemplate": f"{label}: %{{y:.3g}} mm<extra></extra>"})
+    return {"data": data, "layout": {"xaxis": {"title": {"text": "time t [s]"}}, "yaxis": {"title": {"text": "position error [mm]"}, "type": "log"},
+                                     "margin": {"l": 60, "r": 20, "t": 10, "b": 40}}}
