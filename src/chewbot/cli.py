@@ -28,6 +28,7 @@ from chewbot.command import (  # noqa: F401  (the exit codes, for the commands a
 )
 from chewbot.errors import ChewbotError
 from chewbot.recordings.command import import_motion
+from chewbot.sweep.command import sweep
 
 app = typer.Typer(
     name="chewbot",
@@ -452,6 +453,7 @@ def track_incisor(
 
 
 app.command("import-motion")(import_motion)
+app.command()(sweep)
 
 
 @app.command()

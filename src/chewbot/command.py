@@ -103,7 +103,8 @@ def pause_for_tests(stage: str) -> None:
     process id) and wait up to a minute, so that a test can send a signal at this point. Does nothing otherwise.
 
     Stages: ``import`` (between the entry point and the command's imports), ``dynamics`` (a run's inverse
-    dynamics is about to start), ``writing`` (a run's results.csv is written in the temporary folder).
+    dynamics is about to start), ``writing`` (a run's results.csv is written in the temporary folder), ``chunk``
+    (a sweep has written a chunk of evaluations to its folder).
     """
     spec = os.environ.get(TEST_PAUSE_VARIABLE, "")
     name, _, flag = spec.partition(":")

@@ -66,17 +66,31 @@ def write_report(result: RunResult, path: Path, files: list[str] | None = None) 
         _run_section(result, files or []),
     ]
     o = result.options
+    page = render_page(
+        title=f"chewbot report: {result.model.name}, {result.task.name} ({o.side} side)",
+        subtitle=f"{result.model.description} · {result.table.n} samples · {o.orientation} · {dynamics_label(result)}",
+        nav=RUN_NAV, body="\n".join(body), figures=figures)
+    Path(path).write_text(page, encoding="utf-8")
+    return Path(path)
+
+
+RUN_NAV = (("robot-section", "Robot"), ("checks", "Checks"), ("summary", "Summary"), ("plots", "Plots"),
+           ("run", "Run details and files"))
+
+
+def render_page(title: str, subtitle: str, nav, body: str, figures: dict[str, go.Figure]) -> str:
+    """A self-contained page in chewbot's report template: ``nav`` (anchor, label) pairs in the header, ``body``
+    (HTML sections), ``figures`` drawn into the elements of their ids (plotly.js inlined)."""
     template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
-    page = template.substitute(
-        title=html.escape(f"chewbot report: {result.model.name}, {result.task.name} ({o.side} side)"),
-        subtitle=html.escape(f"{result.model.description} · {result.table.n} samples · {o.orientation} · {dynamics_label(result)}"),
+    return template.substitute(
+        title=html.escape(title),
+        subtitle=html.escape(subtitle),
+        nav="".join(f'<a href="#{html.escape(a)}">{html.escape(label)}</a>' for a, label in nav),
         plotlyjs=get_plotlyjs(),
-        body="\n".join(body),
+        body=body,
         # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
         figures="{" + ",".join(f"{json.dumps(k)}:{pio.to_json(f, validate=False)}" for k, f in figures.items()).replace("<", "\\u003c") + "}",
     )
-    Path(path).write_text(page, encoding="utf-8")
-    return Path(path)
 
 
 # --- the robot in 3D ------------------------------------------------------------------------------------
