@@ -421,9 +421,9 @@ def test_bad_spec_names_the_file_and_key(tmp_path, change, key, words):
     raw = {**GOOD, **{k: v for k, v in change.items() if v is not None}}
     for k in [k for k, v in change.items() if v is None]:
         raw.pop(k)
-    if raw["kind"] == "grid":
+    if raw.get("kind") == "grid":
         raw.pop("parameters"), raw.pop("samples"), raw.pop("outputs")
-    if raw["kind"] == "optimize":
+    if raw.get("kind") == "optimize":
         raw.pop("samples")
     with pytest.raises(SpecError) as exc:
         parse_spec(raw, "bad.toml")

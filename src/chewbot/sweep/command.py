@@ -101,4 +101,4 @@ def _print_summary(stdout, result) -> None:
         o = result.optimum
         values = ", ".join(f"{k} = {v:.5g}" for k, v in o["parameters"].items())
         stdout.print(escape(f"optimum: {spec.minimize} = {o['outputs'][spec.minimize]:.5g} at {values} "
-                            f"({'feasible' if o['feasible'] else 'NOT feasible'}; sample {o['sample']})"), highlight=False)
+                            f"({'constraints met' if o['constraints_met'] else 'constraints NOT met'}; sample {o['sample']})"), highlight=False)

@@ -52,14 +52,15 @@ def optimize(spec: Spec, runner: ChunkRunner) -> tuple[dict, list[dict]]:
         X = np.atleast_2d(x.T)
         evaluate(X)
         c = np.array([_violation(seen[r.tobytes()], spec.require_feasible) for r in X])
-        return c if x.ndim == 2 else c[:1]
+        return c[None, :] if x.ndim == 2 else c[:1]  # (constraints, trials), SciPy's vectorized shape
 
     def energy(x: np.ndarray) -> np.ndarray:
         X = np.atleast_2d(x.T)
         evaluate(X)
         return np.array([seen[r.tobytes()][objective] for r in X])
 
-    def record(intermediate) -> None:
+    def record(intermediate_result) -> None:  # SciPy passes its OptimizeResult to a parameter of this name
+        intermediate = intermediate_result
         population = getattr(intermediate, "population", None)
         feasible = None
         if population is not None:
@@ -79,7 +80,7 @@ def optimize(spec: Spec, runner: ChunkRunner) -> tuple[dict, list[dict]]:
     best = seen[np.asarray(result.x, dtype=float).tobytes()]
     optimum = {"parameters": dict(zip(keys, map(float, result.x))),
                "outputs": {name: float(best[name]) for name in spec.computed_outputs},
-               "sample": int(best["sample"]), "feasible": bool(_violation(best, spec.require_feasible) <= 0),
+               "sample": int(best["sample"]), "constraints_met": bool(_violation(best, spec.require_feasible) <= 0),
                "generations": int(result.nit), "evaluations": state["next"], "message": str(result.message)}
     return optimum, state["history"]
 

@@ -117,7 +117,7 @@ def _search(result, figures: dict) -> str:
     figures["convergence"] = fig
     rows = [[f"<code>{_e(k)}</code>", f"{v:.6g}"] for k, v in o["parameters"].items()]
     rows += [[_e(k), f"{v:.6g} {_e(OUTPUTS[k].unit)}"] for k, v in o["outputs"].items()]
-    rows += [["sample", str(o["sample"])], ["feasible", "yes" if o["feasible"] else "no"],
+    rows += [["sample", str(o["sample"])], ["constraints met", "yes" if o["constraints_met"] else "no"],
              ["generations, evaluations", f"{o['generations']}, {o['evaluations']}"], ["SciPy", _e(o["message"])]]
     return ("<h3>Search</h3>" + f'<p class="note">Differential evolution minimising {_e(spec.minimize)}; the best feasible '
             "member of each generation (optimum.csv, convergence.csv).</p>" + '<div id="convergence" class="plot"></div>'

@@ -228,9 +228,9 @@ def _write_results(result: SweepResult, folder: SweepFolder) -> list[str]:
     if result.optimum is not None:
         o = result.optimum
         write(OPTIMUM_FILE, ["quantity", "value", "unit"],
-              [[k, v, "the parameter file's"] for k, v in o["parameters"].items()]
+              [[k, v, "the parameter file's (the key's suffix)"] for k, v in o["parameters"].items()]
               + [[k, v, OUTPUTS[k].unit] for k, v in o["outputs"].items()]
-              + [["sample", o["sample"], ""], ["feasible", o["feasible"], ""]])
+              + [["sample", o["sample"], ""], ["constraints_met", o["constraints_met"], ""]])
         write(CONVERGENCE_FILE, ["generation", "evaluations", f"best {spec.minimize} [{OUTPUTS[spec.minimize].unit}]",
                                  "convergence [1]", "feasible_in_population", *spec.keys],
               [[c["generation"], c["evaluations"], c["best"], c["convergence"], c["feasible"], *c["x"]]
