@@ -171,6 +171,28 @@ def test_contact_pull_is_a_failure_only_under_the_unilateral_contact_model():
     assert pull.result().samples is None and pull.result().passed
 
 
+def test_contact_pull_under_a_unilateral_contact_fails_below_the_preload():
+    """Unilateral with a preload of 2 N: a normal force of 1.5 N presses the condyle but less than the preload, so
+    the sample fails (a run exits 4); bilateral, only a negative N counts (a warning)."""
+    m = model("target")
+    t = np.arange(5) * 1e-3
+    cols = {"t": t, "N_L": np.array([3.0, 1.5, 2.0, 2.0 - 1e-7, 4.0]), "N_R": np.full(5, 2.5)}
+    uni = RunChecks(m.limits, True, "unilateral", preload=2.0)
+    uni.update(0, cols)
+    pull = {c.name: c for c in uni.results()}["contact-pull"]
+    # 1e-7 N below the bound is within PULL_TOLERANCE_N (1e-6 N): rounding, not a pull
+    assert pull.samples == 1 and pull.first_sample == {"index": 1, "t": 1e-3} and pull.fails_run
+    assert "preload 2 N" in pull.message and run_fails(uni.results())
+    bil = RunChecks(m.limits, True, "bilateral", preload=2.0)
+    bil.update(0, cols)
+    assert {c.name: c for c in bil.results()}["contact-pull"].samples == 0
+    # for_model takes the preload from the model's contact.preload_N
+    from chewbot.params import load_model
+
+    ctx = RunChecks.for_model(load_model("target", {"contact.preload_N": 2.0}), "unilateral").checks[0].ctx
+    assert ctx.preload == 2.0 and ctx.contact == "unilateral"
+
+
 def test_warnings_do_not_fail_a_run_and_methods_without_bearing_forces_are_not_evaluated():
     result = compute(RunOptions(method="hessian"))
     cols = {name: result.table[name] for name in result.table.columns}

@@ -153,6 +153,13 @@ class Switch(str, Enum):
     off = "off"
 
 
+class Contact(str, Enum):
+    """How the HKP planes hold the condyles (docs/contact.md)."""
+
+    bilateral = "bilateral"
+    unilateral = "unilateral"
+
+
 def _version(value: bool) -> None:
     if value:
         from chewbot import __version__
@@ -200,6 +207,7 @@ def run(
     method: str | None = typer.Option(None, "--method", callback=_check_method, show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
     goal: Goal | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: what the redundant torques minimise (torques, forces at S_i, HKP normal forces). Default: min-torque."),
     friction: Switch | None = typer.Option(None, "--friction", show_default=False, help="newton-euler: friction at the HKPs and the actuators. Default: on."),
+    contact: Contact = typer.Option(Contact.bilateral, "--contact", help="Target: how the planes hold the condyles. bilateral: a ball in a slot, the plane may push or pull (the papers' reading); unilateral: a ball pressed on a plane, N_L, N_R >= contact.preload_N, kept by the redundant actuation where the limits allow (docs/contact.md)."),
     out: Path = typer.Option(Path("runs/default"), "--out", help="Results folder to write."),
     force: bool = flag("--force", help=FORCE_HELP),
     allow_violations: bool = flag("--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
@@ -211,7 +219,8 @@ def run(
     Writes results.csv (one row per sample, SI units in the header; torques tau1..tau6 and inertia coupling
     MCI1..MCI6 included), run.json (model, options, versions, units, the validity checks), figures and report.html.
     The folder is always written in full; the exit code is then 4 if a validity check failed (torque, power or
-    bearing limits, crank range, speed, an infeasible distribution), unless --allow-violations.
+    bearing limits, crank range, speed, an infeasible distribution, and under --contact unilateral a normal force
+    below contact.preload_N), unless --allow-violations.
 
     Examples:
 
@@ -222,6 +231,8 @@ def run(
       chewbot run --task my_chewing.csv --orientation euler-parameters --out runs/mine
 
       chewbot run --method newton-euler --goal min-hkp-force --friction on --out runs/ne-g3
+
+      chewbot run --method newton-euler --contact unilateral --set contact.preload_N=2 --out runs/pressed
 
       chewbot run --task runs/left/results.csv --method liang --out runs/left-liang
 
@@ -235,16 +246,20 @@ def run(
         method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
     if method != "newton-euler" and (goal is not None or friction is not None):
         fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
-    if method == "newton-euler":  # what newton-euler uses; the other formulations take neither
+    sixrss = False
+    if method == "newton-euler" or contact is Contact.unilateral:  # options that only the target takes
         from chewbot.params import load_model
 
         with errors_reported():
             sixrss = not load_model(model).has_hkp
+    if sixrss and contact is Contact.unilateral:
+        fail(ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts"), EXIT_BAD_INPUT)
+    if method == "newton-euler":  # what newton-euler uses; the other formulations take neither
         if sixrss and goal is not None:
             fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
         goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
     options = RunOptions(model=model, task=task, side=side and side.value, orientation=orientation.value, method=method,
-                         goal=goal and goal.value, friction=friction and friction.value, overrides=overrides)
+                         goal=goal and goal.value, friction=friction and friction.value, contact=contact.value, overrides=overrides)
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", total=RUN_STEPS) as step:
@@ -284,7 +299,7 @@ def progress(quiet: bool, label: str, total: int | None = None):
 
 def _print_run_summary(result, out: Path) -> None:
     """The lines a person wants after a run: where the report is and the peak torque (the checks follow)."""
-    from chewbot.report.summary import column_stats, numbered_columns
+    from chewbot.report.summary import column_stats, contact_note, normal_force_stats, numbered_columns
 
     stdout.print(f"wrote [bold]{escape(str(out))}[/] ({result.table.n} samples, {len(result.table.columns)} columns); "
                  f"open {escape(str(out / 'report.html'))}", highlight=False)
@@ -292,6 +307,13 @@ def _print_run_summary(result, out: Path) -> None:
     if taus:
         top = max(column_stats(result.table, taus), key=lambda s: abs(s.peak))
         stdout.print(f"largest torque: {top.name} = {top.peak:.4g} N·m at t = {top.t_peak:.3f} s", highlight=False)
+    contact = result.options.contact
+    preload = result.model.contact.preload if contact == "unilateral" else 0.0
+    forces = normal_force_stats(result.table, preload)
+    if forces:
+        stdout.print(f"contact model: {contact_note(contact, preload, result.info.get('dynamics', {}))}", highlight=False)
+        stdout.print("normal forces: " + ", ".join(f"{f.name} from {f.low:.4g} to {f.high:.4g} N ({f.below:.3g} % of the samples "
+                                                    f"below {preload:g} N)" for f in forces), highlight=False)
     passed = sum(c.passed and c.samples is not None for c in result.checks)
     stdout.print(f"validity checks: {passed} passed, {sum(not c.passed for c in result.checks)} failed, "
                  f"{sum(c.samples is None for c in result.checks)} not evaluated (run.json, \"checks\")", highlight=False)

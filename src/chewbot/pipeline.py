@@ -112,7 +112,7 @@ def _dynamics_stage(result: RunResult, step) -> None:
     step(f"inverse dynamics ({o.method})")
     pause_for_tests("dynamics")
     t0 = time.perf_counter()
-    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {})}
+    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {}), "contact": o.contact}
     dyn = inverse_dynamics(result.model, result.kinematics, o.method, **used)
     result.info["timings"][f"dynamics_{o.method}_s"] = time.perf_counter() - t0
     result.dynamics = dyn
@@ -197,7 +197,7 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None) -> P
         ]
         if result.dynamics is not None:
             result.figures += [
-                dynamics_figures.torques(result.table, tmp / "torques.png", result.options.method),
+                dynamics_figures.torques(result.table, tmp / "torques.png", result.options.method, result.options.contact),
                 dynamics_figures.coupling_indices(result.table, tmp / "coupling.png"),
             ]
             if result.options.method == "newton-euler":

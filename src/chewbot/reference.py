@@ -1,4 +1,4 @@
-"""A plain reference: Newton–Euler torques in NumPy and the friction-aware distribution by SciPy's SLSQP.
+"""A plain reference: Newton–Euler torques in NumPy and the friction-aware distributions by SciPy's SLSQP.
 
 Written the straightforward way, independently of the CasADi graphs: every body's Newton–Euler equations with
 vectors and matrices (batched over the samples for the frictionless torques), and the optimal distribution
@@ -118,13 +118,16 @@ def _sample_torques(model: Model, e: _Sample, k: int, N: np.ndarray, dtheta: np.
     return e.inertial[k] + np.sum(e.lever[k] * F_S, axis=1) + tau_f, F_G
 
 
-def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None = None, side: str | None = None,
-                     eps_theta_dot: float = 1e-3, eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """Goal G1 with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other, each
-    warm-started from the previous one, under the actuator limits (torque, power, axial and radial load).
+def slsqp_distribution(model: Model, kin: Kinematics, goal: str = "min-torque", samples: np.ndarray | None = None,
+                       side: str | None = None, lower: float | None = None, eps_theta_dot: float = 1e-3,
+                       eps_v: float = 1e-5, delta: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """An optimal distribution with friction (seed 001, Sect. 4.5) by SciPy's SLSQP, one sample after the other,
+    each warm-started from the sample before where that was solved, under the actuator limits (torque, power, axial and radial load).
 
-    ``samples``: indices to solve (default all). The friction regularisations are those of the Newton–Euler
-    model. Returns (tau (n, 6), N (n, 2)) for the samples solved.
+    ``goal``: ``min-torque`` (G1, sum tau_i^2), ``min-coupler-force`` (G2, sum abs(F_S,i)^2), ``min-hkp-force``
+    (G3, N_L^2 + N_R^2); ``lower``: N_L, N_R >= lower (a unilateral contact) or None; ``samples``: indices to solve
+    (default all). The friction regularisations are those of the Newton–Euler model. Returns (tau (n, 6), N (n, 2))
+    for the samples solved.
     """
     if not model.has_hkp:
         raise ValueError("the 6RSS has nothing to distribute")
@@ -132,13 +135,22 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
     idx = np.arange(kin.n) if samples is None else np.asarray(samples)
     lim = model.limits
     z = np.array([model.R_C0[i][:, 2] for i in range(6)])
+    weight = np.outer(model.crank_mass * model.g, [0.0, 0.0, 1.0])  # F_G = F_S + weight
     taus, Ns = [], []
-    x0 = np.zeros(2)
+    start = np.zeros(2) if lower is None else np.full(2, lower)
+    x0, previous = start, None
     for k in idx:
+        x0 = x0 if previous == k - 1 else start  # warm start from the sample before only
         dth = kin.dtheta[k]
 
         def torques(N, k=k, dth=dth):
             return _sample_torques(model, e, k, N, dth, eps_theta_dot, eps_v, delta)
+
+        def cost(N, torques=torques):
+            if goal == "min-hkp-force":
+                return float(N @ N)
+            tau, F_G = torques(N)
+            return float(np.sum(tau**2) if goal == "min-torque" else np.sum((F_G - weight) ** 2))
 
         def limits(N, torques=torques, dth=dth):
             tau, F_G = torques(N)
@@ -147,11 +159,17 @@ def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None =
             return np.concatenate([lim.torque - np.abs(tau), lim.power - np.abs(tau * dth),
                                    lim.axial_load - np.abs(axial), lim.radial_load - radial])
 
-        res = minimize(lambda N, torques=torques: float(np.sum(torques(N)[0] ** 2)), x0, method="SLSQP",
+        res = minimize(cost, x0, method="SLSQP", bounds=None if lower is None else [(lower, None)] * 2,
                        constraints=[{"type": "ineq", "fun": limits}], options={"ftol": 1e-16, "maxiter": 200})
         if not res.success:
             raise ChewbotError(f"SciPy SLSQP failed at sample {k} (t = {kin.t[k]:.6g} s): {res.message}")
-        x0 = res.x
+        x0, previous = res.x, k
         taus.append(torques(res.x)[0])
         Ns.append(res.x)
     return np.array(taus), np.array(Ns)
+
+
+def slsqp_min_torque(model: Model, kin: Kinematics, samples: np.ndarray | None = None, side: str | None = None,
+                     **smoothing) -> tuple[np.ndarray, np.ndarray]:
+    """Goal G1 by :func:`slsqp_distribution` (the bilateral contact): the baseline of ``chewbot bench``."""
+    return slsqp_distribution(model, kin, "min-torque", samples, side, **smoothing)

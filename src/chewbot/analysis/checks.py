@@ -9,8 +9,8 @@ Every run checks every sample and records the verdicts in run.json under ``"chec
 | ``bearing-load`` | abs(axial) or radial force at a crank bearing G_i over ``limits.axial_load_N``, ``limits.radial_load_N`` | FG1_axial .. FG6_radial (newton-euler) | failure |
 | ``crank-range`` | theta_i outside ``limits.theta_range_deg`` (no key: not checked) | theta1..6 | failure |
 | ``speed-limit`` | abs(theta_dot_i) > ``limits.speed_rad_per_s`` (no key: not checked) | dtheta1..6 | failure |
-| ``distribution-infeasible`` | the distribution found no torques within the limits | the formulation's ``info["infeasible"]`` | failure |
-| ``contact-pull`` | N_L or N_R < 0: the plane pulls the condyle | N_L, N_R | failure only under the unilateral contact model |
+| ``distribution-infeasible`` | the distribution found no torques within the limits (and, unilateral, N >= the preload) | the formulation's ``info["infeasible"]`` | failure |
+| ``contact-pull`` | N_L or N_R < 0: the plane pulls the condyle (unilateral: below ``contact.preload_N``) | N_L, N_R | failure only under the unilateral contact model |
 | ``near-singular`` | a transmission angle below :data:`NEAR_SINGULAR_DEG` or the chains' Jacobian's kappa below :data:`KAPPA_MIN` | mu1..6, kappa_J | warning |
 | ``bite-force`` | abs(F_B) > :data:`BITE_FORCE_BOUND_N` | Fx, Fy, Fz | warning |
 
@@ -30,10 +30,9 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from chewbot.dynamics.contact import CONTACT_MODELS, check_contact
 from chewbot.dynamics.distribution import LIMIT_RTOL
 from chewbot.model import Limits, Model
-
-CONTACT_MODELS = ("bilateral", "unilateral")
 
 # A chain's transmission angle below this is near-singular (docs/conventions.md, "Transmission angle"): its
 # crank rate is then more than 1/sin(10 deg) = 5.8 times the speed of M_i along the coupler divided by the
@@ -76,15 +75,16 @@ class CheckResult:
 
 @dataclass(frozen=True)
 class CheckContext:
-    """What the checks know beyond the columns: the model's limits, the mechanism and the contact model."""
+    """What the checks know beyond the columns: the model's limits, the mechanism, the contact model and the
+    smallest normal force it admits (``contact.preload_N``, unilateral only)."""
 
     limits: Limits
     has_hkp: bool
     contact: str = "bilateral"
+    preload: float = 0.0
 
     def __post_init__(self):
-        if self.contact not in CONTACT_MODELS:
-            raise ValueError(f"contact model must be one of {', '.join(CONTACT_MODELS)}, not {self.contact!r}")
+        check_contact(self.contact)
 
 
 @dataclass(frozen=True)
@@ -279,7 +279,8 @@ class DistributionInfeasible(Check):
 
     def measure(self, columns, info):
         if not self.ctx.has_hkp or "infeasible" not in info:
-            return _missing(self, "no redundant torques were distributed (newton-euler on the target distributes them)"
+            return _missing(self, "no redundant torques were distributed (newton-euler on the target distributes them, "
+                            "the other formulations under --contact unilateral)"
                             if self.ctx.has_hkp else "the 6RSS has no redundant actuation to distribute")
         n = len(columns["t"])
         bad = np.zeros(n, dtype=bool)
@@ -290,10 +291,14 @@ class DistributionInfeasible(Check):
                 self.first_limits = f"{', '.join(entry.get('limits', []))}; solver: {entry.get('solver', '?')}"
         return Measure(bad.astype(float), bad, np.full(n, np.nan), lambda k: "")
 
+    def _constraints(self) -> str:
+        bounds = f" and N_L, N_R >= {self.ctx.preload:g} N (unilateral contact)" if self.ctx.contact == "unilateral" else ""
+        return f" (within the actuator limits where the formulation has them{bounds})"
+
     def message(self):
         if not self.samples:
-            return "the distribution found torques within every limit at every sample"
-        return (f"{self.samples} sample(s) without torques within the limits, the first at t = {self.first[1]:.4g} s "
+            return f"the distribution found admissible torques at every sample{self._constraints()}"
+        return (f"{self.samples} sample(s) without admissible torques{self._constraints()}, the first at t = {self.first[1]:.4g} s "
                 f"(sample {self.first[0]}: {self.first_limits})")
 
 
@@ -303,8 +308,12 @@ class ContactPull(Check):
     def severity(self):
         return "failure" if self.ctx.contact == "unilateral" else "warning"
 
+    def lowest(self) -> float:
+        """The smallest admissible normal force: the preload under the unilateral contact model, else 0."""
+        return self.ctx.preload if self.ctx.contact == "unilateral" else 0.0
+
     def bound(self):
-        return ("0 (the plane can only push: unilateral contact)" if self.ctx.contact == "unilateral"
+        return (f"{self.lowest():g} N (contact.preload_N: the plane can only push, unilateral contact)" if self.ctx.contact == "unilateral"
                 else "0 (reported only: under the bilateral contact model the plane may hold the condyle)")
 
     def measure(self, columns, info):
@@ -315,13 +324,15 @@ class ContactPull(Check):
             return _missing(self, "the run has no normal forces N_L, N_R")
         j = np.argmin(N, axis=1)
         low = N[np.arange(N.shape[0]), j]
-        return Measure(-low, low < -PULL_TOLERANCE_N, low, lambda k: "N_" + "LR"[j[k]])
+        return Measure(-low, low < self.lowest() - PULL_TOLERANCE_N, low, lambda k: "N_" + "LR"[j[k]])
 
     def message(self):
         _, value, where, _, t = self.worst
+        below = "N < 0" if not self.lowest() else f"N < the preload {self.lowest():g} N"
         if not self.samples:
-            return f"both planes push their condyles at every sample: smallest {where} = {value:.4g} N at t = {t:.4g} s"
-        return (f"{self.samples} sample(s) where a plane pulls its condyle (N < 0), the first at t = {self.first[1]:.4g} s "
+            return (f"both planes push their condyles at every sample{f' with at least {self.lowest():g} N' if self.lowest() else ''}: "
+                    f"smallest {where} = {value:.4g} N at t = {t:.4g} s")
+        return (f"{self.samples} sample(s) where a plane pulls its condyle ({below}), the first at t = {self.first[1]:.4g} s "
                 f"(sample {self.first[0]}); most negative {where} = {value:.4g} N at t = {t:.4g} s"
                 + ("" if self.ctx.contact == "unilateral" else "; bilateral contact model: reported, not a failure"))
 
@@ -391,13 +402,13 @@ CHECKS = (TorqueLimit, PowerLimit, BearingLoad, CrankRange, SpeedLimit, Distribu
 class RunChecks:
     """All the checks of a run, updated chunk by chunk: ``update(offset, columns, info)`` then ``results()``."""
 
-    def __init__(self, limits: Limits, has_hkp: bool, contact: str = "bilateral"):
-        ctx = CheckContext(limits, has_hkp, contact)
+    def __init__(self, limits: Limits, has_hkp: bool, contact: str = "bilateral", preload: float = 0.0):
+        ctx = CheckContext(limits, has_hkp, contact, preload)
         self.checks = [cls(ctx) for cls in CHECKS]
 
     @classmethod
     def for_model(cls, model: Model, contact: str = "bilateral") -> RunChecks:
-        return cls(model.limits, model.has_hkp, contact)
+        return cls(model.limits, model.has_hkp, contact, model.contact.preload)
 
     def update(self, offset: int, columns: Mapping, info: Mapping | None = None) -> None:
         """Add the chunk starting at sample ``offset``: ``columns`` by name (with ``t``), ``info`` the formulation's."""

@@ -34,11 +34,14 @@ controller.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
 from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import require_euler_angles
 from chewbot.kinematics.functions import lift_sx
 from chewbot.kinematics.motion import Kinematics
@@ -170,7 +173,26 @@ DYNAMICS_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "
 TORQUE_OUTPUTS = ("tau", "theta", "dtheta")
 
 
-def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
+@dataclass(frozen=True)
+class LiftedCore:
+    """The 6RSS core evaluated along q_EE (Euler angles) as CasADi expressions: the kernel's ``inputs``
+    (q, q_dot, q_ddot, B, F_B and p where the graph takes it), the model's numbers ``params``, x = X_EE(q_EE)
+    with M_J = dx/dq_EE and its rate, and the core's outputs by name (:data:`CORE_OUTPUTS`)."""
+
+    inputs: list
+    params: SymbolicModel
+    q: ca.SX
+    dq: ca.SX
+    ddq: ca.SX
+    x: ca.SX
+    M_J: ca.SX
+    dM_J: ca.SX
+    core: dict
+
+
+def lifted_core(model_or_mechanism: Model | str) -> LiftedCore:
+    """The 6RSS core along the mechanism's own coordinates q_EE: x = phi(q_EE) (the parasitic Z and gamma of the
+    target), x_dot = M_J q_EE_dot, x_ddot = M_J q_EE_ddot + M_J_dot q_EE_dot (module docstring)."""
     model = symbols(model_or_mechanism)
     extra, _ = parameter_input(model)
     n = model.dof
@@ -182,6 +204,12 @@ def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
     dM_J = ca.jtimes(M_J, q, dq)
     ddx = ca.mtimes(M_J, ddq) + ca.mtimes(dM_J, dq)
     core = dict(zip(CORE_OUTPUTS, core_function(model_or_mechanism)(x, dx, ddx, B, F, *extra)))
+    return LiftedCore([q, dq, ddq, B, F, *extra], model, q, dq, ddq, x, M_J, dM_J, core)
+
+
+def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
+    lc = lifted_core(model_or_mechanism)
+    model, q, dq, ddq, M_J, dM_J, core = lc.params, lc.q, lc.dq, lc.ddq, lc.M_J, lc.dM_J, lc.core
     J1 = ca.mtimes(core["J6"], M_J)
     terms = {
         "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
@@ -194,7 +222,7 @@ def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
     else:  # without forming them
         rhs = ca.mtimes(M_J.T, core["f6"])
     terms["tau"] = ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), rhs)) if model.has_hkp else ca.solve(J1.T, rhs)
-    return [q, dq, ddq, B, F, *extra], terms
+    return lc.inputs, terms
 
 
 def _kernel(model_or_mechanism: Model | str, prefix: str, outputs: tuple[str, ...]) -> KernelSpec:
@@ -236,10 +264,12 @@ def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices:
     return dict(zip(outputs, out))
 
 
-@register("6rss-core", lambda mechanism, orientation, **options: [torque_kernel(mechanism)])
-def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
-    """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring).
-    ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""
+@register("6rss-core", lambda mechanism, orientation, **options: [torque_kernel(mechanism), *contact_kernels(mechanism)])
+def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
+    """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring), the
+    target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`. ``side``
+    overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are ignored."""
     require_euler_angles(kin, "6rss-core")
     tau = core_terms(model, kin, side, matrices=False)["tau"]
-    return Dynamics("6rss-core", tau, info={"equations": "6RSS core in X_EE, HKPs projected out (Eq. 53)", "friction": False})
+    return frictionless_dynamics("6rss-core", model, kin, tau, side=side, contact=contact,
+                                 info={"equations": "6RSS core in X_EE, HKPs projected out (Eq. 53)", "friction": False})

@@ -2,16 +2,18 @@
 
 A problem is given by two CasADi expressions of (D, x, friction, p): D the sample's data, x the free unknowns,
 p the model's parameters: ``residual`` r, whose squared norm is the goal (minimise |r|^2), and ``limits`` c with
-|c| <= bound component-wise (the actuators' physical limits, given per model). Each sample is solved in two
-stages:
+|c| <= bound component-wise (the actuators' physical limits, given per model), and optionally lower bounds on x
+(the unilateral contact's N >= preload, :mod:`chewbot.dynamics.contact`). Each sample is solved in two stages:
 
 1. Unconstrained, all samples at once: x starts at the problem's ``start`` (for the Newton–Euler goals the
    best of the piecewise least-squares minimisers, :func:`chewbot.dynamics.newton_euler.start_sx`), or at
    the friction-free optimum (r is affine in x then: one Newton step from 0 gives it), then damped Newton on the
    exact Hessian (Gauss-Newton where the exact one is not positive definite) with an Armijo backtracking
    line search, vectorised over the samples that have not converged.
-2. Where that optimum breaks a limit: SQP (CasADi ``sqpmethod``, exact Hessian) with the limits as
-   inequality constraints, sample after sample in time order, each warm-started from the solution of the
+2. Where that optimum breaks a lower bound on x: the best of the minimisers over the faces of the bounds, by
+   the same vectorised Newton with the face's components held at their bounds.
+3. Where a limit or a bound is still broken: SQP (CasADi ``sqpmethod``, exact Hessian) with the limits as
+   inequality constraints and the bounds on x, sample after sample in time order, each warm-started from the solution of the
    previous sample. A sample where no admissible x is found is recorded (which sample, which limit, and the
    SQP's return status, which tells a proven infeasible problem from a failure to converge), never clipped;
    ``strict`` raises :class:`~chewbot.errors.InfeasibleError` instead.
@@ -19,6 +21,7 @@ stages:
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -38,6 +41,9 @@ ARMIJO = 1e-4
 MEASURABLE = 1e-10
 # A limit counts as broken above bound (1 + LIMIT_RTOL): the SQP's own feasibility tolerance is 1e-8 or so.
 LIMIT_RTOL = 1e-6
+# A lower bound l on x counts as broken below l - LOWER_TOL (1 + |l|): the SQP's active-set QP puts x on an
+# active bound up to rounding; the check is a thousand times finer than the limits' (N: 1e-9 N at a zero bound).
+LOWER_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -154,6 +160,12 @@ class SampleData:
         self.n = D.size2()
         self.p = [] if p is None else [ca.DM(np.asarray(p, dtype=float))]
 
+    def take(self, rows: np.ndarray) -> SampleData:
+        """The samples ``rows`` alone (one conversion of their columns, then calls cost as many samples)."""
+        sub = SampleData(self.D[:, [int(k) for k in rows]])
+        sub.p = self.p
+        return sub
+
     def column(self, k: int) -> np.ndarray:
         return np.asarray(self.D[:, k]).ravel()
 
@@ -169,16 +181,23 @@ class SampleData:
         return out
 
 
-def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float, bound: np.ndarray) -> np.ndarray:
-    """(N, n_limits) boolean: which limits each sample breaks."""
+def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: float, bound: np.ndarray,
+                  lower: np.ndarray | None = None) -> np.ndarray:
+    """(N, n_limits [+ nx]) boolean: which limits each sample breaks, then (with ``lower``) which lower bounds on x."""
     (c,) = data(problem.limits, x, friction)
-    return np.abs(c) > bound * (1 + LIMIT_RTOL)
+    broken = np.abs(c) > bound * (1 + LIMIT_RTOL)
+    return broken if lower is None else np.hstack([broken, x < lower - LOWER_TOL * (1 + np.abs(lower))])
 
 
-def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bound: np.ndarray, strict: bool = False) -> Solution:
+def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bound: np.ndarray, strict: bool = False,
+          lower: np.ndarray | None = None, lower_names: list[str] | None = None) -> Solution:
     """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports;
-    ``bound``: the limits' bounds, |c| <= bound."""
+    ``bound``: the limits' bounds, |c| <= bound; ``lower``: lower bounds on x (nx,), constraints of the problem like
+    the limits (None: x is free), named ``lower_names`` where a sample breaks them."""
     bound = np.asarray(bound, dtype=float)
+    if lower is not None:
+        lower = np.broadcast_to(np.asarray(lower, dtype=float), (problem.nx,))
+    names = list(problem.limit_names) + ([] if lower is None else list(lower_names or [f"x{j + 1} >= {v:g}" for j, v in enumerate(lower)]))
     x = np.zeros((data.n, problem.nx))
     iterations, unconverged = 0, []
     if problem.nx:
@@ -189,17 +208,20 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bo
             x = -np.linalg.solve(H, g[..., None])[..., 0]  # friction-free optimum: r is affine in x there
         if friction:
             x, iterations, unconverged = _newton(problem, data, x, friction)
-    broken = broken_limits(problem, data, x, friction, bound)
+    broken = broken_limits(problem, data, x, friction, bound, lower)
+    if lower is not None and problem.nx:
+        x = _on_bounds(problem, data, x, friction, lower, broken[:, -problem.nx:].any(axis=1))
+        broken = broken_limits(problem, data, x, friction, bound, lower)
     rows = np.flatnonzero(broken.any(axis=1))
     constrained, infeasible = [], []
     status = {}
     if problem.nx and rows.size:
-        x, constrained, status = _constrained(problem, data, x, friction, rows, bound)
-        broken = broken_limits(problem, data, x, friction, bound)
+        x, constrained, status = _constrained(problem, data, x, friction, rows, bound, lower)
+        broken = broken_limits(problem, data, x, friction, bound, lower)
         rows = np.flatnonzero(broken.any(axis=1))
     for k in rows:
-        names = [problem.limit_names[j] for j in np.flatnonzero(broken[k])]
-        infeasible.append({"sample": int(k), "t": float(t[k]), "limits": names,
+        broke = [names[j] for j in np.flatnonzero(broken[k])]
+        infeasible.append({"sample": int(k), "t": float(t[k]), "limits": broke,
                            "solver": status.get(int(k), "none: no redundancy to distribute" if not problem.nx else "unknown")})
     if infeasible and strict:
         first = infeasible[0]
@@ -209,14 +231,18 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bo
     return Solution(x, iterations, unconverged, constrained, infeasible)
 
 
-def _newton(problem: Problem, data: SampleData, x, friction):
-    """Damped Newton on all samples at once; returns x, the iteration count, the samples left unconverged."""
+def _newton(problem: Problem, data: SampleData, x, friction, fixed: np.ndarray | None = None):
+    """Damped Newton on all samples at once; returns x, the iteration count, the samples left unconverged.
+    ``fixed``: (nx,) boolean, components of x held where they are (Newton on the others)."""
     active = np.ones(data.n, dtype=bool)
     eye = np.eye(problem.nx)
     for it in range(1, MAX_NEWTON + 1):
         J, g, H, H_gn = data(problem.objective, x, friction)
         convex = np.linalg.eigvalsh(H).min(axis=1) > 0
         H = np.where(convex[:, None, None], H, H_gn + 1e-12 * eye)
+        if fixed is not None:  # a zero step on the fixed components: their gradient out, their rows of H the identity's
+            g = np.where(fixed, 0.0, g)
+            H = np.where(fixed[:, None] | fixed[None, :], eye, H)
         step = np.where(active[:, None], -np.linalg.solve(H, g[..., None])[..., 0], 0.0)
         slope = np.einsum("ij,ij->i", g, step)
         alpha = np.ones(data.n)
@@ -238,19 +264,47 @@ def _newton(problem: Problem, data: SampleData, x, friction):
     return x, MAX_NEWTON, np.flatnonzero(active).tolist()
 
 
-def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound):
-    """SQP with the limits, sample after sample in time order, each warm-started from the previous one."""
+def _on_bounds(problem: Problem, data: SampleData, x, friction, lower, below):
+    """Where x is below its lower bounds (``below``, (N,)): the best minimiser over the faces of the bounds, all
+    those samples at once. The bounded optimum minimises the goal on the face of its active bounds, and it is the
+    feasible face-minimiser of least goal (exact for a convex goal; with the smoothed friction terms, Newton's local
+    optimum on each face). Each face is one Newton run with the face's components held at their bounds: 2^nx - 1
+    faces, three for the two normal forces. A sample that they leave infeasible goes on to the SQP."""
+    rows = np.flatnonzero(below)
+    if not rows.size:
+        return x
+    sub, x_rows = data.take(rows), x[rows]
+    best, best_J = x_rows.copy(), np.full(rows.size, np.inf)
+    for face in itertools.product((False, True), repeat=problem.nx):
+        fixed = np.array(face)
+        if not fixed.any():
+            continue
+        xf, _, unconverged = _newton(problem, sub, np.where(fixed, lower, x_rows), friction, fixed)
+        (J,) = sub(problem.value, xf, friction)
+        ok = np.all(xf >= lower - LOWER_TOL * (1 + np.abs(lower)), axis=1)
+        ok[unconverged] = False
+        better = ok & (J[:, 0] < best_J)
+        best[better], best_J[better] = xf[better], J[better, 0]
+    x = x.copy()
+    x[rows] = best
+    return x
+
+
+def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, lower):
+    """SQP with the limits (and the lower bounds on x), sample after sample in time order, each warm-started from
+    the previous one."""
     x = x.copy()
     solver = problem.nlp
     status = {}
     params = [np.asarray(p).ravel() for p in data.p]
+    lbx = -np.inf if lower is None else lower
     for k in rows:
         check_interrupted()  # CasADi's solver may catch a SIGINT and return a failure status: stop here
         x0 = x[k - 1] if k > 0 else x[k]
-        sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound)
+        sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound, lbx=lbx)
         xk = np.asarray(sol["x"]).ravel()
         c = np.asarray(sol["g"]).ravel()
-        if np.all(np.abs(c) <= bound * (1 + LIMIT_RTOL)):
+        if np.all(np.abs(c) <= bound * (1 + LIMIT_RTOL)) and (lower is None or np.all(xk >= lower - LOWER_TOL * (1 + np.abs(lower)))):
             x[k] = xk
         else:  # what the solver said: a proven infeasible problem and a failure to converge read differently
             status[int(k)] = str(solver.stats().get("return_status", "unknown"))

@@ -19,6 +19,7 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
@@ -36,11 +37,14 @@ def hessian_rates(e: Energy) -> Rates:
     return Rates(J_theta_dot, J_qEE_dot, H12 - 0.5 * H12.T)
 
 
-@register("hessian", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "hessian", hessian_rates)])
-def hessian(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
+@register("hessian", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "hessian", hessian_rates),
+                                                                   *contact_kernels(mechanism)])
+def hessian(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
     """Minimum-norm actuator torques by the Hessian method (Eq. 54); the target's redundancy resolved by the
-    pseudo-inverse, the 6RSS's torques unique. ``side`` overrides the bite side of ``kin``; ``goal`` and
-    ``friction`` (Newton-Euler options) are accepted and ignored: the model is frictionless."""
+    pseudo-inverse, the 6RSS's torques unique; the target's normal forces N_L, N_R, and under the ``unilateral``
+    ``contact`` model the unilateral fallback (:mod:`chewbot.dynamics.contact`). ``side`` overrides the bite side
+    of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored: the model is frictionless."""
     require_euler_angles(kin, "hessian")
     tau = reduced_torques(model, kin, "hessian", hessian_rates, side)
-    return Dynamics("hessian", tau, info={"equations": "seed 000 Eqs. 20-23, 37-54", "friction": False})
+    return frictionless_dynamics("hessian", model, kin, tau, side=side, contact=contact,
+                                 info={"equations": "seed 000 Eqs. 20-23, 37-54", "friction": False})

@@ -25,11 +25,11 @@ import numpy as np
 
 from chewbot.casadi_tools import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
-from chewbot.results import Table
 
 LAGRANGE_OUTPUTS = ("D", "J_theta", "J_qEE", "Q_B")
 
@@ -83,13 +83,18 @@ def solve_multipliers(terms: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndar
     return z[:, :6], z[:, 6:12]
 
 
-@register("lagrange", lambda mechanism, orientation, **options: [lagrange_kernel(mechanism)])
-def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
+@register("lagrange", lambda mechanism, orientation, **options: [lagrange_kernel(mechanism), *contact_kernels(mechanism)])
+def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
     """Minimum-norm torques and the closure multipliers lambda1..6 (N/m: h_i is in m^2) by Lagrange's equations of
-    the first kind. ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options)
-    are accepted and ignored."""
+    the first kind, the target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`.
+    ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and
+    ignored."""
     require_euler_angles(kin, "lagrange")
-    tau, lam = solve_multipliers(lagrange_terms(model, kin, side))
-    table = Table()
-    table.add_block([f"lambda{i + 1}" for i in range(6)], lam, "N/m", "Lagrange multipliers of the closure equations h_i (m^2)")
-    return Dynamics("lagrange", tau, table, info={"equations": "seed 000 Eqs. 37-42, 55-56 (derived signs)", "friction": False})
+    terms = lagrange_terms(model, kin, side)
+    tau, lam = solve_multipliers(terms)
+    dyn = frictionless_dynamics("lagrange", model, kin, tau, side=side, contact=contact,
+                                info={"equations": "seed 000 Eqs. 37-42, 55-56 (derived signs)", "friction": False})
+    if dyn.tau is not tau:  # the unilateral fallback moved tau in the null space: lambda follows from Eq. (56)
+        lam = (terms["D"][:, :6] - dyn.tau) / terms["J_theta"]
+    dyn.table.add_block([f"lambda{i + 1}" for i in range(6)], lam, "N/m", "Lagrange multipliers of the closure equations h_i (m^2)")
+    return dyn

@@ -16,6 +16,7 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
@@ -42,10 +43,13 @@ def liang_rates(e: Energy) -> Rates:
     return Rates(ca.diag(matrix_rate(s.J_theta(), e.q, e.dq)), matrix_rate(s.J_qEE(), e.q, e.dq), C)
 
 
-@register("liang", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "liang", liang_rates)])
-def liang(model: Model, kin: Kinematics, *, side: str | None = None, **ignored) -> Dynamics:
-    """Minimum-norm actuator torques (Eq. 54) with J_dot and C by Liang's method (Eq. 61). ``side`` overrides
-    the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored."""
+@register("liang", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "liang", liang_rates),
+                                                                   *contact_kernels(mechanism)])
+def liang(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
+    """Minimum-norm actuator torques (Eq. 54) with J_dot and C by Liang's method (Eq. 61), the target's normal
+    forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`. ``side`` overrides the bite side
+    of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored."""
     require_euler_angles(kin, "liang")
     tau = reduced_torques(model, kin, "liang", liang_rates, side)
-    return Dynamics("liang", tau, info={"equations": "seed 000 Eqs. 37-54, 61", "friction": False})
+    return frictionless_dynamics("liang", model, kin, tau, side=side, contact=contact,
+                                 info={"equations": "seed 000 Eqs. 37-54, 61", "friction": False})

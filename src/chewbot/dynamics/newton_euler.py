@@ -38,6 +38,7 @@ import numpy as np
 from chewbot.analysis.indices import friction_share, performance_indices
 from chewbot.casadi_tools import KernelSpec, compiled, mapped
 from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.contact import add_normal_forces, bound_names, check_contact
 from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
@@ -325,18 +326,23 @@ def check_goal(goal: str) -> None:
 
 @register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
-                 friction: bool = True, strict: bool = False, **ignored) -> Dynamics:
+                 friction: bool = True, contact: str = "bilateral", strict: bool = False, **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
 
     ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
-    ``friction``: HKP and actuator friction on or off; ``strict``: raise
+    ``friction``: HKP and actuator friction on or off; ``contact``: ``"unilateral"`` adds N_L, N_R >=
+    ``model.contact.preload`` to the distribution's constraints (:mod:`chewbot.dynamics.contact`); ``strict``: raise
     :class:`~chewbot.errors.InfeasibleError` at a sample with no admissible distribution instead of recording
     it in ``info["infeasible"]``. Columns of the table: see docs/newton_euler.md.
     """
     check_goal(goal)
+    check_contact(contact)
     fl = 1.0 if friction else 0.0
     data, vhat, v_T = sample_data(model, kin, side)
-    sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict)
+    unilateral = contact == "unilateral" and model.has_hkp
+    preload = model.contact.preload
+    sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict,
+                lower=np.full(2, preload) if unilateral else None, lower_names=bound_names(preload))
     forces = compiled(forces_kernel(model.mechanism))
     out = dict(zip(forces.name_out(), data(forces, sol.x, fl)))
     table = Table()
@@ -347,7 +353,7 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
     if model.has_hkp:
         fr = model.friction
         fT = -fl * (fr.hkp_coulomb * out["absN"][:, None, :] * vhat + fr.hkp_viscous * v_T)
-        table.add_block(["N_L", "N_R"], sol.x, "N", "normal force of the plane on the condyle, along n = (p1, 0, 1)/|.|")
+        add_normal_forces(table, sol.x)
         table.add_block([f"fT_{j}_{c}" for j in "LR" for c in "xyz"], fT.transpose(0, 2, 1).reshape(kin.n, 6), "N",
                         "HKP friction force on the condyle, {S}")
     table.add_block([f"FS{i + 1}_{c}" for i in range(6) for c in "xyz"], out["f"], "N", "force of crank i on coupler i at S_i, {S}")
@@ -367,6 +373,10 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
             "constrained_samples": len(sol.constrained), "infeasible": sol.infeasible,
             "smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
                           "delta_F_G_N": DELTA_F_G}}
+    if model.has_hkp:
+        info["contact"] = ({"model": "unilateral", "preload_N": preload,
+                            "distribution": f"goal {goal} with N_L, N_R >= contact.preload_N as constraints"} if unilateral
+                           else {"model": "bilateral", "normal_forces": "N_L, N_R are unknowns of the distribution"})
     return Dynamics("newton-euler", out["tau"], table, info)
 
 

@@ -29,19 +29,32 @@ def _columns(table: Table, prefix: str) -> np.ndarray:
     return np.column_stack([table[f"{prefix}{i}"] for i in JOINTS])
 
 
-def torques(table: Table, path: Path, method: str = "") -> Path:
-    """Actuator torques over time with the bite force below them (seed 000, Fig. 6a)."""
-    fig, (ax, axf) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, height_ratios=(2, 1))
+def torques(table: Table, path: Path, method: str = "", contact: str = "") -> Path:
+    """Actuator torques over time with the bite force below them (seed 000, Fig. 6a), and the HKP normal forces
+    N_L, N_R where the run has them (the target), titled with the ``contact`` model."""
+    hkp = "N_L" in table
+    fig, axes = plt.subplots(3 if hkp else 2, 1, figsize=(11, 8.5 if hkp else 6), sharex=True,
+                             height_ratios=(2, 1, 1) if hkp else (2, 1))
+    ax, axf = axes[0], axes[1]
     t = table["t"]
     _per_joint(ax, t, _columns(table, "tau"), "τ", "N·m")
     ax.set_title(f"Actuator torques{f' ({method})' if method else ''}")
-    for name in ("Fx", "Fy", "Fz"):
-        axf.plot(t, table[name], label=name)
-    axf.set_ylabel("bite force F_B [N]")
-    axf.set_xlabel("time t [s]")
-    axf.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    axf.grid(alpha=0.3)
+    _lines(axf, t, {name: table[name] for name in ("Fx", "Fy", "Fz")}, "bite force F_B [N]")
+    if hkp:
+        _lines(axes[2], t, {name: table[name] for name in ("N_L", "N_R")}, "HKP normal force N [N]")
+        axes[2].axhline(0.0, color="k", lw=0.6)
+        axes[2].set_title(f"Normal force of each plane on its condyle (> 0: pushes){f'; {contact} contact' if contact else ''}")
+    axes[-1].set_xlabel("time t [s]")
     return _save(fig, path)
+
+
+def _lines(ax, t, series: dict, ylabel: str) -> None:
+    """A few named series on ``ax``, legend at the right."""
+    for name, y in series.items():
+        ax.plot(t, y, label=name)
+    ax.set_ylabel(ylabel)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.grid(alpha=0.3)
 
 
 def coupling_indices(table: Table, path: Path) -> Path:

@@ -33,9 +33,11 @@ from chewbot.model import Model
 from chewbot.report.summary import (
     INDEX_NAMES,
     column_stats,
+    contact_note,
     crank_tips,
     infeasible_samples,
     near_singular,
+    normal_force_stats,
     numbered_columns,
     performance_indices,
     solver_notes,
@@ -393,7 +395,9 @@ def dynamics_label(result: RunResult) -> str:
     if not o.method:
         return "inverse dynamics not run"
     if o.method != "newton-euler":
-        return f"inverse dynamics: {o.method} (minimum-norm torques, no friction)"
+        fallback = (", N_L, N_R >= contact.preload_N: the unilateral fallback"
+                    if o.contact == "unilateral" and result.model.has_hkp else "")
+        return f"inverse dynamics: {o.method} (minimum-norm torques{fallback}, no friction)"
     goal = o.goal if result.model.has_hkp and o.goal else "no redundancy to distribute (6RSS)"
     return f"inverse dynamics: newton-euler (goal {goal}, friction {o.friction or 'on'})"
 
@@ -489,6 +493,14 @@ def _dynamics_summary(result: RunResult) -> str:
                    f"{model.limits.torque:g} N·m are marked.</p>")
     else:
         out.append('<p class="note">Inverse dynamics did not run (<code>chewbot run --method ...</code> computes the torques).</p>')
+    contact = result.options.contact
+    preload = model.contact.preload if contact == "unilateral" else 0.0
+    forces = normal_force_stats(table, preload)
+    if forces:
+        rows = [[f.name, _fmt(f.low), f"{f.t_low:.3f}", _fmt(f.high), f"{f.t_high:.3f}", _fmt(f.below, 3)] for f in forces]
+        out.append("<h3>HKP normal forces</h3>" + _table(["", "min [N]", "at t [s]", "max [N]", "at t [s]", f"below {preload:g} N [%]"], rows)
+                   + f'<p class="note">N &gt; 0: the plane pushes the condyle, along n = (p<sub>1</sub>, 0, 1)/|n|. '
+                   f"Contact model: {_e(contact_note(contact, preload, info))}.</p>")
     mcis = numbered_columns(table, "MCI")
     if mcis:
         stats = column_stats(table, mcis)

@@ -156,3 +156,46 @@ def infeasible_samples(info: dict, t: np.ndarray) -> list[dict]:
 def solver_notes(info: dict) -> dict[str, object]:
     """The plain entries (text, numbers, flags) of a formulation's info, for a key/value listing."""
     return {k: v for k, v in info.items() if isinstance(v, (str, int, float, bool))}
+
+
+@dataclass(frozen=True)
+class NormalForceStats:
+    """One condyle's normal force along the task: smallest and largest (N) with their times, and the share of the
+    samples below ``bound`` (0, or the preload of a unilateral contact), percent."""
+
+    name: str
+    low: float
+    t_low: float
+    high: float
+    t_high: float
+    below: float
+
+
+def normal_force_stats(table: Table, bound: float = 0.0) -> list[NormalForceStats]:
+    """:class:`NormalForceStats` of N_L and N_R (none where the run has no normal forces: the 6RSS)."""
+    from chewbot.analysis.checks import PULL_TOLERANCE_N
+
+    if "N_L" not in table:
+        return []
+    t = table["t"]
+    out = []
+    for name in ("N_L", "N_R"):
+        y = table[name]
+        lo, hi = int(np.argmin(y)), int(np.argmax(y))
+        out.append(NormalForceStats(name, float(y[lo]), float(t[lo]), float(y[hi]), float(t[hi]),
+                                    float(100 * np.mean(y < bound - PULL_TOLERANCE_N))))
+    return out
+
+
+def contact_note(contact: str, preload: float, info: dict) -> str:
+    """The contact model of a run in words, with how the formulation obtained N (its ``info["contact"]``)."""
+    c = info.get("contact", {})
+    how = c.get("distribution") or c.get("normal_forces") or ""
+    if contact == "unilateral":
+        head = f"unilateral (a ball pressed on a plane: N >= contact.preload_N = {preload:g} N)"
+        raised = c.get("raised_samples")
+        if raised is not None:
+            how += f"; the bound raised N at {raised} sample(s)"
+    else:
+        head = "bilateral (a ball held in a slot: the plane may push or pull; a pull is reported, not a failure)"
+    return f"{head}{'; ' + how if how else ''}"

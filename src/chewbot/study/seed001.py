@@ -3,7 +3,7 @@
 Newton–Euler with friction on the default task (left side): the target under the three goals with Euler
 parameters and with Euler angles, and the 6RSS (closed form) with both. Writes ``table3.csv`` and
 ``table3.md`` (indices F1..F7, the median time of the run, and whether each goal gives the smallest value of
-its own index), ``claims.md``/``claims.csv`` (items 6 and 7 of the papers' findings, docs/conventions.md),
+its own index), ``claims.md``/``claims.csv`` (items 6, 7 and 9 of the papers' findings, docs/conventions.md),
 ``study.json`` and the figures: Figs. 10, 12, 13 for goal G1, Fig. 11 (friction share) for
 each goal, and Fig. 14 (times, Euler parameters against Euler angles).
 """
@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from chewbot.analysis.checks import PULL_TOLERANCE_N
 from chewbot.analysis.indices import INDEX_UNITS
 from chewbot.dynamics.newton_euler import GOALS, newton_euler
 from chewbot.kinematics.motion import solve_kinematics
@@ -133,6 +134,48 @@ def claims(rows: list[dict]) -> list[Claim]:
     return out
 
 
+# Seed 001 on its Fig. 10 (goal G1, left-side chewing): "at most of the time instants" N_R < 0 and N_L > 0 (the
+# right ball pressed by the upper surface of its socket, the left by the lower one), and N_R has the larger peaks.
+# "Most" is read as more than half of the samples.
+MOST = 0.5
+
+
+def normal_force_signs(rows: list[dict]) -> Claim:
+    """Item 9 (seed 001, Fig. 10): the sign pattern of N_L, N_R under G1, with our shares under each goal (rows of
+    Euler parameters, the paper's parametrisation; the other gives the same forces)."""
+    shares = {}
+    for r in rows:
+        if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":
+            N = {j: r["_dyn"].table[f"N_{j}"] for j in "LR"}
+            shares[r["goal"]] = {"L+": float(np.mean(N["L"] > PULL_TOLERANCE_N)), "R-": float(np.mean(N["R"] < -PULL_TOLERANCE_N)),
+                                 "L-": float(np.mean(N["L"] < -PULL_TOLERANCE_N)), "R+": float(np.mean(N["R"] > PULL_TOLERANCE_N)),
+                                 "peak": {j: float(np.abs(N[j]).max()) for j in "LR"}}
+    g1 = shares["G1"]
+    pattern = g1["R-"] > MOST and g1["L+"] > MOST
+    peaks = g1["peak"]["R"] > g1["peak"]["L"]
+
+    def figure(goal: str) -> str:
+        s = shares[goal]
+        if max(s["peak"].values()) <= PULL_TOLERANCE_N:
+            return f"{goal}: N_L = N_R = 0 at every sample (the goal drives both to zero: no sign)"
+        return (f"{goal}: N_L > 0 in {100 * s['L+']:.1f} %, < 0 in {100 * s['L-']:.1f} %; N_R > 0 in {100 * s['R+']:.1f} %, "
+                f"< 0 in {100 * s['R-']:.1f} % of the samples; peaks abs(N_L) {s['peak']['L']:.3g} N, abs(N_R) {s['peak']['R']:.3g} N")
+
+    reasons = []
+    if not pattern:
+        reasons.append(f"under G1 N_R < 0 at {100 * g1['R-']:.1f} % and N_L > 0 at {100 * g1['L+']:.1f} % of the samples. "
+                       "The sign of N is not a property of the mechanism (the two redundant torques set N_L, N_R freely, "
+                       "docs/contact.md); which one the minimum-torque split gives depends on values the paper does not "
+                       "give (condyle centres, molar points, crank masses) and on its measured task and bite force, which "
+                       "are not public")
+    if not peaks:
+        reasons.append("abs(N_L) has the larger peaks under G1")
+    return Claim(9, "default, left side, friction on, bilateral contact",
+                 "under G1, N_R < 0 and N_L > 0 at most instants (the right ball pressed by the upper surface of its "
+                 "socket, the left by the lower), N_R with the larger peaks (Fig. 10)",
+                 "; ".join(figure(g) for g in ("G1", "G2", "G3")), pattern and peaks, "; ".join(reasons))
+
+
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
     from chewbot.outputs import STUDY_FOLDER, atomic_folder, check_output, to_json
@@ -153,7 +196,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
                    "notes": "Newton-Euler with friction, default task, left side; time: median of "
                             f"{REPEATS} runs after a warm-up, kinematics excluded"}
         (tmp / "study.json").write_text(to_json(summary))
-        write_claims(claims(rows), tmp)
+        write_claims(claims(rows) + [normal_force_signs(rows)], tmp)
         step("figures")
         for r in rows:
             if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":
