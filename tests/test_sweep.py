@@ -42,7 +42,7 @@ chunk = 1
 model = "target"
 method = "hessian"
 outputs = ["peak_tau_Nm", "peak_tau3_Nm", "rms_tau_Nm", "peak_power_W", "mean_MCI", "mean_MCI4", "min_mu_deg",
-           "min_kappa_J", "feasible", "failed_checks"]
+           "min_kappa_J", "feasible", "failed_checks", "peak_N_L", "min_N_R", "contact_pull_share"]
 
 [set]
 "friction.hkp_coulomb" = 0.2
@@ -170,10 +170,34 @@ def test_a_sample_equals_chewbot_run(local_sweep):
                     "rms_tau_Nm": np.sqrt(np.mean(tau ** 2)), "peak_power_W": np.abs(tau * dtheta).max(),
                     "mean_MCI": mci.mean(), "mean_MCI4": mci[:, 3].mean(), "min_mu_deg": np.degrees(mu.min()),
                     "min_kappa_J": run.table["kappa_J"].min(), "feasible": float(not run_fails(run.checks)),
-                    "failed_checks": float(sum(c.fails_run for c in run.checks))}
+                    "failed_checks": float(sum(c.fails_run for c in run.checks)),
+                    "peak_N_L": run.table["N_L"].max(), "min_N_R": run.table["N_R"].min(),
+                    "contact_pull_share": next(c.samples for c in run.checks if c.name == "contact-pull") / len(tau)}
         for name, value in expected.items():
             # the same functions on the same inputs: equal to rounding (1e-9 relative, the issue's bound)
             assert row[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
+
+
+@pytest.mark.parametrize("method", ["hessian", "newton-euler"])
+def test_unilateral_contact_as_chewbot_run(method):
+    """contact = "unilateral" changes the torques (the unilateral distribution) and makes contact-pull a failure,
+    as chewbot run --contact unilateral does; the normal forces are the run's."""
+    from chewbot.pipeline import compute
+    from chewbot.results import RunOptions
+    from chewbot.sweep.evaluate import evaluate_chunk
+
+    outputs = ["peak_tau_Nm", "min_N_L", "min_N_R", "contact_pull_share", "feasible"]
+    spec = parse_spec({"kind": "monte-carlo", "samples": 1, "method": method, "contact": "unilateral", "outputs": outputs,
+                       "parameters": {"task.force_z_N": {"uniform": [-120.0, -40.0]}}}, "unilateral.toml")
+    out = evaluate_chunk(spec, np.array([[-100.0]]))
+    run = compute(RunOptions(method=method, contact="unilateral", overrides={"task.force_z_N": -100.0}))
+    tau = np.column_stack([run.table[f"tau{i}"] for i in range(1, 7)])
+    pull = next(c for c in run.checks if c.name == "contact-pull")
+    assert pull.severity == "failure"
+    expected = {"peak_tau_Nm": np.abs(tau).max(), "min_N_L": run.table["N_L"].min(), "min_N_R": run.table["N_R"].min(),
+                "contact_pull_share": pull.samples / len(tau), "feasible": float(not any(c.fails_run for c in run.checks))}
+    for name, value in expected.items():
+        assert out[name][0] == pytest.approx(value, rel=1e-9, abs=1e-12), name  # the same functions: rounding only
 
 
 def test_the_same_table_on_a_separate_scheduler(spec_file, local_sweep, dask_cluster, tmp_path):
@@ -377,7 +401,7 @@ def test_failed_evaluations_are_rows_of_nan_with_their_reason(model, method, tas
                                       "chains.crank_length_mm[3]": {"uniform": [2.0, 15.0]}}}, "failing.toml")
     out = evaluate_chunk(spec, np.array([[5e-3, 15.0], [-1e-3, 15.0], [5e-3, 2.0]]))
     assert np.isfinite(out["peak_tau_Nm"][0]) and out["error"][0] is None
-    assert np.isnan(out["peak_N_L"][0]) == (model == "6rss" or method != "newton-euler")
+    assert np.isnan(out["peak_N_L"][0]) == (model == "6rss")  # every formulation gives N_L, N_R on the target
     assert "couplers.density_g_per_mm3" in out["error"][1]  # the bad value, named as --set names it
     assert "out of reach" in out["error"][2] and "chain 3" in out["error"][2]
     if task == "csv":

@@ -127,7 +127,8 @@ class Evaluation:
         from chewbot.dynamics import inverse_dynamics
 
         s = self.spec
-        options = {**({"goal": s.goal} if s.goal else {}), **({"friction": s.friction == "on"} if s.friction else {})}
+        options = {**({"goal": s.goal} if s.goal else {}), **({"friction": s.friction == "on"} if s.friction else {}),
+                   "contact": s.contact}
         return inverse_dynamics(self.model, self.kinematics, s.method, **options)
 
     @cached_property
@@ -168,6 +169,10 @@ class Evaluation:
         for name, values in dyn.table.columns.items():
             table.add(name, values, dyn.table.units[name])
         return run_checks(self.model, table, dyn.info or None, self.spec.contact)
+
+    def check(self, name: str):
+        """The result of the validity check ``name``."""
+        return next(c for c in self.checks if c.name == name)
 
     @cached_property
     def failed_checks(self) -> list:

@@ -44,6 +44,16 @@ def _column(name: str, reduce):
     return value
 
 
+def _share(check: str):
+    """The failing samples of a validity check over the task's samples; NaN where the run cannot evaluate it."""
+
+    def value(ev) -> float:
+        samples = ev.check(check).samples
+        return NAN if samples is None else samples / ev.kinematics.n
+
+    return value
+
+
 def _index(name: str):
     def value(ev) -> float:
         return float(ev.dynamics.info.get("indices", {}).get(name, NAN))
@@ -88,6 +98,9 @@ def _outputs() -> dict[str, Output]:
         Output("peak_N_R", "N", "largest normal force of the right plane on its condyle", _column("N_R", np.max), target_only=True),
         Output("min_N_L", "N", "smallest normal force of the left plane (negative: the plane pulls)", _column("N_L", np.min), target_only=True),
         Output("min_N_R", "N", "smallest normal force of the right plane", _column("N_R", np.min), target_only=True),
+        Output("contact_pull_share", "1", "share of the task's samples where a plane pulls its condyle: the contact-pull "
+               "check's failing samples (N below 0, or below contact.preload_N under the unilateral contact model)",
+               _share("contact-pull"), target_only=True),
         Output("feasible", "1", "1 where no validity check that makes chewbot run exit 4 fails, else 0",
                lambda ev: float(not ev.fails)),
         Output("failed_checks", "1", "number of validity checks that fail the run", lambda ev: float(len(ev.failed_checks))),
