@@ -15,6 +15,7 @@ and scaled to the task).
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
@@ -210,6 +211,69 @@ def bench_kernels(calls: int = 20000) -> list[KernelTiming]:
             ts.append(time.perf_counter() - t0)
         out.append(KernelTiming(k.name, 1e6 * statistics.median(ts), c_times.get(k.name), calls))
     return out
+
+
+SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (issue: 10,240 evaluations in 10 minutes)
+
+
+@dataclass(frozen=True)
+class SweepTiming:
+    """The scale study's evaluations on ``workers`` worker processes: ``evaluations`` computed in ``evaluating_s``
+    (wall time from the first chunk sent to the last one written) and ``elapsed_s`` (with the cluster's start and
+    the writing of the folder). ``workers = 0``: in this process, without Dask (the chunks one after the other)."""
+
+    workers: int
+    evaluations: int
+    evaluating_s: float
+    elapsed_s: float
+
+    @property
+    def per_s(self) -> float:
+        return self.evaluations / self.evaluating_s
+
+    @property
+    def per_s_per_core(self) -> float:
+        return self.per_s / max(self.workers, 1)
+
+
+def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), progress=None) -> tuple[list[SweepTiming], int]:
+    """Throughput of the scale study (:data:`SCALE_SPEC`: a Sobol' study of 8 parameters on the default task,
+    Hessian method, peak torque and mean MCI) with ``base_samples`` base samples instead of 1,024 (N (D + 2)
+    evaluations): in this process without Dask, then by ``chewbot sweep`` on a local cluster of each number of
+    ``workers``. Returns the timings and the evaluations of the whole study."""
+    import re
+
+    from chewbot.sweep.evaluate import evaluate_chunk
+    from chewbot.sweep.run import prepare, run_sweep
+    from chewbot.sweep.samplers import sobol_design
+    from chewbot.sweep.spec import read_spec, spec_path
+
+    step = progress or (lambda msg: None)
+    full = read_spec(SCALE_SPEC)
+    total = full.samples * (len(full.keys) + 2)
+    text, n = re.subn(r"(?m)^samples = \d+", f"samples = {base_samples}", spec_path(SCALE_SPEC).read_text())
+    if n != 1:
+        raise ValueError(f"{spec_path(SCALE_SPEC)}: expected one line 'samples = N'")
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "scale.toml"
+        path.write_text(text)
+        spec = read_spec(path)
+        step(f"{SCALE_SPEC}, {base_samples} base samples, in this process")
+        prepare(spec)
+        design = sobol_design(spec)
+        evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
+        t0 = time.perf_counter()
+        for a in range(0, design.n, spec.chunk):
+            evaluate_chunk(spec, design.rows(a, min(a + spec.chunk, design.n)))
+        seconds = time.perf_counter() - t0
+        out.append(SweepTiming(0, design.n, seconds, seconds))
+        for w in workers:
+            step(f"{SCALE_SPEC}, {base_samples} base samples, {w} worker(s)")
+            result = run_sweep(path, Path(tmp) / f"sweep-{w}", workers=w)
+            evaluating = json.loads((result.folder / "run.json").read_text())["timings"]["evaluating_s"]
+            out.append(SweepTiming(w, result.computed, evaluating, result.elapsed_s))
+    return out, total
 
 
 def machine() -> str:

@@ -323,6 +323,9 @@ def _print_run_summary(result, out: Path) -> None:
 def bench(
     repeats: int = typer.Option(11, "--repeats", min=1, help="Timed runs per case after the first (median reported)."),
     calls: int = typer.Option(20000, "--calls", min=100, help="Calls per kernel for the one-sample timings."),
+    sweep: int = typer.Option(0, "--sweep", metavar="N", min=0, help="Also time the sweep's scale study (the built-in "
+                              "SPEC sobol-scale) with N base samples, a power of 2 (10 N evaluations), in this process and "
+                              "on local clusters of 1 and 2 workers, and project the whole study (1,024 base samples)."),
     out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file."),
     force: bool = flag("--force", help=FORCE_HELP),
 ) -> None:
@@ -336,8 +339,10 @@ def bench(
     Example:
 
       taskset -c 0 chewbot bench --out bench.md
+
+      chewbot bench --sweep 32 --out bench.md
     """
-    from chewbot.bench import bench_kernels, bench_task, machine, ratios
+    from chewbot.bench import bench_kernels, bench_sweep, bench_task, machine, ratios
     from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
     with errors_reported():
@@ -347,7 +352,8 @@ def bench(
             timings = bench_task(repeats=repeats, progress=step)
             step("kernels, one sample")
             kernel_timings = bench_kernels(calls)
-        text = _bench_markdown(timings, kernel_timings, ratios(timings), machine())
+            scale = bench_sweep(sweep, progress=step) if sweep else None
+        text = _bench_markdown(timings, kernel_timings, ratios(timings), machine()) + (_sweep_markdown(*scale) if scale else "")
         stdout.print(text, markup=False, highlight=False)
         if out is not None:
             with atomic_file(out, force) as tmp:
@@ -362,6 +368,22 @@ def _bench_markdown(timings, kernel_timings, ratio_values, machine_line: str) ->
     lines += ["", "One sample, exported kernels:", "", "| kernel | call from Python (us, median) | call from C (ns, mean) |", "|---|---|---|"]
     lines += [f"| {k.name} | {k.python_us:.2f} | {'-' if k.c_ns is None else f'{k.c_ns:.0f}'} |" for k in kernel_timings]
     lines += ["", "Ratios of the medians:", ""] + [f"- {name}: {value:.3g}" for name, value in ratio_values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _sweep_markdown(timings, total: int) -> str:
+    """The scale study's throughput, its scaling over the workers and the projected time of the whole study."""
+    serial = timings[0]
+    lines = ["", f"Sweep throughput: the scale study (chewbot sweep sobol-scale: Sobol', 8 parameters, default task, Hessian "
+             f"method, peak_tau_Nm and mean_MCI), {serial.evaluations} evaluations:", "",
+             "| workers | evaluations/s | per core (evaluations/s) | per sample of the task (us, per core) | speed-up | "
+             "evaluating (s) | with the cluster's start and the files (s) | the whole study, " + f"{total:,} evaluations (min) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for t in timings:
+        who = "in this process, no Dask" if t.workers == 0 else str(t.workers)
+        us = 1e6 / t.per_s_per_core / 5001
+        lines.append(f"| {who} | {t.per_s:.2f} | {t.per_s_per_core:.2f} | {us:.1f} | {t.per_s / serial.per_s:.2f} | "
+                     f"{t.evaluating_s:.1f} | {t.elapsed_s:.1f} | {total / t.per_s / 60:.1f} |")
     return "\n".join(lines) + "\n"
 
 

@@ -10,7 +10,7 @@ import typer
 
 def sweep(
     spec: str = typer.Argument(..., help="The SPEC: a TOML file (docs/sweeps.md) or the name of a built-in SPEC "
-                               "(finding5, finding5-printed, sobol-scale, workspace)."),
+                               "(finding5, finding5-search, sobol-scale, workspace)."),
     out: Path = typer.Option(..., "--out", help="Sweep folder to write: run.json, chunks/ while it runs, samples.parquet, "
                              "the indices or the optimum (CSV), report.html."),
     scheduler: str | None = typer.Option(None, "--scheduler", metavar="ADDRESS", help="An existing Dask scheduler, "

@@ -69,7 +69,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, proces
                 for s in handlers:  # inherited by the worker processes as "ignored"
                     signal.signal(s, signal.SIG_IGN)
                 cluster = LocalCluster(n_workers=workers or cores(), threads_per_worker=1, processes=processes,
-                                       dashboard_address=None, silence_logs=logging.ERROR)
+                                       dashboard_address=None, silence_logs=logging.ERROR,
+                                       # no dashboard; the scheduler's small HTTP server on a free port, not on 8787
+                                       # (where another cluster on this machine may be)
+                                       scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"})
             finally:
                 for s, h in handlers.items():
                     signal.signal(s, h)
