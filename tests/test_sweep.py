@@ -1,6 +1,7 @@
-"""chewbot sweep: a sample equals chewbot run's numbers; the same table on a local cluster and on a separate Dask
-scheduler and worker; --resume after a killed sweep computes only the missing chunks; Sobol' indices of the
-Ishigami function through the same machinery; a map's singular poses are the kinematics' own; failed evaluations
+"""chewbot sweep: a sample equals chewbot run's numbers (also under the unilateral contact model); Ctrl-C shuts the
+local cluster down and keeps the finished chunks; --resume on a separate Dask scheduler and worker computes only
+the missing chunks and gives the local table bit for bit; Sobol' indices of the Ishigami function and a
+constrained search with a known optimum through the same machinery; a map's singular poses are the kinematics' own; failed evaluations
 are rows of NaN with their reason, for both robots, several methods, the default task and a task file; bad SPEC
 files name the file and the key.
 
@@ -25,7 +26,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from chewbot.command import EXIT_TERMINATED, TEST_PAUSE_VARIABLE
+from chewbot.command import EXIT_INTERRUPTED, TEST_PAUSE_VARIABLE
 from chewbot.errors import ChewbotError, KinematicsError
 from chewbot.sweep.record import SweepFolder
 from chewbot.sweep.spec import Parameter, Spec, SpecError, parse_spec, read_spec
@@ -178,7 +179,8 @@ def test_a_sample_equals_chewbot_run(local_sweep):
             assert row[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
 
 
-@pytest.mark.parametrize("method", ["hessian", "newton-euler"])
+# newton-euler's unilateral distribution (an SQP where a limit binds) takes about 10 s per run: slow
+@pytest.mark.parametrize("method", ["hessian", pytest.param("newton-euler", marks=pytest.mark.slow)])
 def test_unilateral_contact_as_chewbot_run(method):
     """contact = "unilateral" changes the torques (the unilateral distribution) and makes contact-pull a failure,
     as chewbot run --contact unilateral does; the normal forces are the run's."""
@@ -200,32 +202,53 @@ def test_unilateral_contact_as_chewbot_run(method):
         assert out[name][0] == pytest.approx(value, rel=1e-9, abs=1e-12), name  # the same functions: rounding only
 
 
-def test_the_same_table_on_a_separate_scheduler(spec_file, local_sweep, dask_cluster, tmp_path):
-    out = tmp_path / "remote"
-    code, _, err = chewbot("sweep", str(spec_file), "--out", str(out), "--scheduler", dask_cluster)
-    assert code == 0, err
-    assert same_table(out / "samples.parquet", local_sweep / "samples.parquet")
+def _process_group(pgid: int) -> list[int]:
+    """The processes of a process group (their pids), from /proc."""
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid:  # the fields after the command: state, ppid, pgrp
+            pids.append(int(stat.parent.name))
+    return pids
 
 
-def test_resume_computes_only_the_missing_chunks(spec_file, local_sweep, dask_cluster, tmp_path):
-    out, flag = tmp_path / "resumed", tmp_path / "flag"
-    proc = chewbot("sweep", str(spec_file), "--out", str(out), "--scheduler", dask_cluster,
-                   env={TEST_PAUSE_VARIABLE: f"chunk:{flag}"}, wait=False)
-    deadline = time.monotonic() + WAIT_S
-    while not flag.exists():
-        assert proc.poll() is None, proc.communicate()[1]
-        assert time.monotonic() < deadline, "no chunk was written in time"
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGTERM)  # killed after its first chunk
-    _, err = proc.communicate(timeout=WAIT_S)
-    assert proc.returncode == EXIT_TERMINATED, err
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table from /proc")
+def test_ctrl_c_then_resume_on_a_separate_scheduler(spec_file, local_sweep, dask_cluster, tmp_path):
+    """Ctrl-C (SIGINT to the terminal's whole process group) after the first chunk of a sweep on the local cluster:
+    exit 130, the cluster's worker processes are gone, the finished chunk is whole, no temporary file is left,
+    run.json says incomplete. --resume on a separate Dask scheduler and worker then computes only the three
+    missing chunks, and the table equals the one of the uninterrupted local sweep bit for bit."""
     import json
 
-    record = json.loads((out / "run.json").read_text())
-    assert record["complete"] is False
-    chunks = sorted((out / "chunks").iterdir())
-    assert [p.name for p in chunks] == ["chunk-000000000.parquet"]  # whole, no temporary left
-    assert not [p for p in out.iterdir() if re.match(r"^\..+\.partial-", p.name)]
+    out, flag = tmp_path / "resumed", tmp_path / "flag"
+    proc = subprocess.Popen([sys.executable, "-m", "chewbot", "sweep", str(spec_file), "--out", str(out), "--workers", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, TEST_PAUSE_VARIABLE: f"chunk:{flag}"})
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while not flag.exists():
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "no chunk was written in time"
+            time.sleep(0.02)
+        assert len(_process_group(proc.pid)) >= 2  # the command and its worker (and the nanny)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=WAIT_S)
+        assert proc.returncode == EXIT_INTERRUPTED, err
+        assert "Traceback" not in err
+        deadline = time.monotonic() + 30  # the workers exit as the cluster closes; time for a loaded machine
+        while _process_group(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _process_group(proc.pid) == []
+    finally:
+        if proc.poll() is None or _process_group(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert json.loads((out / "run.json").read_text())["complete"] is False
+    assert [p.name for p in (out / "chunks").iterdir()] == ["chunk-000000000.parquet"]  # whole, no temporary left
+    assert not [p for p in out.rglob("*") if ".partial-" in p.name]
 
     code, stdout, err = chewbot("sweep", str(spec_file), "--out", str(out), "--scheduler", dask_cluster, "--resume")
     assert code == 0, err
@@ -234,6 +257,7 @@ def test_resume_computes_only_the_missing_chunks(spec_file, local_sweep, dask_cl
     assert record["chunks"] == {"size": 1, "computed": 3, "reused": 1}  # only the three missing chunks were evaluated
     assert record["timings"]["evaluated"] == 3
     assert "1 chunk(s) read back" in stdout
+    assert not (out / "chunks").exists()
     assert same_table(out / "samples.parquet", local_sweep / "samples.parquet")
     # a SPEC that changed is refused
     from chewbot.sweep.run import input_files
@@ -291,6 +315,48 @@ def test_sobol_indices_of_the_ishigami_function(tmp_path):
     ind = sobol_indices(spec.keys, params, y, seed=1)
     assert ind["blocks"] == 4094
     assert np.all(np.abs(ind["ST"] - ST) <= 3 * ind["ST_conf"] + 1e-3)
+
+
+# ------------------------------------------------------------------------------------------- search
+
+
+def constrained_quadratic(payload, values: np.ndarray) -> dict:
+    """f = (x1 - 0.8)^2 + (x2 - 0.8)^2 subject to x1 + x2 <= 1 (violation_share = the excess), failing for x1 > 0.95:
+    the optimum is (0.5, 0.5), f = 0.18, on the constraint. A chunk's evaluations, as a worker returns them."""
+    x1, x2 = values.T
+    fails = x1 > 0.95
+    nan = np.where(fails, np.nan, 0.0)
+    return {"f": (x1 - 0.8) ** 2 + (x2 - 0.8) ** 2 + nan, "feasible": (x1 + x2 <= 1.0) + nan,
+            "violation_share": np.maximum(x1 + x2 - 1.0, 0.0) + nan,
+            "error": ["x1 > 0.95" if f else None for f in fails]}
+
+
+def test_search_finds_a_known_constrained_optimum_and_replays_from_its_chunks(tmp_path):
+    """Differential evolution through the chunked runner on a cluster: the constrained optimum of a quadratic,
+    every trial a row; run again on the same folder, the search reads every generation back and computes nothing."""
+    from chewbot.sweep.optimize import optimize
+    from chewbot.sweep.runner import ChunkRunner, dask_client
+    from chewbot.sweep.spec import OPTIMIZER_DEFAULTS
+
+    params = (Parameter("x1", "bounds", (0.0, 1.0)), Parameter("x2", "bounds", (-1.0, 1.0)))
+    spec = Spec(source="quadratic", kind="optimize", seed=3, chunk=32, parameters=params, minimize="f",
+                optimizer={**OPTIMIZER_DEFAULTS, "generations": 40, "popsize": 8, "tol": 0.0})
+    folder = SweepFolder.start(tmp_path / "search", {}, b"")
+    units = {"f": "1", "feasible": "1", "violation_share": "1"}
+    with dask_client(workers=1, processes=False) as client:
+        runner = ChunkRunner(client, folder, constrained_quadratic, None, spec.chunk, units)
+        optimum, history = optimize(spec, runner)
+        # feasible points have f >= 0.18 (the constrained minimum), an unconstrained search would find f = 0 at
+        # (0.8, 0.8); along the boundary f = 0.18 + 2 d^2 at a distance d from (0.5, 0.5), so 1e-4 in f (d about 7e-3)
+        # is what 40 generations of 16 members reach on this flat valley floor with room to spare
+        assert optimum["constraints_met"] and 0.18 - 1e-12 <= optimum["outputs"]["f"] <= 0.18 + 1e-4
+        assert optimum["parameters"]["x1"] == pytest.approx(0.5, abs=1e-2)
+        assert optimum["parameters"]["x2"] == pytest.approx(0.5, abs=1e-2)
+        assert optimum["evaluations"] == runner.evaluations > 0 and len(history) == optimum["generations"]
+        assert all(h["best"] >= 0.18 - 1e-12 for h in history)  # never below the constrained minimum
+        replay = ChunkRunner(client, folder, constrained_quadratic, None, spec.chunk, units)
+        again, _ = optimize(spec, replay)
+    assert again == optimum and replay.computed == 0 and replay.reused == runner.computed
 
 
 # ------------------------------------------------------------------------------------------- maps
