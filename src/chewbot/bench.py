@@ -15,14 +15,13 @@ and scaled to the task).
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import statistics
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import Callable
@@ -218,14 +217,21 @@ SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (issue: 10,24
 
 @dataclass(frozen=True)
 class SweepTiming:
-    """The scale study's evaluations on ``workers`` worker processes: ``evaluations`` computed in ``evaluating_s``
-    (wall time from the first chunk sent to the last one written) and ``elapsed_s`` (with the cluster's start and
-    the writing of the folder). ``workers = 0``: in this process, without Dask (the chunks one after the other)."""
+    """The scale study's evaluations on ``workers`` worker processes (``workers = 0``: in this process, without
+    Dask, the chunks one after the other): ``evaluations`` computed in ``evaluating_s``, wall time from the first
+    chunk sent to the last one written, the workers warm (their kernels loaded and the task built, as after a
+    sweep's first chunks); ``startup_s``: starting the cluster and warming its workers."""
 
     workers: int
     evaluations: int
     evaluating_s: float
-    elapsed_s: float
+    startup_s: float
+    task_samples: int  # samples of the task per evaluation
+
+    @property
+    def per_sample_us(self) -> float:
+        """Wall time per task sample on one core (us)."""
+        return 1e6 / self.per_s_per_core / self.task_samples
 
     @property
     def per_s(self) -> float:
@@ -236,44 +242,46 @@ class SweepTiming:
         return self.per_s / max(self.workers, 1)
 
 
-def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), progress=None) -> tuple[list[SweepTiming], int]:
+def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk: int = 8,
+                progress=None) -> tuple[list[SweepTiming], int]:
     """Throughput of the scale study (:data:`SCALE_SPEC`: a Sobol' study of 8 parameters on the default task,
     Hessian method, peak torque and mean MCI) with ``base_samples`` base samples instead of 1,024 (N (D + 2)
-    evaluations): in this process without Dask, then by ``chewbot sweep`` on a local cluster of each number of
-    ``workers``. Returns the timings and the evaluations of the whole study."""
-    import re
-
+    evaluations) in chunks of ``chunk``: in this process without Dask, then by the sweep's chunk runner on a local
+    cluster of each number of ``workers``, writing each chunk as ``chewbot sweep`` does. Returns the timings and the
+    evaluations of the whole study."""
     from chewbot.sweep.evaluate import evaluate_chunk
-    from chewbot.sweep.run import prepare, run_sweep
+    from chewbot.sweep.record import SweepFolder
+    from chewbot.sweep.run import output_units, prepare
+    from chewbot.sweep.runner import ChunkRunner, dask_client
     from chewbot.sweep.samplers import sobol_design
-    from chewbot.sweep.spec import read_spec, spec_path
+    from chewbot.sweep.spec import read_spec
 
     step = progress or (lambda msg: None)
     full = read_spec(SCALE_SPEC)
-    total = full.samples * (len(full.keys) + 2)
-    text, n = re.subn(r"(?m)^samples = \d+", f"samples = {base_samples}", spec_path(SCALE_SPEC).read_text())
-    if n != 1:
-        raise ValueError(f"{spec_path(SCALE_SPEC)}: expected one line 'samples = N'")
-    out = []
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "scale.toml"
-        path.write_text(text)
-        spec = read_spec(path)
-        step(f"{SCALE_SPEC}, {base_samples} base samples, in this process")
-        prepare(spec)
-        design = sobol_design(spec)
-        evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
-        t0 = time.perf_counter()
-        for a in range(0, design.n, spec.chunk):
-            evaluate_chunk(spec, design.rows(a, min(a + spec.chunk, design.n)))
-        seconds = time.perf_counter() - t0
-        out.append(SweepTiming(0, design.n, seconds, seconds))
-        for w in workers:
-            step(f"{SCALE_SPEC}, {base_samples} base samples, {w} worker(s)")
-            result = run_sweep(path, Path(tmp) / f"sweep-{w}", workers=w)
-            evaluating = json.loads((result.folder / "run.json").read_text())["timings"]["evaluating_s"]
-            out.append(SweepTiming(w, result.computed, evaluating, result.elapsed_s))
-    return out, total
+    spec = replace(full, samples=base_samples, chunk=chunk)
+    design = sobol_design(spec)
+    prepare(spec)
+    step(f"{SCALE_SPEC}, {design.n} evaluations, in this process")
+    t0 = time.perf_counter()
+    evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
+    warm = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for a in range(0, design.n, chunk):
+        evaluate_chunk(spec, design.rows(a, min(a + chunk, design.n)))
+    samples = default_task(None, spec.side or "left").t.size
+    out = [SweepTiming(0, design.n, time.perf_counter() - t0, warm, samples)]
+    for w in workers:
+        step(f"{SCALE_SPEC}, {design.n} evaluations, {w} worker(s)")
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            with dask_client(workers=w) as client:
+                client.run(evaluate_chunk, spec, design.rows(0, 1))  # every worker warm
+                startup = time.perf_counter() - t0
+                runner = ChunkRunner(client, SweepFolder.start(Path(tmp) / "sweep", {}, b""), evaluate_chunk, spec, chunk,
+                                     output_units(spec))
+                runner.run(design)
+            out.append(SweepTiming(w, runner.evaluations, runner.compute_s, startup, samples))
+    return out, full.samples * (len(full.keys) + 2)
 
 
 def machine() -> str:
