@@ -345,6 +345,8 @@ def bench(
     from chewbot.bench import bench_kernels, bench_sweep, bench_task, machine, ratios
     from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
+    if sweep & (sweep - 1):
+        fail(ChewbotError(f"--sweep {sweep}: the base samples of a Sobol' study must be a power of 2 (8, 16, 32, ...)"), EXIT_BAD_INPUT)
     with errors_reported():
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
