@@ -26,7 +26,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import Callable
@@ -403,6 +403,92 @@ def bench_long(sizes=LONG_SAMPLES, methods=LONG_METHODS, progress=None) -> list[
     return out
 
 
+SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (issue: 10,240 evaluations in 10 minutes)
+
+
+@dataclass(frozen=True)
+class SweepTiming:
+    """The scale study's evaluations on ``workers`` worker processes (``workers = 0``: in this process, without
+    Dask, the chunks one after the other): ``evaluations`` computed in ``evaluating_s``, wall time from the first
+    chunk sent to the last one written, the workers warm (their kernels loaded and the task built, as after a
+    sweep's first chunks); ``startup_s``: starting the cluster and warming its workers."""
+
+    workers: int
+    evaluations: int
+    evaluating_s: float
+    startup_s: float
+    task_samples: int  # samples of the task per evaluation
+
+    @property
+    def per_sample_us(self) -> float:
+        """Wall time per task sample on one core (us)."""
+        return 1e6 / self.per_s_per_core / self.task_samples
+
+    @property
+    def per_s(self) -> float:
+        return self.evaluations / self.evaluating_s
+
+    @property
+    def per_s_per_core(self) -> float:
+        return self.per_s / max(self.workers, 1)
+
+
+def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk: int = 8,
+                progress=None) -> tuple[list[SweepTiming], int]:
+    """Throughput of the scale study (:data:`SCALE_SPEC`: a Sobol' study of 8 parameters on the default task,
+    Hessian method, peak torque and mean MCI) with ``base_samples`` base samples instead of 1,024 (N (D + 2)
+    evaluations) in chunks of ``chunk``: in this process without Dask, then by the sweep's chunk runner on a local
+    cluster of each number of ``workers``, writing each chunk as ``chewbot sweep`` does. Returns the timings and the
+    evaluations of the whole study."""
+    from chewbot.sweep.evaluate import evaluate_chunk
+    from chewbot.sweep.record import SweepFolder
+    from chewbot.sweep.run import output_units, prepare
+    from chewbot.sweep.runner import ChunkRunner, dask_client
+    from chewbot.sweep.samplers import sobol_design
+    from chewbot.sweep.spec import read_spec
+    from chewbot.task.default import default_task
+
+    step = progress or (lambda msg: None)
+    full = read_spec(SCALE_SPEC)
+    spec = replace(full, samples=base_samples, chunk=chunk)
+    design = sobol_design(spec)
+    prepare(spec)
+    step(f"{SCALE_SPEC}, {design.n} evaluations, in this process")
+    t0 = time.perf_counter()
+    evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
+    warm = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for a in range(0, design.n, chunk):
+        evaluate_chunk(spec, design.rows(a, min(a + chunk, design.n)))
+    samples = default_task(None, spec.side or "left").t.size
+    out = [SweepTiming(0, design.n, time.perf_counter() - t0, warm, samples)]
+    for w in workers:
+        step(f"{SCALE_SPEC}, {design.n} evaluations, {w} worker(s)")
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            with dask_client(workers=w) as client:
+                client.run(evaluate_chunk, spec, design.rows(0, 1))  # every worker warm
+                startup = time.perf_counter() - t0
+                runner = ChunkRunner(client, SweepFolder.start(Path(tmp) / "sweep", {}, b""), evaluate_chunk, spec, chunk,
+                                     output_units(spec))
+                runner.run(design)
+            out.append(SweepTiming(w, runner.evaluations, runner.compute_s, startup, samples))
+    return out, full.samples * (len(full.keys) + 2)
+
+
+def sweep_markdown(timings: list[SweepTiming], total: int) -> str:
+    """The scale study's throughput, its scaling over the workers and the projected time of the whole study."""
+    serial = timings[0]
+    lines = ["", f"Sweep throughput: the scale study (chewbot sweep sobol-scale: Sobol', 8 parameters, default task, Hessian "
+             f"method, peak_tau_Nm and mean_MCI), {serial.evaluations} evaluations, warm workers:", "",
+             "| workers | evaluations/s | per core (evaluations/s) | per task sample and core (us) | speed-up | "
+             f"evaluating (s) | cluster start and warm-up (s) | the whole study, {total:,} evaluations (min) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for t in timings:
+        who = "in this process, no Dask" if t.workers == 0 else str(t.workers)
+        lines.append(f"| {who} | {t.per_s:.2f} | {t.per_s_per_core:.2f} | {t.per_sample_us:.1f} | {t.per_s / serial.per_s:.2f} | "
+                     f"{t.evaluating_s:.1f} | {t.startup_s:.1f} | {total / t.per_s / 60:.1f} |")
+    return "\n".join(lines) + "\n"
 # --- the page ------------------------------------------------------------------------------------------------
 
 

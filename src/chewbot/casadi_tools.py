@@ -43,7 +43,7 @@ FLAGS = ("-O1",)
 # Modules of the package that build no compiled kernel, left out of the source hash of the cache key (so that
 # editing them does not recompile every kernel). Everything else in the package is in it, new modules included.
 NOT_IN_KEY = ("cli.py", "pipeline.py", "outputs.py", "results.py", "bench.py", "reference.py", "export.py",
-              "report", "study", "task")
+              "report", "study", "task", "sweep")
 _OWN_DIR = re.compile(r"^(chewbot-[^/]+-casadi-[^/]+|casadi-[0-9][^/]*)$")  # casadi-X: the layout before version folders
 _TEMP = re.compile(r"^\.(?:.+)\.(?P<pid>\d+)\.[A-Za-z0-9_]+\.(?:tmp|build)$")
 _GRAPHS: dict[tuple, ca.Function] = {}

@@ -30,6 +30,7 @@ from chewbot.errors import ChewbotError
 from chewbot.identification.command import identify
 from chewbot.recordings.command import import_motion
 from chewbot.simulation.command import simulate
+from chewbot.sweep.command import sweep
 
 app = typer.Typer(
     name="chewbot",
@@ -379,6 +380,9 @@ def bench(
     calls: int = typer.Option(20000, "--calls", min=100, help="Calls per in-loop kernel for the one-sample timings."),
     long: bool = flag("--long", help="Also run tasks of 10,000 to 1,000,000 samples with every method: time per "
                       "sample and peak memory (about half an hour)."),
+    sweep: int = typer.Option(0, "--sweep", metavar="N", min=0, help="Also time the sweep's scale study (the built-in "
+                              "SPEC sobol-scale) with N base samples, a power of 2 (10 N evaluations), in this process and "
+                              "on local clusters of 1 and 2 workers, and project the whole study (1,024 base samples)."),
     out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
                                     "file written by chewbot bench with --force)."),
     force: bool = flag("--force", help=FORCE_HELP),
@@ -395,15 +399,21 @@ def bench(
       chewbot bench --out docs/benchmark.md --force
 
       taskset -c 0 chewbot bench --long --out bench.md
+
+      chewbot bench --sweep 32 --out bench.md
     """
-    from chewbot.bench import benchmark
+    from chewbot.bench import bench_sweep, benchmark, sweep_markdown
     from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
 
+    if sweep & (sweep - 1):
+        fail(ChewbotError(f"--sweep {sweep}: the base samples of a Sobol' study must be a power of 2 (8, 16, 32, ...)"), EXIT_BAD_INPUT)
     with errors_reported():
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
             text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
+            if sweep:
+                text += sweep_markdown(*bench_sweep(sweep, progress=step))
         stdout.print(text, markup=False, highlight=False)
         if out is not None:
             with atomic_file(out, force) as tmp:
@@ -522,6 +532,7 @@ def track_incisor(
 app.command("import-motion")(import_motion)
 app.command("identify")(identify)
 app.command("simulate")(simulate)
+app.command()(sweep)
 
 
 @app.command()

@@ -104,7 +104,8 @@ def pause_for_tests(stage: str) -> None:
 
     Stages: ``import`` (between the entry point and the command's imports), ``dynamics`` (a run's inverse
     dynamics is about to start), ``writing`` (a run's results.csv is written in the temporary folder), ``fit``
-    (``identify``'s least squares are about to start).
+    (``identify``'s least squares are about to start), ``chunk`` (a sweep has written a chunk of evaluations to its
+    folder).
     """
     spec = os.environ.get(TEST_PAUSE_VARIABLE, "")
     name, _, flag = spec.partition(":")

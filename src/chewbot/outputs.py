@@ -343,6 +343,23 @@ def atomic_members(folder: Path, names: list[str], force: bool = False, marker: 
         _remove(staging)
         for old in aside.values():
             _remove(old)
+def atomic_member(path: Path):
+    """Yield a temporary path beside ``path``, a file inside an output folder that chewbot is writing and marks
+    itself (a sweep's chunk, its run.json); when the block ends without an error it becomes ``path`` (replacing
+    an older version of it), on an error or a signal it is removed: the file is whole or absent, never half
+    written. The temporary name carries the process id, so :func:`remove_stale` removes it if the process dies."""
+    path = Path(path)
+    tmp = _temporary(path, "partial")
+    try:
+        yield tmp
+        with shield():
+            os.replace(tmp, path)
+    except BaseException as exc:
+        with shield():
+            _remove(tmp)
+        if isinstance(exc, OSError):
+            raise cannot_write(path, exc) from exc
+        raise
 
 
 @contextmanager

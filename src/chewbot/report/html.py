@@ -68,18 +68,41 @@ def write_report(record: dict, model: Model, view: RunView, path: Path, files: l
         _plots_section(view, figures),
         _run_section(record, model, view, files or []),
     ]
+    page = render_page(
+        title=f"chewbot report: {model.name}, {record['task']['name']} ({o['side']} side)",
+        subtitle=f"{model.description} · {view.n} samples · {o['orientation']} · {dynamics_label(record, model)}",
+        nav=RUN_NAV, body="\n".join(body), figures=figures)
+    Path(path).write_text(page, encoding="utf-8")
+    return Path(path)
+
+
+RUN_NAV = (("robot-section", "Robot"), ("checks", "Checks"), ("summary", "Summary"), ("plots", "Plots"),
+           ("run", "Run details and files"))
+
+
+def render_page(title: str, subtitle: str, nav, body: str, figures: dict) -> str:
+    """A self-contained page in chewbot's report template: ``nav`` (anchor, label) pairs in the header, ``body``
+    (HTML sections), ``figures`` drawn into the elements of their ids (plotly.js inlined): each a figure as plotly.js's
+    JSON (a dict, NumPy arrays allowed) or a plotly ``Figure``."""
     template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
-    page = template.substitute(
-        title=html.escape(f"chewbot report: {model.name}, {record['task']['name']} ({o['side']} side)"),
-        subtitle=html.escape(f"{model.description} · {view.n} samples · {o['orientation']} · {dynamics_label(record, model)}"),
+    figures = {key: fig if isinstance(fig, dict) else _plotly_json(fig) for key, fig in figures.items()}
+    return template.substitute(
+        title=html.escape(title),
+        subtitle=html.escape(subtitle),
+        nav="".join(f'<a href="#{html.escape(a)}">{html.escape(label)}</a>' for a, label in nav),
         plotlyjs=_plotly_file("plotly.min.js"),
-        body="\n".join(body),
+        body=body,
         # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
         figures=json.dumps({"template": json.loads(_plotly_file("templates/plotly_white.json")), "figures": figures},
                            separators=(",", ":"), default=_json_value, allow_nan=False).replace("<", "\\u003c"),
     )
-    Path(path).write_text(page, encoding="utf-8")
-    return Path(path)
+
+
+def _plotly_json(figure) -> dict:
+    """A plotly ``Figure`` as plotly.js's JSON (NaN as null, as plotly writes it)."""
+    import plotly.io as pio
+
+    return json.loads(pio.to_json(figure, validate=False))
 
 
 @cache
@@ -294,6 +317,13 @@ def _series(t: np.ndarray, table: Table, names, panel: int = 1, labels=None, gro
                        "hovertemplate": f"{shown} = %{{y:.4g}} {label}<extra></extra>",
                        **({} if panel == 1 else {"xaxis": f"x{panel}", "yaxis": f"y{panel}"})})
     return traces, label
+
+
+def figure_layout(figure, height: int) -> None:
+    """The layout of the report's time plots on a plotly ``Figure`` (as :func:`_figure` gives the JSON ones)."""
+    figure.update_layout(height=height, margin=dict(l=70, r=20, t=30, b=50), hovermode="x unified",
+                         legend=dict(orientation="h", y=1.0, yanchor="bottom", x=0, font=dict(size=12)))
+    figure.update_xaxes(showspikes=True, spikemode="across", spikethickness=1)
 
 
 def _figure(data: list[dict], layout: dict, height: int) -> dict:

@@ -8,39 +8,18 @@ results.csv. The comparison's page puts the controllers' figures in one table an
 
 from __future__ import annotations
 
-import html
 import json
-from importlib import resources
 from pathlib import Path
-from string import Template
 
 import numpy as np
 
-from chewbot.report.html import (
-    _checks_section,
-    _e,
-    _f4,
-    _fmt,
-    _json_value,
-    _plotly_file,
-    _plots_section,
-    _table,
-    robot_figure,
-)
+from chewbot.report.html import RUN_NAV, _checks_section, _e, _f4, _fmt, _plots_section, _table, render_page, robot_figure
 from chewbot.report.view import PLOT_POINTS, RunView, ViewBuilder, every_kth
 from chewbot.results import Table, kinematics_table
 
 
-def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path) -> Path:
-    """The page of :func:`chewbot.report.html.write_report` with these sections and figures (plotly.js's JSON)."""
-    template = Template(resources.files("chewbot.report").joinpath("template.html").read_text("utf-8"))
-    page = template.substitute(
-        title=html.escape(title), subtitle=html.escape(subtitle), plotlyjs=_plotly_file("plotly.min.js"), body="\n".join(body),
-        # "<" only occurs inside JSON strings, where \u003c means the same: no "</script>" can end the block
-        figures=json.dumps({"template": json.loads(_plotly_file("templates/plotly_white.json")), "figures": figures},
-                           separators=(",", ":"), default=_json_value, allow_nan=False).replace("<", "\\u003c"),
-    )
-    Path(path).write_text(page, encoding="utf-8")
+def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path, nav=RUN_NAV) -> Path:
+    Path(path).write_text(render_page(title, subtitle, nav, "\n".join(body), figures), encoding="utf-8")
     return Path(path)
 
 
@@ -149,7 +128,8 @@ def write_comparison_report(results: dict, path: Path, files: list[str] | None =
         listed = ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)
         body.append(f'<section id="run"><h2>Files</h2><p>{listed}</p></section>')
     return _page(f"chewbot simulation: controllers compared on {first.plant.name}, {first.task.name}",
-                 f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path)
+                 f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path,
+                 nav=(("summary", "Tracking"), ("plots", "Errors"), ("run", "Files")))
 
 
 def _comparison_figure(results: dict) -> dict:

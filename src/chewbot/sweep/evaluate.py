@@ -1,0 +1,203 @@
+"""Evaluating a SPEC's model at many parameter sets: what a Dask worker runs for a chunk of evaluations.
+
+:func:`evaluate_chunk` is the function the cluster maps over chunks: a SPEC and the parameter values of a
+chunk's evaluations (rows) in, one column per output and an ``error`` column out. Each worker process keeps an
+:class:`Evaluator` per SPEC: the parameter file parsed once, the task built once per set of task parameters, the
+compiled kernels loaded once; an evaluation then costs the model's validation (about a millisecond, no graph is
+built: the kernels take the parameter vector as an input) and the run's stages its outputs need.
+
+An evaluation computes what ``chewbot run --set KEY=VALUE ...`` computes, with the same functions on the same
+inputs, so its outputs equal the run's numbers. One that fails (a pose out of reach, a value the model refuses,
+anything else) gives NaN outputs and its reason in ``error``: it never stops the sweep.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.errors import ChewbotError, KinematicsError
+from chewbot.sweep.quantities import OUTPUTS
+from chewbot.sweep.spec import COUNTERPARTS, Spec
+
+
+class Evaluator:
+    """Everything that stays the same over a SPEC's evaluations, and :meth:`evaluate` for a chunk of them."""
+
+    def __init__(self, spec: Spec):
+        from chewbot.params import read_parameter_file, resolve_model_path
+
+        self.spec = spec
+        self._raw = {}
+        for name in (spec.model, spec.counterpart or COUNTERPARTS.get(spec.model)):
+            if name is not None:
+                path = resolve_model_path(name)
+                raw = read_parameter_file(path)
+                self._raw[name] = (path, raw.pop("__sha256__"), raw)
+        self._tasks: dict = {}
+
+    def model(self, overrides: dict[str, float], name: str | None = None):
+        """The model (``name``: the SPEC's by default) with ``overrides``, as ``load_model(name, overrides)`` gives it."""
+        from chewbot.params import apply_overrides, model_from_dict
+
+        path, sha256, raw = self._raw[name or self.spec.model]
+        if not overrides:
+            return model_from_dict(raw, source=str(path), sha256=sha256)
+        label = f"{path} (with {', '.join(f'--set {k}={v:g}' for k, v in overrides.items())})"
+        return model_from_dict(apply_overrides(raw, overrides), source=str(path), sha256=sha256, label=label, overrides=overrides)
+
+    def task(self, mechanism: str, overrides: dict[str, float]):
+        """The SPEC's task for a mechanism (kept: it does not depend on the model's numbers). The default task is
+        built in the target's four coordinates, which the kinematics lift to six on the 6RSS with its sockets."""
+        key = (mechanism if self.spec.task != "default" else "", tuple(sorted(overrides.items())))
+        if key not in self._tasks:
+            if len(self._tasks) > 64:  # task parameters varied continuously: nothing to reuse
+                self._tasks.clear()
+            if self.spec.task == "default":
+                from chewbot.task.default import default_task, parameters_with
+
+                task = default_task(None, self.spec.side or "left", parameters_with(overrides) if overrides else None)
+            else:
+                from chewbot.task.csvio import read_task_csv
+
+                task = read_task_csv(Path(self.spec.task), side=self.spec.side, mechanism=mechanism)
+            self._tasks[key] = task
+        return self._tasks[key]
+
+    def evaluate(self, values: np.ndarray) -> dict:
+        """The outputs of each row of ``values`` (n, len(spec.keys)): {output: (n,) floats, "error": [str | None]}."""
+        names = self.spec.computed_outputs
+        out = {name: np.full(len(values), np.nan) for name in names}
+        errors: list[str | None] = [None] * len(values)
+        for k, row in enumerate(np.atleast_2d(values)):
+            overrides = {**self.spec.fixed, **{key: float(v) for key, v in zip(self.spec.keys, row)}}
+            ev = Evaluation(self, overrides)
+            try:
+                for name in names:
+                    o = OUTPUTS[name]
+                    out[name][k] = np.nan if o.target_only and not ev.model.has_hkp else o.value(ev)
+            except Exception as exc:  # noqa: BLE001  a failed evaluation is a row of NaN and its reason, never a crash
+                for name in names:
+                    out[name][k] = np.nan
+                errors[k] = failure_reason(exc)
+        out["error"] = errors
+        return out
+
+
+def failure_reason(exc: BaseException) -> str:
+    """The ``error`` text of a failed evaluation: chewbot's own message, or the exception's type and message."""
+    if isinstance(exc, ChewbotError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+class Evaluation:
+    """One parameter set, its run's stages computed when an output first needs them."""
+
+    def __init__(self, evaluator: Evaluator, overrides: dict[str, float]):
+        from chewbot.params import split_overrides
+
+        self.evaluator = evaluator
+        self.spec = evaluator.spec
+        self.model_overrides, self.task_overrides = split_overrides(overrides)
+
+    @cached_property
+    def model(self):
+        return self.evaluator.model(self.model_overrides)
+
+    def _kinematics(self, model):
+        from chewbot.kinematics.motion import solve_kinematics
+
+        task = self.evaluator.task(model.mechanism, self.task_overrides)
+        try:
+            return solve_kinematics(model, task, self.spec.orientation)
+        except KinematicsError as exc:  # name the task file's line, as chewbot run does
+            if task.lines is None or exc.sample is None:
+                raise
+            raise exc.located(f"{task.source}: line {task.lines[exc.sample]}") from None
+
+    @cached_property
+    def kinematics(self):
+        return self._kinematics(self.model)
+
+    @cached_property
+    def dynamics(self):
+        from chewbot.dynamics import inverse_dynamics
+
+        s = self.spec
+        options = {**({"goal": s.goal} if s.goal else {}), **({"friction": s.friction == "on"} if s.friction else {}),
+                   "contact": s.contact}
+        return inverse_dynamics(self.model, self.kinematics, s.method, **options)
+
+    @cached_property
+    def mu(self) -> np.ndarray:
+        """Transmission angles (N, 6), rad: results.csv's mu1..mu6."""
+        return np.arcsin(np.clip(self.kinematics.transmission, 0.0, 1.0))
+
+    @cached_property
+    def mci(self) -> np.ndarray:
+        from chewbot.analysis.coupling import joint_space_inertia, mci
+
+        return mci(joint_space_inertia(self.model, self.kinematics))
+
+    @cached_property
+    def mean_mci(self) -> np.ndarray:
+        return self.mci.mean(axis=0)
+
+    @cached_property
+    def counterpart_mean_mci(self) -> np.ndarray:
+        """Mean MCI_i of the counterpart mechanism with the same values, on the same motion."""
+        from chewbot.analysis.coupling import joint_space_inertia, mci
+
+        name = self.spec.counterpart or COUNTERPARTS[self.spec.model]
+        model = self.evaluator.model(self.model_overrides, name)
+        return mci(joint_space_inertia(model, self._kinematics(model))).mean(axis=0)
+
+    @cached_property
+    def checks(self) -> list:
+        """The validity checks of the run, on the columns its results.csv has."""
+        from chewbot.analysis.checks import run_checks
+        from chewbot.results import kinematics_table
+
+        kin, dyn = self.kinematics, self.dynamics
+        table = kinematics_table(kin)
+        table.add_block([f"mu{i + 1}" for i in range(6)], self.mu, "rad")
+        table.add("kappa_J", kin.kappa, "1")
+        table.add_block([f"tau{i + 1}" for i in range(6)], dyn.tau, "N*m")
+        for name, values in dyn.table.columns.items():
+            table.add(name, values, dyn.table.units[name])
+        return run_checks(self.model, table, dyn.info or None, self.spec.contact)
+
+    def check(self, name: str):
+        """The result of the validity check ``name``."""
+        return next(c for c in self.checks if c.name == name)
+
+    @cached_property
+    def failed_checks(self) -> list:
+        return [c for c in self.checks if c.fails_run]
+
+    @property
+    def fails(self) -> bool:
+        return bool(self.failed_checks)
+
+
+_EVALUATORS: dict[str, object] = {}
+
+
+def evaluate_chunk(spec: Spec, values: np.ndarray) -> dict:
+    """What a worker computes for a chunk: the rows of ``values`` (parameter values, or poses for a grid over
+    poses) -> {column: (n,) floats, "error": [str | None]}. The evaluator of a SPEC is kept in the worker."""
+    key = spec.digest()
+    evaluator = _EVALUATORS.get(key)
+    if evaluator is None:
+        if spec.over_poses:
+            from chewbot.sweep.maps import PoseEvaluator
+
+            evaluator = PoseEvaluator(spec)
+        else:
+            evaluator = Evaluator(spec)
+        _EVALUATORS.clear()  # one SPEC at a time per worker
+        _EVALUATORS[key] = evaluator
+    return evaluator.evaluate(np.asarray(values, dtype=float))
