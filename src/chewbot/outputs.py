@@ -343,6 +343,9 @@ def atomic_members(folder: Path, names: list[str], force: bool = False, marker: 
         _remove(staging)
         for old in aside.values():
             _remove(old)
+
+
+@contextmanager
 def atomic_member(path: Path):
     """Yield a temporary path beside ``path``, a file inside an output folder that chewbot is writing and marks
     itself (a sweep's chunk, its run.json); when the block ends without an error it becomes ``path`` (replacing

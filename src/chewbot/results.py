@@ -270,9 +270,10 @@ class RunRecord:
     files: list[Path] = field(default_factory=list)
 
 
-def _versions() -> dict[str, str]:
+def versions(*extra: str) -> dict[str, str]:
+    """The versions of Python, chewbot and the libraries its results depend on, and of the packages ``extra``."""
     out = {"python": platform.python_version()}
-    for pkg in ("chewbot", "numpy", "scipy", "casadi", "pydantic", "matplotlib", "plotly"):
+    for pkg in ("chewbot", "numpy", "scipy", "casadi", "pydantic", "matplotlib", "plotly", *extra):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -296,9 +297,9 @@ def task_record(task: Task) -> dict:
             "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})}
 
 
-def environment_record() -> dict:
-    """The versions of chewbot and its libraries, and the platform."""
-    return {"versions": _versions(), "platform": platform.platform()}
+def environment_record(*extra: str) -> dict:
+    """The versions of chewbot and its libraries (and of the packages ``extra``), and the platform."""
+    return {"versions": versions(*extra), "platform": platform.platform()}
 
 
 def columns_record(columns: Table) -> dict:

@@ -11,16 +11,15 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import platform
 import sys
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
+from chewbot.results import environment_record
 from chewbot.sweep.evaluate import evaluate_chunk
 from chewbot.sweep.quantities import OUTPUTS
 from chewbot.sweep.record import SweepFolder
@@ -99,19 +98,6 @@ def prepare(spec: Spec) -> None:
     prepare_kernels(kernels)
 
 
-def _versions() -> dict[str, str]:
-    """The versions a run records, and those of the packages a sweep adds."""
-    from chewbot.pipeline import _versions as run_versions
-
-    def version(package: str) -> str:
-        try:
-            return metadata.version(package)
-        except metadata.PackageNotFoundError:
-            return "not installed"
-
-    return {**run_versions(), **{p: version(p) for p in ("distributed", "SALib", "pyarrow")}}
-
-
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
@@ -140,7 +126,7 @@ def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = Non
     if not resume:
         record = {"spec": spec.as_dict(), "spec_file": spec.source, "spec_sha256": digest, "inputs": files,
                   "outputs": output_descriptions(spec), "started": _now(), "command": sys.argv,
-                  "versions": _versions(), "platform": platform.platform()}
+                  **environment_record("distributed", "SALib", "pyarrow")}
         folder = SweepFolder.start(out, record, text, force, inputs)
     result = SweepResult(folder.path, spec)
     started = time.perf_counter()
