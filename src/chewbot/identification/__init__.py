@@ -22,6 +22,14 @@ _EXPORTS = {
 }
 __all__ = sorted(_EXPORTS)
 
+# A direction of the parameters is not identifiable where its singular value (unit-norm columns) is below this
+# fraction of the largest: the torques then change along it less than 1e-8 of what the best direction changes them.
+RCOND = 1e-8
+# ... or where its standard error exceeds this fraction of the parameters' reference magnitudes
+# (:func:`chewbot.identification.estimate.references`): the log does not tell the value better than that, and the
+# start value is kept.
+MAX_RELATIVE_SE = 0.3
+
 
 def __getattr__(name: str):
     if name in _EXPORTS:

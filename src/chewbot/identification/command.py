@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from chewbot.identification.estimate import MAX_RELATIVE_SE
+from chewbot.identification import MAX_RELATIVE_SE
 from chewbot.task.smoothing import WINDOW_S
 
 

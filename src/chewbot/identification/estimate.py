@@ -28,17 +28,12 @@ from scipy.optimize import least_squares
 from chewbot.casadi_tools import evaluate, native
 from chewbot.command import check_interrupted, pause_for_tests
 from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
+from chewbot.identification import MAX_RELATIVE_SE, RCOND
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 
-# A direction of the parameters is not identifiable where its singular value (unit-norm columns) is below this
-# fraction of the largest: the torques then change along it less than 1e-8 of what the best direction changes them.
-RCOND = 1e-8
-# ... or where its standard error exceeds this fraction of the parameters' reference magnitudes (:func:`references`):
-# the log does not tell the value better than that, and the start value is kept.
-MAX_RELATIVE_SE = 0.3
 # Newton on the normal forces stops when every step is below this (N) times 1 + abs(N): 1e-10 N on forces of a few
 # newtons, above the rounding of N (the torques' rounding over the smallest singular value of d tau / d N).
 N_STEP_TOL = 1e-10

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from chewbot.errors import ChewbotError
-from chewbot.identification.estimate import MAX_RELATIVE_SE, RCOND, Fit, ReducedProblem, fit
+from chewbot.identification import MAX_RELATIVE_SE, RCOND
+from chewbot.identification.estimate import Fit, ReducedProblem, fit
 from chewbot.identification.log import RobotLog
 from chewbot.identification.motion import LogMotion, log_motion
 from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMETERS, x_of

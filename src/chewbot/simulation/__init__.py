@@ -1,1 +1,5 @@
-"""Closed-loop simulation: forward dynamics, controllers, the loop at the control rate."""
+"""Closed-loop simulation: forward dynamics, controllers, the loop at the control rate.
+
+Nothing heavy is imported here: the command line reads :data:`CONTROLLERS` without loading CasADi."""
+
+CONTROLLERS = ("feedforward", "pd", "computed-torque")

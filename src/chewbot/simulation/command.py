@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from chewbot.simulation.controllers import CONTROLLERS
+from chewbot.simulation import CONTROLLERS
 
 SIMULATE_STEPS = 8  # models and task, simulation, kinematics, checks, results.csv, figures, report (and the compile)
 

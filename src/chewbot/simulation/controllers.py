@@ -41,10 +41,10 @@ from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.model_vector import N_P, c_name, cached_graph, symbols
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
+from chewbot.simulation import CONTROLLERS
 from chewbot.simulation.reference import Reference
 
 METHODS = ("hessian", "lagrange", "liang", "6rss-core", "newton-euler")
-CONTROLLERS = ("feedforward", "pd", "computed-torque")
 CONTROL_INPUTS = ("q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains", "B", "p")
 
 

@@ -28,7 +28,7 @@ from chewbot.model import Model
 from chewbot.outputs import Marker, atomic_folder, to_json
 from chewbot.params import load_model, split_overrides
 from chewbot.pipeline import input_files as run_inputs
-from chewbot.pipeline import load_task, run_json, singularity_columns
+from chewbot.pipeline import load_task, singularity_columns
 from chewbot.report.summary import crank_tips
 from chewbot.results import POSE_UNITS, RunOptions, Table, kinematics_table
 from chewbot.rotation import matrix_from_euler_angles

@@ -19,7 +19,6 @@ The measured error on an analytic signal, with and without noise, is printed by
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from chewbot.errors import TaskError
 
@@ -66,6 +65,8 @@ def window_samples(n: int, dt: float, window_s: float = WINDOW_S, polyorder: int
 
 def derivatives(t: np.ndarray, y: np.ndarray, window_s: float = WINDOW_S, polyorder: int = POLYORDER) -> tuple[np.ndarray, np.ndarray]:
     """First and second time derivatives of uniformly sampled ``y`` ((N,) or (N, k), samples first) at times ``t``."""
+    from scipy.signal import savgol_filter  # scipy.signal takes 0.7 s to import: only where derivatives are estimated
+
     y = np.asarray(y, dtype=float)
     dt = uniform_step(t)
     w = window_samples(y.shape[0], dt, window_s, polyorder)
