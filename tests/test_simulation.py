@@ -173,7 +173,6 @@ def test_feedforward_on_the_exact_model_tracks_over_a_short_motion():
 # ---------------------------------------------------------------------------------------- closed loop
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", ["target", "6rss"])
 def test_computed_torque_on_the_exact_model_reproduces_the_task(name):
     """Computed torque with the exact model evaluated at every integrator stage (rate None) from the exact initial
@@ -202,7 +201,6 @@ def mass_error_plant_set() -> dict[str, float]:
     return raw_mass
 
 
-@pytest.mark.slow
 def test_computed_torque_beats_pd_under_a_mass_error():
     """A plant 20 % heavier than the controller's model, the default task at 1 kHz: computed torque (its model wrong
     by 20 %, the feedback absorbing the rest) tracks at least 2 times better than independent PD on the cranks in
@@ -298,7 +296,6 @@ def test_simulate_writes_a_results_folder(tmp_path):
         assert not (tmp_path / "bad").exists()
 
 
-@pytest.mark.slow
 def test_simulate_compare_writes_one_folder_per_controller(tmp_path):
     """--compare: each controller's folder (:func:`check_folder`), the comparison's run.json and table."""
     from typer.testing import CliRunner

@@ -164,7 +164,7 @@ def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", 
         (tmp / "example.c").write_text(_example_program(prefix, kernels))
         (tmp / "README.md").write_text(_readme(prefix, kernels, model_name))
         (tmp / "Makefile").write_text(
-            "CC ?= cc\nCFLAGS ?= -O2 -std=c99\n\n"
+            "CC ?= cc\nCFLAGS ?= -O3 -march=native -std=c99\n\n"
             f"example: example.c {prefix}.c {prefix}.h\n\t$(CC) $(CFLAGS) -o $@ example.c {prefix}.c -lm\n\t./example\n"
         )
     return out
