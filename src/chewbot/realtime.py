@@ -191,7 +191,7 @@ def _view(buffer: np.ndarray, rows: int, cols: int) -> np.ndarray:
 
 
 # Compiler flags of the in-loop kernels: measured in docs/realtime.md ("The in-loop kernels").
-LOOP_FLAGS = ("-O3",)
+LOOP_FLAGS = ("-O3", "-march=native")
 
 
 def loop_spec(model_or_mechanism: Model | str, kind: str) -> KernelSpec:
