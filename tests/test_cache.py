@@ -62,6 +62,17 @@ def test_key_follows_the_source(tmp_path):
     assert source_digest.__wrapped__(copy) != source_digest(package)
 
 
+def test_a_library_built_for_this_processor_is_keyed_by_it(monkeypatch):
+    """-march=native code may not run on another processor: its key names the processor (a cache shared between
+    machines never hands it over); portable flags leave the processor out of the key."""
+    spec = _tiny("processor")
+    native_flags, portable = ("-O3", "-march=native"), ("-O1",)
+    here = casadi_tools.kernel_key(spec, native_flags), casadi_tools.kernel_key(spec, portable)
+    monkeypatch.setattr(casadi_tools, "_processor_identity", lambda: "x86_64 another processor")
+    assert casadi_tools.kernel_key(spec, native_flags) != here[0]
+    assert casadi_tools.kernel_key(spec, portable) == here[1]
+
+
 @needs_compiler
 def test_a_warm_run_builds_no_graph(tmp_path):
     """After the kernels of a run are in the cache, a fresh process computes the run with CasADi's graph

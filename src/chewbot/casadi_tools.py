@@ -22,6 +22,7 @@ import functools
 import hashlib
 import json
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -151,12 +152,28 @@ def _compiler_identity(cc: str) -> str:
     return f"{shutil.which(cc)} {version[0] if version else ''}"
 
 
+@functools.cache
+def _processor_identity() -> str:
+    """The processor's architecture and model (Linux: /proc/cpuinfo's "model name"), part of the key of a library
+    built for this processor only (-march=native): a cache shared between machines never hands it to another."""
+    model = ""
+    try:
+        with open("/proc/cpuinfo") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), "")
+    except OSError:
+        pass
+    return f"{platform.machine()} {model or platform.processor()}"
+
+
 def kernel_key(spec: KernelSpec, flags: tuple[str, ...] = FLAGS) -> str:
     """The cache key of a kernel, from what determines its code, without building it: chewbot's source
-    (:func:`source_digest`), the kernel's name and key, the chewbot and CasADi versions, the compiler and flags."""
+    (:func:`source_digest`), the kernel's name and key, the chewbot and CasADi versions, the compiler and flags,
+    and the processor where a flag builds for it (-march=native)."""
     cc = c_compiler() or ""
     parts = [source_digest(), spec.name, repr(spec.key), _chewbot_version(), ca.__version__,
              _compiler_identity(cc) if cc else "", list(flags)]
+    if any(flag.startswith("-march=native") or flag.startswith("-mcpu=native") for flag in flags):
+        parts.append(_processor_identity())
     return hashlib.sha256(json.dumps(parts).encode()).hexdigest()[:24]
 
 
