@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -20,17 +19,6 @@ def _assert_nothing_written(folder, out_name: str) -> None:
     """No results folder and no temporary sibling left behind."""
     assert not (folder / out_name).exists()
     assert [p.name for p in folder.iterdir() if out_name in p.name] == []
-
-
-@pytest.fixture(scope="module")
-def task_csv(tmp_path_factory):
-    """A small reachable target task: 0.5 s at 100 Hz, millimetres and degrees, with a bite force."""
-    t = np.linspace(0.0, 0.5, 51)
-    s = np.sin(np.pi * t / 0.5) ** 2
-    rows = ["t,X[mm],Y[mm],alpha[deg],beta[deg],Fz"] + [f"{a:.3f},{2 * b:.6f},{b:.6f},{b:.6f},{5 * b:.6f},{-20 * b:.6f}" for a, b in zip(t, s)]
-    path = tmp_path_factory.mktemp("tasks") / "task.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
 def _edited(task_csv, tmp_path, name: str, edit) -> str:

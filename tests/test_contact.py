@@ -221,17 +221,6 @@ def test_newton_euler_infeasible_samples_are_named_never_clipped():
         inverse_dynamics(m, kin, "newton-euler", contact="unilateral", strict=True)
 
 
-@pytest.fixture(scope="module")
-def small_task(tmp_path_factory):
-    """0.5 s at 100 Hz of the target, a bite force of up to 20 N (as tests/test_cli.py's task)."""
-    t = np.linspace(0.0, 0.5, 51)
-    s = np.sin(np.pi * t / 0.5) ** 2
-    rows = ["t,X[mm],Y[mm],alpha[deg],beta[deg],Fz"] + [f"{a:.3f},{2 * b:.6f},{b:.6f},{b:.6f},{5 * b:.6f},{-20 * b:.6f}" for a, b in zip(t, s)]
-    path = tmp_path_factory.mktemp("contact") / "task.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return str(path)
-
-
 def _cli(*args):
     from typer.testing import CliRunner
 
@@ -240,11 +229,11 @@ def _cli(*args):
     return CliRunner().invoke(app, list(args))
 
 
-def test_run_with_the_unilateral_contact_records_it_and_names_the_fallback(small_task, tmp_path):
+def test_run_with_the_unilateral_contact_records_it_and_names_the_fallback(task_csv, tmp_path):
     from chewbot.results import read_results
 
     out = tmp_path / "pressed"
-    result = _cli("run", "--task", small_task, "--contact", "unilateral", "--set", "contact.preload_N=1", "--out", str(out), "-q")
+    result = _cli("run", "--task", str(task_csv), "--contact", "unilateral", "--set", "contact.preload_N=1", "--out", str(out), "-q")
     assert result.exit_code == 0, result.output
     run_json, table = read_results(out)
     assert run_json["options"]["contact"] == "unilateral"
@@ -256,13 +245,13 @@ def test_run_with_the_unilateral_contact_records_it_and_names_the_fallback(small
     assert "HKP normal forces" in report and "unilateral fallback" in report
 
 
-def test_unilateral_contact_that_the_actuators_cannot_hold_fails_the_run(small_task):
+def test_unilateral_contact_that_the_actuators_cannot_hold_fails_the_run(task_csv):
     """A preload of 300 N with newton-euler: no sample has torques within the limits that hold it; the run's checks
     fail (chewbot run then exits 4, after writing the folder: exit_after_checks, tests/test_outputs.py)."""
     from chewbot.analysis.checks import run_fails
     from chewbot.pipeline import RunOptions, compute
 
-    result = compute(RunOptions(task=small_task, method="newton-euler", contact="unilateral",
+    result = compute(RunOptions(task=str(task_csv), method="newton-euler", contact="unilateral",
                                 overrides={"contact.preload_N": 300.0}))
     checks = {c.name: c for c in result.checks}
     infeasible = checks["distribution-infeasible"]

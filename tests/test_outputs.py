@@ -43,17 +43,6 @@ def invoke(*args: str):
 
 
 @pytest.fixture(scope="module")
-def task_csv(tmp_path_factory):
-    """A small reachable target task: 0.5 s at 100 Hz, millimetres and degrees, a bite force of 20 N."""
-    t = np.linspace(0.0, 0.5, 51)
-    s = np.sin(np.pi * t / 0.5) ** 2
-    rows = ["t,X[mm],Y[mm],alpha[deg],beta[deg],Fz"] + [f"{a:.3f},{2 * b:.6f},{b:.6f},{b:.6f},{5 * b:.6f},{-20 * b:.6f}" for a, b in zip(t, s)]
-    path = tmp_path_factory.mktemp("tasks") / "task.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
-@pytest.fixture(scope="module")
 def finished_run(task_csv, tmp_path_factory):
     """One finished run (right side, so that the side is not the default), reused by the tests below."""
     out = tmp_path_factory.mktemp("runs") / "right"

@@ -29,17 +29,6 @@ from chewbot.task.default import ChewingParameters, default_task
 WAIT_S = 120  # a stage must be reached within this (a cold kernel cache on a loaded 2-core machine)
 
 
-@pytest.fixture(scope="module")
-def task_csv(tmp_path_factory):
-    """A small reachable target task: 0.5 s at 100 Hz with a bite force."""
-    t = np.linspace(0.0, 0.5, 51)
-    s = np.sin(np.pi * t / 0.5) ** 2
-    rows = ["t,X[mm],Y[mm],alpha[deg],beta[deg],Fz"] + [f"{a:.3f},{2 * b:.6f},{b:.6f},{b:.6f},{5 * b:.6f},{-20 * b:.6f}" for a, b in zip(t, s)]
-    path = tmp_path_factory.mktemp("tasks") / "task.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
 def _start(args: list[str], cwd: Path, prelude: str = "", **env) -> subprocess.Popen:
     """`chewbot ARGS` in a new process (through chewbot.command.main, as the installed program), ``prelude``
     run first (a test's own instrumentation)."""
