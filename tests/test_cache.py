@@ -16,9 +16,9 @@ import pytest
 from typer.testing import CliRunner
 
 import chewbot
-from chewbot import casadi_tools
+from chewbot.compiled import kernels as casadi_tools
 from chewbot.cli import app
-from chewbot.casadi_tools import KernelSpec, c_compiler, cache_dir, cache_root, compile_library, source_digest
+from chewbot.compiled.kernels import KernelSpec, c_compiler, cache_dir, cache_root, compile_library, source_digest
 
 needs_compiler = pytest.mark.skipif(c_compiler() is None, reason="no C compiler: kernels run in CasADi's virtual machine")
 
@@ -52,7 +52,7 @@ def test_location(monkeypatch, tmp_path):
 def test_key_follows_the_source(tmp_path):
     """An edit of a module that builds graphs changes the key (an editable install never reuses a stale kernel);
     an edit of the report does not."""
-    package = Path(casadi_tools.__file__).parent
+    package = Path(casadi_tools.__file__).parent.parent
     copy = tmp_path / "chewbot"
     shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
     assert source_digest(copy) == source_digest(package)
@@ -77,20 +77,20 @@ def test_a_library_built_for_this_processor_is_keyed_by_it(monkeypatch):
 def test_a_warm_run_builds_no_graph(tmp_path):
     """After the kernels of a run are in the cache, a fresh process computes the run with CasADi's graph
     building and code generation made to fail: the libraries are found by their key and loaded."""
-    from chewbot.params import load_model
-    from chewbot.pipeline import RunOptions, run_kernels
+    from chewbot.model.params import load_model
+    from chewbot.run.pipeline import RunOptions, run_kernels
 
     options = RunOptions(method="hessian")
     casadi_tools.prepare(run_kernels(load_model("target"), options))
     script = textwrap.dedent("""
         import casadi as ca, numpy as np
-        from chewbot import casadi_tools
+        from chewbot.compiled import kernels as casadi_tools
         def refuse(*args, **kwargs):
             raise AssertionError("a CasADi graph was built or C generated on a cache hit")
         ca.SX.sym = ca.MX.sym = refuse
         ca.CodeGenerator = refuse
         casadi_tools.KernelSpec.graph = refuse
-        from chewbot.pipeline import RunOptions, compute
+        from chewbot.run.pipeline import RunOptions, compute
         result = compute(RunOptions(method="hessian"))
         assert np.isfinite(result.dynamics.tau).all() and np.abs(result.dynamics.tau).max() > 0.1
         print("ok")
@@ -110,7 +110,7 @@ def test_two_processes_compiling_the_same_kernel_both_succeed(tmp_path):
         from pathlib import Path
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_cache import _tiny
-        from chewbot.casadi_tools import native
+        from chewbot.compiled.kernels import native
         while not Path({str(start)!r}).exists():
             time.sleep(0.01)
         fn = native(_tiny("concurrent"))

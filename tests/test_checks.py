@@ -27,7 +27,7 @@ from chewbot.dynamics import inverse_dynamics
 from chewbot.kinematics.conditioning import jacobian_conditioning, reciprocal_condition
 from chewbot.kinematics.ik import transmission
 from chewbot.model import Limits
-from chewbot.pipeline import RunOptions, compute
+from chewbot.run.pipeline import RunOptions, compute
 from chewbot.report.summary import crank_tips
 from chewbot.rotation import matrix_from_euler_angles
 
@@ -187,7 +187,7 @@ def test_contact_pull_under_a_unilateral_contact_fails_below_the_preload():
     bil.update(0, cols)
     assert {c.name: c for c in bil.results()}["contact-pull"].samples == 0
     # for_model takes the preload from the model's contact.preload_N
-    from chewbot.params import load_model
+    from chewbot.model.params import load_model
 
     ctx = RunChecks.for_model(load_model("target", {"contact.preload_N": 2.0}), "unilateral").checks[0].ctx
     assert ctx.preload == 2.0 and ctx.contact == "unilateral"

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from chewbot.kinematics.ik import continuous
-from chewbot.pipeline import RunOptions, compute, run, write
+from chewbot.run.pipeline import RunOptions, compute, run, write
 from chewbot.report.summary import column_stats, near_singular
 from chewbot.report.view import ViewBuilder
-from chewbot.results import Table
+from chewbot.table import Table
 
 CHUNK = 1000  # five full chunks and one of a single sample over the default task's 5001 samples
 
@@ -103,7 +103,7 @@ def test_the_warm_start_is_carried_across_chunks(monkeypatch):
 def test_theta_continues_across_chunks_as_unwrap_of_the_whole_task():
     """Crank angles that wrap around +-pi (a crank turning): each chunk made continuous on its own and shifted by
     whole turns to continue the one before equals NumPy's unwrap of the whole sequence."""
-    from chewbot.pipeline import _continued
+    from chewbot.run.pipeline import _continued
 
     rng = np.random.default_rng(3)
     turning = np.cumsum(rng.uniform(-0.4, 0.6, size=(2500, 6)), axis=0)

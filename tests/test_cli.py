@@ -6,7 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE, app
-from chewbot.params import BUILTIN_MODELS, builtin_model_path
+from chewbot.model.params import BUILTIN_MODELS, builtin_model_path
 
 runner = CliRunner()
 

@@ -2,7 +2,7 @@
 
 Routes: Newton-Euler's own normal forces (unknowns of its free-body equations) against the ones the contact kernel
 derives from its torques; the four frictionless formulations against each other; the mandible's Newton-Euler
-equations written in NumPy (chewbot.reference) with the coupler forces the torques imply; the unilateral
+equations written in NumPy (chewbot.bench.reference) with the coupler forces the torques imply; the unilateral
 distributions against SciPy's SLSQP on the same problem.
 """
 
@@ -20,8 +20,8 @@ from chewbot.dynamics import inverse_dynamics
 from chewbot.dynamics.contact import normal_force_map, normal_forces, unilateral_minimum_norm
 from chewbot.dynamics.newton_euler import GOALS
 from chewbot.errors import InfeasibleError
-from chewbot.params import load_model
-from chewbot.reference import _equations, slsqp_distribution
+from chewbot.model.params import load_model
+from chewbot.bench.reference import _equations, slsqp_distribution
 
 from conftest import default_kinematics, model
 
@@ -93,7 +93,7 @@ def test_every_frictionless_formulation_gives_the_same_normal_forces():
 
 
 def _mandible_residual(m, kin, tau, N):
-    """The mandible's six Newton-Euler equations (chewbot.reference, NumPy) with the coupler axial forces that tau
+    """The mandible's six Newton-Euler equations (chewbot.bench.reference, NumPy) with the coupler axial forces that tau
     implies through each crank's moment equation (tau_i = I_i theta_ddot_i + lever_i . F_S,i, F_S,i = F_rest,i +
     k_i u_i) and the normal forces N n at T_L, T_R: A k - (w - P N), (n, 6)."""
     e = _equations(m, kin, None)
@@ -230,7 +230,7 @@ def _cli(*args):
 
 
 def test_run_with_the_unilateral_contact_records_it_and_names_the_fallback(task_csv, tmp_path):
-    from chewbot.results import read_results
+    from chewbot.table import read_results
 
     out = tmp_path / "pressed"
     result = _cli("run", "--task", str(task_csv), "--contact", "unilateral", "--set", "contact.preload_N=1", "--out", str(out), "-q")
@@ -249,7 +249,7 @@ def test_unilateral_contact_that_the_actuators_cannot_hold_fails_the_run(task_cs
     """A preload of 300 N with newton-euler: no sample has torques within the limits that hold it; the run's checks
     fail (chewbot run then exits 4, after writing the folder: exit_after_checks, tests/test_outputs.py)."""
     from chewbot.analysis.checks import run_fails
-    from chewbot.pipeline import RunOptions, compute
+    from chewbot.run.pipeline import RunOptions, compute
 
     result = compute(RunOptions(task=str(task_csv), method="newton-euler", contact="unilateral",
                                 overrides={"contact.preload_N": 300.0}))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import default_kinematics, model
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics import inverse_dynamics
 from chewbot.dynamics.dalembert import reduced_rhs, reduced_terms
 from chewbot.dynamics.energy import energies, energy, generalised_state

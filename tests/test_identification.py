@@ -22,8 +22,8 @@ from chewbot.errors import ChewbotError, TaskError
 from chewbot.identification import identify, read_log
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_of, x_of, x_of_phi
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.pipeline import compute
-from chewbot.results import RunOptions
+from chewbot.run.pipeline import compute
+from chewbot.table import RunOptions
 from chewbot.task.default import ChewingParameters, default_task
 
 runner = CliRunner()

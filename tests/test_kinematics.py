@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import default_kinematics, model
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import pose_function
 from chewbot.kinematics.ik import forward_kinematics, inverse_kinematics, transmission
@@ -21,7 +21,7 @@ from chewbot.rotation import (
     matrix_from_euler_angles,
     matrix_from_euler_parameters,
 )
-from chewbot.task.base import TARGET_COORDS, Task
+from chewbot.kinematics.task import TARGET_COORDS, Task
 from chewbot.task.default import ChewingParameters, default_task, lift_to_full
 
 ORIENTATIONS = ("euler-angles", "euler-parameters")

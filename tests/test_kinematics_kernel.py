@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from conftest import default_kinematics, model
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import parasitic_function, points_function, pose_function, rates_function
 from chewbot.kinematics.ik import inverse_kinematics, transmission
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.symbolic import ORIENTATIONS
 from chewbot.rotation import R_omega, euler_angles_to_parameters, matrix_from_euler_angles
-from chewbot.task.base import TARGET_COORDS, Task
+from chewbot.kinematics.task import TARGET_COORDS, Task
 from chewbot.task.default import ChewingParameters, default_task
 
 

@@ -1,4 +1,4 @@
-"""The in-loop kernels (chewbot.realtime.loop_kernel): one sample at a time from preallocated arrays, against the
+"""The in-loop kernels (chewbot.export.realtime.loop_kernel): one sample at a time from preallocated arrays, against the
 batch API on the same samples of the default task; and the arrays are the kernel's own, written in place."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from conftest import default_kinematics, model
 
 from chewbot.analysis.coupling import coupling
-from chewbot.casadi_tools import FLAGS, c_compiler
+from chewbot.compiled.kernels import FLAGS, c_compiler
 from chewbot.dynamics import inverse_dynamics
-from chewbot.realtime import g1_distribution, loop_kernel
+from chewbot.export.realtime import g1_distribution, loop_kernel
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="the in-loop kernels need a C compiler")
 

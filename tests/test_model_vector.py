@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from conftest import default_kinematics, model
 
-from chewbot.casadi_tools import c_compiler, evaluate, native
+from chewbot.compiled.kernels import c_compiler, evaluate, native
 from chewbot.dynamics.core6rss import torque_kernel
-from chewbot.model_vector import BLOCKS, N_P, SymbolicModel, block_slice, parameter_index, parameter_names
-from chewbot.params import BUILTIN_MODELS, builtin_model_path, load_model
+from chewbot.model.vector import BLOCKS, N_P, SymbolicModel, block_slice, parameter_index, parameter_names
+from chewbot.model.params import BUILTIN_MODELS, builtin_model_path, load_model
 
 
 def _file_value(raw: dict, key: str):

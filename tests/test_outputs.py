@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 
 from chewbot.analysis.checks import results_from_json
 from chewbot.cli import EXIT_CHECK_FAILED, EXIT_OUTPUT, app, exit_after_checks
-from chewbot.outputs import (
+from chewbot.files import (
     RESULTS_FOLDER,
     WRITTEN_FILE,
     OutputError,
@@ -30,8 +30,8 @@ from chewbot.outputs import (
     marker_line,
     remove_stale,
 )
-from chewbot.params import builtin_model_path
-from chewbot.results import Table, read_results
+from chewbot.model.params import builtin_model_path
+from chewbot.table import Table, read_results
 from chewbot.task.csvio import read_task_csv
 
 runner = CliRunner()
@@ -147,7 +147,7 @@ def test_single_files_carry_the_marker_and_are_written_all_or_none(tmp_path):
 
 
 def test_bench_out_follows_the_force_rule(tmp_path, monkeypatch):
-    from chewbot import bench
+    from chewbot.bench import benchmark as bench
 
     # the timings themselves are not this test's subject
     monkeypatch.setattr(bench, "benchmark", lambda **options: "| case | median (ms) |\n")
@@ -165,7 +165,7 @@ def test_bench_out_follows_the_force_rule(tmp_path, monkeypatch):
 def test_export_writes_its_marker_and_force_replaces_only_an_export(tmp_path):
     import casadi as ca
 
-    from chewbot.export import Kernel, export_c
+    from chewbot.export.c import Kernel, export_c
 
     x = ca.SX.sym("x")
     k = Kernel(ca.Function("twice", [x], [2 * x], ["x"], ["y"]), "2 x", {"x": "m"}, {"y": "m"}, {"x": np.array([1.5])})
@@ -304,7 +304,7 @@ def test_dash_h_is_help_and_flags_show_as_flags():
 def test_check_model_prints_units_and_warns_near_a_singular_home_pose(monkeypatch):
     import dataclasses
 
-    from chewbot import params
+    from chewbot.model import params
     from chewbot.kinematics.ik import transmission
     from chewbot.report.summary import home_pose
 
@@ -347,7 +347,7 @@ def test_the_report_names_the_dynamics_in_effect_and_every_figure_has_a_title(fi
 
 def test_study_prints_its_table_of_claims(tmp_path, monkeypatch):
     from chewbot import study
-    from chewbot.outputs import STUDY_FOLDER
+    from chewbot.files import STUDY_FOLDER
     from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 
     def fake(out, force=False, progress=None):

@@ -15,8 +15,8 @@ from chewbot.cli import EXIT_BAD_INPUT, app
 from chewbot.dynamics import inverse_dynamics
 from chewbot.errors import ParameterError, TaskError
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.model_vector import vector_digest
-from chewbot.params import apply_overrides, builtin_model_path, load_model, parse_override, read_parameter_file
+from chewbot.model.vector import vector_digest
+from chewbot.model.params import apply_overrides, builtin_model_path, load_model, parse_override, read_parameter_file
 from chewbot.report.summary import home_pose
 from chewbot.task.default import ChewingParameters, default_task, parameters_with
 
@@ -144,7 +144,7 @@ def test_applying_overrides_builds_no_graph(monkeypatch):
     """A sweep applies overrides to thousands of parameter sets: loading and the vector are NumPy only."""
     raw = read_parameter_file(builtin_model_path("target"))
     monkeypatch.setattr(ca.SX, "sym", lambda *a, **k: (_ for _ in ()).throw(AssertionError("a graph was built")))
-    from chewbot.params import model_from_dict
+    from chewbot.model.params import model_from_dict
 
     m = model_from_dict(apply_overrides(raw, {"chains.crank_length_mm[3]": 12.5}), source="target.toml")
     assert m.vector()[0] == 9.8

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from chewbot.errors import ParameterError
-from chewbot.params import BUILTIN_MODELS, builtin_model_path, load_model
+from chewbot.model.params import BUILTIN_MODELS, builtin_model_path, load_model
 
 
 @pytest.mark.parametrize("name", BUILTIN_MODELS)

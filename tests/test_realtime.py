@@ -15,18 +15,18 @@ import pytest
 from conftest import default_kinematics, model
 from typer.testing import CliRunner
 
-from chewbot.casadi_tools import NativeFunction, c_compiler, evaluate
+from chewbot.compiled.kernels import NativeFunction, c_compiler, evaluate
 from chewbot.cli import app
 from chewbot.dynamics import inverse_dynamics
 from chewbot.dynamics.core6rss import core_terms, dynamics_kernel, torque_kernel
 from chewbot.dynamics.dalembert import reduced_terms
 from chewbot.dynamics.energy import energies, generalised_state
 from chewbot.dynamics.hessian import hessian_rates
-from chewbot.export import export_c
+from chewbot.export.c import export_c
 from chewbot.kinematics.functions import jacobians_function
-from chewbot.realtime import EXAMPLE_T, example_inputs, g1_distribution, kernels
+from chewbot.export.realtime import EXAMPLE_T, example_inputs, g1_distribution, kernels
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.reference import frictionless_torques, slsqp_min_torque
+from chewbot.bench.reference import frictionless_torques, slsqp_min_torque
 from chewbot.task.default import default_task
 
 SIDES = ("left", "right")
@@ -272,7 +272,7 @@ def test_numpy_reference_with_friction_reproduces_the_newton_euler_torques():
     """At the solver's normal forces, the plain NumPy Newton-Euler with friction (written independently of the
     CasADi model) gives the same torques: an independent check of the friction model and the force chain."""
     from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
-    from chewbot.reference import _equations, _sample_torques
+    from chewbot.bench.reference import _equations, _sample_torques
 
     assert DELTA_N == DELTA_F_G  # the reference smooths both magnitudes with one delta
 

@@ -17,12 +17,12 @@ from plotly.offline import get_plotlyjs
 from typer.testing import CliRunner
 
 from chewbot.cli import app
-from chewbot.outputs import OutputExistsError
-from chewbot.pipeline import RunOptions, compute, write
+from chewbot.files import OutputExistsError
+from chewbot.run.pipeline import RunOptions, compute, write
 from chewbot.report import html as report_html
 from chewbot.report import view as report_view
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
-from chewbot.results import Table, kinematics_table
+from chewbot.table import Table, kinematics_table
 from conftest import default_kinematics, model
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"

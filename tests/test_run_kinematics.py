@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from chewbot.cli import app
-from chewbot.pipeline import RunOptions, compute, write
-from chewbot.results import Table
+from chewbot.run.pipeline import RunOptions, compute, write
+from chewbot.table import Table
 
 COORDS = ("X", "Y", "Z", "alpha", "beta", "gamma")
 ISSUE_COLUMNS = (

@@ -2,7 +2,7 @@
 standard error and no traceback, no temporary folder or file left, an existing output untouched.
 
 Each stage is reached without timing guesses: the test hook CHEWBOT_TEST_PAUSE=STAGE:FILE makes the process
-create FILE and wait there (chewbot.command.pause_for_tests); the compiler is caught as a child process of
+create FILE and wait there (chewbot.commands.common.pause_for_tests); the compiler is caught as a child process of
 chewbot; the NLP solver by the first call of CasADi's nlpsol, after which the signal comes from a timer while
 the solver runs sample after sample.
 """
@@ -20,19 +20,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from chewbot.command import EXIT_INTERRUPTED, EXIT_TERMINATED, TEST_PAUSE_VARIABLE
+from chewbot.commands.common import EXIT_INTERRUPTED, EXIT_TERMINATED, TEST_PAUSE_VARIABLE
 from chewbot import load_model
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.params import builtin_model_path
+from chewbot.model.params import builtin_model_path
 from chewbot.task.default import ChewingParameters, default_task
 
 WAIT_S = 120  # a stage must be reached within this (a cold kernel cache on a loaded 2-core machine)
 
 
 def _start(args: list[str], cwd: Path, prelude: str = "", **env) -> subprocess.Popen:
-    """`chewbot ARGS` in a new process (through chewbot.command.main, as the installed program), ``prelude``
+    """`chewbot ARGS` in a new process (through chewbot.commands.common.main, as the installed program), ``prelude``
     run first (a test's own instrumentation)."""
-    code = f"{prelude}\nimport sys\nfrom chewbot.command import main\nsys.exit(main(sys.argv[1:]))"
+    code = f"{prelude}\nimport sys\nfrom chewbot.commands.common import main\nsys.exit(main(sys.argv[1:]))"
     return subprocess.Popen([sys.executable, "-c", code, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, **env})
 
@@ -81,7 +81,7 @@ def _compiler_child(pid: int) -> bool:
 
 @pytest.mark.skipif(not Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").exists(), reason="needs Linux's /proc children list")
 def test_sigint_while_compiling_a_kernel(task_csv, tmp_path):
-    from chewbot.casadi_tools import c_compiler
+    from chewbot.compiled.kernels import c_compiler
 
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         pytest.skip("no C compiler, or compiling is switched off: nothing is compiled")

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from scipy.interpolate import BPoly
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics.contact import normal_forces
 from chewbot.dynamics.dalembert import reduced_kernel
 from chewbot.dynamics.energy import energies
 from chewbot.dynamics.hessian import hessian_rates
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.model_vector import N_P
-from chewbot.params import load_model
+from chewbot.model.vector import N_P
+from chewbot.model.params import load_model
 from chewbot.simulation.controllers import Gains, ModelBasedController, inverse_dynamics_function
 from chewbot.simulation.forward import forward_dynamics, n_coordinates, residual_function
 from chewbot.simulation.plant import Plant
@@ -189,7 +189,7 @@ def test_computed_torque_on_the_exact_model_reproduces_the_task(name):
 def mass_error_plant_set() -> dict[str, float]:
     """--plant-set of every mass 20 % heavier than the controller's model (the mandible, couplers, cranks)."""
     raw_mass = {"mandible.mass_g": None, "couplers.density_g_per_mm3": None}
-    from chewbot.params import read_parameter_file, resolve_model_path
+    from chewbot.model.params import read_parameter_file, resolve_model_path
 
     raw = read_parameter_file(resolve_model_path("target"))
     raw_mass["mandible.mass_g"] = raw["mandible"]["mass_g"] * 1.2
@@ -251,7 +251,7 @@ def check_folder(folder, controller: str) -> None:
     """A simulation folder: its files, results.csv's units, the checks on the plant's normal forces, no drift, and
     each row's accelerations those its state and applied torques produce (recomputed from the CSV, whose 17
     significant digits leave about 1e-12 relative)."""
-    from chewbot.results import Table
+    from chewbot.table import Table
 
     assert {"results.csv", "run.json", "report.html", "tracking_error.png", "torques.png", "saturation.png"} <= {p.name for p in folder.iterdir()}
     table = Table.read_csv(folder / "results.csv")
@@ -321,7 +321,7 @@ def test_sensor_estimate_and_noisy_pd():
     converges quadratically from a guess a micrometre off); with noise of 1e-4 rad PD on the estimate, with the gains
     docs/simulation.md gives for noisy encoders (the default PD gains are too fast for the estimator's lag), follows
     a short task (measured peaks 0.74 mm and 0.65 deg; asserted below 1.5 mm and 1.5 deg)."""
-    from chewbot.casadi_tools import native
+    from chewbot.compiled.kernels import native
     from chewbot.simulation.sensor import CrankSensor, forward_kinematics_kernel
 
     m = model("target")

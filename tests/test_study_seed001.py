@@ -8,7 +8,7 @@ import numpy as np
 
 import pytest
 
-from chewbot.results import Table
+from chewbot.table import Table
 from chewbot.study.seed001 import normal_force_signs, run
 
 

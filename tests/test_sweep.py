@@ -26,7 +26,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from chewbot.command import EXIT_INTERRUPTED, TEST_PAUSE_VARIABLE
+from chewbot.commands.common import EXIT_INTERRUPTED, TEST_PAUSE_VARIABLE
 from chewbot.errors import ChewbotError, KinematicsError
 from chewbot.sweep.record import SweepFolder
 from chewbot.sweep.spec import Parameter, Spec, SpecError, parse_spec, read_spec
@@ -147,8 +147,8 @@ def test_a_sample_equals_chewbot_run(local_sweep):
     """Each row equals chewbot run's numbers with the same --set values (the pipeline's run in memory); a row that
     failed has chewbot run's own error."""
     from chewbot.analysis.checks import run_fails
-    from chewbot.pipeline import compute
-    from chewbot.results import RunOptions
+    from chewbot.run.pipeline import compute
+    from chewbot.table import RunOptions
 
     table = pq.read_table(local_sweep / "samples.parquet").to_pylist()
     assert [r["sample"] for r in table] == [0, 1, 2, 3]
@@ -184,8 +184,8 @@ def test_a_sample_equals_chewbot_run(local_sweep):
 def test_unilateral_contact_as_chewbot_run(method):
     """contact = "unilateral" changes the torques (the unilateral distribution) and makes contact-pull a failure,
     as chewbot run --contact unilateral does; the normal forces are the run's."""
-    from chewbot.pipeline import compute
-    from chewbot.results import RunOptions
+    from chewbot.run.pipeline import compute
+    from chewbot.table import RunOptions
     from chewbot.sweep.evaluate import evaluate_chunk
 
     outputs = ["peak_tau_Nm", "min_N_L", "min_N_R", "contact_pull_share", "feasible"]
@@ -260,7 +260,7 @@ def test_ctrl_c_then_resume_on_a_separate_scheduler(spec_file, local_sweep, dask
     assert not (out / "chunks").exists()
     assert same_table(out / "samples.parquet", local_sweep / "samples.parquet")
     # a SPEC that changed is refused
-    from chewbot.sweep.run import input_files
+    from chewbot.outputs.sweep import input_files
 
     changed = parse_spec(tomllib.loads(SPEC.replace("samples = 4", "samples = 5")), "changed.toml")
     with pytest.raises(ChewbotError, match="cannot resume: the SPEC's samples changed"):
@@ -412,7 +412,7 @@ def test_singular_poses_of_a_map_are_the_kinematics_own(sixrss):
 def test_force_capability_of_the_6rss_by_its_closed_form(sixrss):
     """The 6RSS's torques are unique: tau = J_theta1^-T (G_f - s Q_B(d)), so the largest s is where the first
     abs(tau_i) reaches the limit: the linear program must give that."""
-    from chewbot.casadi_tools import evaluate, native
+    from chewbot.compiled.kernels import evaluate, native
     from chewbot.dynamics.dalembert import REDUCED_OUTPUTS, reduced_kernel
     from chewbot.dynamics.hessian import hessian_rates
     from chewbot.kinematics.motion import solve_kinematics

@@ -1,7 +1,7 @@
 """chewbot: kinematics, inverse dynamics and inertia coupling of the bio-inspired chewing robot.
 
 The names below are imported on first use, so that ``import chewbot`` (and the ``chewbot`` program's start,
-which must take over SIGINT before anything heavy loads: :mod:`chewbot.command`) costs nothing.
+which must take over SIGINT before anything heavy loads: :mod:`chewbot.commands.common`) costs nothing.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ _LAZY = {
     "ParameterError": "chewbot.errors",
     "TaskError": "chewbot.errors",
     "Model": "chewbot.model",
-    "BUILTIN_MODELS": "chewbot.params",
-    "load_model": "chewbot.params",
+    "BUILTIN_MODELS": "chewbot.model.params",
+    "load_model": "chewbot.model.params",
 }
 
 __all__ = [*sorted(_LAZY), "__version__"]

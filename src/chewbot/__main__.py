@@ -2,6 +2,6 @@
 
 import sys
 
-from chewbot.command import main
+from chewbot.commands.common import main
 
 sys.exit(main())

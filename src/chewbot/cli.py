@@ -1,7 +1,7 @@
 """The ``chewbot`` command line (typer + rich).
 
-Every command follows the same rules (docs/cli.md): exit codes and signals (:mod:`chewbot.command`), outputs
-written whole and never over what chewbot did not write (:mod:`chewbot.outputs`). The helpers below are what a
+Every command follows the same rules (docs/cli.md): exit codes and signals (:mod:`chewbot.commands.common`), outputs
+written whole and never over what chewbot did not write (:mod:`chewbot.files`). The helpers below are what a
 command calls: :func:`errors_reported`, :func:`fail`, :func:`progress`, :func:`exit_after_checks`, and the
 options :data:`FORCE_HELP`, :func:`flag`.
 """
@@ -16,7 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from chewbot.command import (  # noqa: F401  (the exit codes, for the commands and their tests)
+from chewbot.commands.common import (  # noqa: F401  (the exit codes, for the commands and their tests)
     EXIT_BAD_INPUT,
     EXIT_CHECK_FAILED,
     EXIT_INTERRUPTED,
@@ -27,10 +27,10 @@ from chewbot.command import (  # noqa: F401  (the exit codes, for the commands a
     check_interrupted,
 )
 from chewbot.errors import ChewbotError
-from chewbot.identification.command import identify
-from chewbot.recordings.command import import_motion
-from chewbot.simulation.command import simulate
-from chewbot.sweep.command import sweep
+from chewbot.commands.identify import identify
+from chewbot.commands.import_motion import import_motion
+from chewbot.commands.simulate import simulate
+from chewbot.commands.sweep import sweep
 
 app = typer.Typer(
     name="chewbot",
@@ -77,7 +77,7 @@ def exit_code(exc: BaseException) -> int:
     """The exit code for an error chewbot raised on purpose (the table in docs/cli.md). Exit code 4 is not an
     error's: it follows a complete output whose validity checks failed (:func:`exit_after_checks`)."""
     from chewbot.errors import KinematicsError
-    from chewbot.outputs import OutputError
+    from chewbot.files import OutputError
 
     for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (OutputError, EXIT_OUTPUT)):
         if isinstance(exc, kind):
@@ -194,7 +194,7 @@ SET_HELP = ("Override one number of the model (a parameter-file key in the file'
 
 def _overrides(arguments: list[str]) -> dict[str, float]:
     """``--set KEY=VALUE`` arguments as a dict, in order (a key given twice: the last value); exit 2 on a bad one."""
-    from chewbot.params import parse_override
+    from chewbot.model.params import parse_override
 
     with errors_reported():
         return dict(parse_override(a) for a in arguments)
@@ -245,9 +245,9 @@ def run(
 
       chewbot run --task long_recording.csv --no-figures --no-report --out runs/batch
     """
-    from chewbot.outputs import RESULTS_FOLDER, check_output
-    from chewbot.pipeline import RunOptions, input_files
-    from chewbot.pipeline import run as run_to_folder
+    from chewbot.files import RESULTS_FOLDER, check_output
+    from chewbot.run.pipeline import RunOptions, input_files
+    from chewbot.run.pipeline import run as run_to_folder
 
     overrides = _overrides(set_)
     if method is None:
@@ -256,7 +256,7 @@ def run(
         fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
     sixrss = False
     if method == "newton-euler" or contact is Contact.unilateral:  # options that only the target takes
-        from chewbot.params import load_model
+        from chewbot.model.params import load_model
 
         with errors_reported():
             sixrss = not load_model(model).has_hkp
@@ -284,7 +284,7 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by one
     step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
     the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
-    arrived that a library swallowed (:func:`chewbot.command.check_interrupted`)."""
+    arrived that a library swallowed (:func:`chewbot.commands.common.check_interrupted`)."""
     if quiet or not console.is_terminal:
         yield lambda msg, done=None, total=None: check_interrupted()
         return
@@ -363,7 +363,7 @@ def report_command(
 
       chewbot report runs/default --force
     """
-    from chewbot.pipeline import redraw
+    from chewbot.run.pipeline import redraw
 
     if no_figures and no_report:
         fail(ChewbotError("--no-figures and --no-report together leave nothing to write"), EXIT_BAD_INPUT)
@@ -402,8 +402,8 @@ def bench(
 
       chewbot bench --sweep 32 --out bench.md
     """
-    from chewbot.bench import bench_sweep, benchmark, sweep_markdown
-    from chewbot.outputs import WRITTEN_FILE, atomic_file, check_output, marker_line
+    from chewbot.bench.benchmark import bench_sweep, benchmark, sweep_markdown
+    from chewbot.files import WRITTEN_FILE, atomic_file, check_output, marker_line
 
     if sweep & (sweep - 1):
         fail(ChewbotError(f"--sweep {sweep}: the base samples of a Sobol' study must be a power of 2 (8, 16, 32, ...)"), EXIT_BAD_INPUT)
@@ -438,10 +438,10 @@ def export_c(
 
       chewbot export-c --out controller/chewbot && make -C controller/chewbot
     """
-    from chewbot.export import export_c as write_c
-    from chewbot.outputs import EXPORT_FOLDER, check_output
-    from chewbot.params import load_model
-    from chewbot.realtime import kernels
+    from chewbot.export.c import export_c as write_c
+    from chewbot.files import EXPORT_FOLDER, check_output
+    from chewbot.model.params import load_model
+    from chewbot.export.realtime import kernels
 
     with errors_reported():
         t, s = load_model(target), load_model(sixrss)
@@ -505,8 +505,8 @@ def track_incisor(
 
       chewbot track-incisor incisor.csv --out task.csv --pin alpha && chewbot run --task task.csv --out runs/tracked
     """
-    from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line
-    from chewbot.params import load_model
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.model.params import load_model
     from chewbot.task.csvio import read_incisor_csv
     from chewbot.task.incisor import track_incisor as track
 
@@ -545,7 +545,7 @@ def models() -> None:
     """
     from rich.table import Table as RichTable
 
-    from chewbot.params import BUILTIN_MODELS, builtin_model_path, load_model
+    from chewbot.model.params import BUILTIN_MODELS, builtin_model_path, load_model
 
     table = RichTable(title="built-in models")
     for col in ("name", "mechanism", "description"):
@@ -581,7 +581,7 @@ def check_model(
       chewbot check-model target --set chains.crank_length_mm[3]=12
     """
     from chewbot.analysis.checks import KAPPA_MIN, NEAR_SINGULAR_DEG
-    from chewbot.params import load_model
+    from chewbot.model.params import load_model
     from chewbot.report.summary import home_pose
 
     overrides = _overrides(set_)
@@ -664,7 +664,7 @@ def cache(context: typer.Context) -> None:
     """
     if context.invoked_subcommand is not None:
         return
-    from chewbot.casadi_tools import cache_info
+    from chewbot.compiled.kernels import cache_info
 
     try:
         info = cache_info()
@@ -683,7 +683,7 @@ def cache_clear() -> None:
 
       chewbot cache clear
     """
-    from chewbot.casadi_tools import cache_root, clear_cache
+    from chewbot.compiled.kernels import cache_root, clear_cache
 
     try:
         count, size = clear_cache()

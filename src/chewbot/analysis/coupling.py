@@ -28,11 +28,11 @@ import numpy as np
 
 import casadi as ca
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
 
 _OFF = ~np.eye(6, dtype=bool)
 

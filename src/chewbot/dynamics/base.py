@@ -4,7 +4,7 @@ A formulation is a function ``f(model, kin, **options) -> Dynamics``: the model,
 whole task (:class:`~chewbot.kinematics.motion.Kinematics`), and options of its own (side, friction, goal, ...).
 Adding a formulation is adding one module that calls :func:`register`.
 
-A run may give a long task in chunks of consecutive samples (:mod:`chewbot.pipeline`), one call per chunk. A
+A run may give a long task in chunks of consecutive samples (:mod:`chewbot.run.pipeline`), one call per chunk. A
 formulation whose samples depend on earlier ones (a solver warm-started from the previous sample's solution) takes
 the option ``carry``, the previous chunk's :attr:`Dynamics.carry` (None for the task's first chunk), and returns
 in ``carry`` what the next chunk needs: the chunks then give the results of the whole task in one call.
@@ -19,7 +19,7 @@ import numpy as np
 
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.results import Table
+from chewbot.table import Table
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,7 +58,7 @@ def register(name: str, kernels: Callable[..., list] | None = None):
 
 
 def formulation_kernels(mechanism: str, orientation: str, method: str, **options) -> list:
-    """The compiled kernels (:class:`~chewbot.casadi_tools.KernelSpec`) that ``method`` uses on a mechanism."""
+    """The compiled kernels (:class:`~chewbot.compiled.kernels.KernelSpec`) that ``method`` uses on a mechanism."""
     import chewbot.dynamics  # noqa: F401  (imports every formulation module, which registers itself)
 
     return KERNELS[method](mechanism, orientation, **options)

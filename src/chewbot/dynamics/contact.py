@@ -42,12 +42,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import c_name, graph_key, mechanism_of
-from chewbot.results import Table
+from chewbot.model.vector import c_name, graph_key, mechanism_of
+from chewbot.table import Table
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
 CONTACT_MODELS = ("bilateral", "unilateral")

@@ -39,14 +39,14 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import require_euler_angles
 from chewbot.kinematics.functions import lift_sx
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
 

@@ -25,11 +25,11 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import Energy, energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
 
 
 @dataclass(frozen=True)

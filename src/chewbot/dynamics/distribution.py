@@ -28,8 +28,8 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
-from chewbot.command import check_interrupted
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
+from chewbot.commands.common import check_interrupted
 from chewbot.errors import InfeasibleError
 
 # Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
@@ -67,7 +67,7 @@ class Problem:
     each taking the model's parameters p last (where the graph has them as an input).
 
     ``objective``: (D, x, friction, p) -> J = |r|^2, grad J, exact Hessian, Gauss-Newton Hessian (compiled
-    kernels, :func:`chewbot.casadi_tools.native`);
+    kernels, :func:`chewbot.compiled.kernels.native`);
     ``value``: (D, x, friction, p) -> J alone (for the line search);
     ``limits``: (D, x, friction, p) -> c (|c| <= the bound :func:`solve` is given); ``limit_names``: a label per
     entry of c; ``start``: (D, p) -> x, where Newton starts with friction (None: the friction-free optimum);
@@ -102,7 +102,7 @@ PROBLEM_KERNELS = ("objective", "value", "limits", "start")
 def problem_kernels(name: str, graph: Callable[[], ProblemGraph], key: tuple, has_start: bool = True) -> list[KernelSpec]:
     """The kernels of a :class:`Problem` (objective, value, limits and start, see there) named ``name_...``, of the
     expressions ``graph()`` returns; ``key``: what determines the graph besides chewbot's source (see
-    :class:`~chewbot.casadi_tools.KernelSpec`)."""
+    :class:`~chewbot.compiled.kernels.KernelSpec`)."""
 
     def objective(g: ProblemGraph) -> list:
         J = ca.sumsqr(g.residual)
@@ -150,7 +150,7 @@ class SampleData:
     """The per-sample data of a whole task (N, k), samples first, and the model's parameters p that every function
     takes last (none: ``p`` empty). ``D`` may be given as a CasADi matrix with one column per sample.
 
-    Each call runs a compiled kernel over every sample in one C loop (:func:`chewbot.casadi_tools.evaluate`, no
+    Each call runs a compiled kernel over every sample in one C loop (:func:`chewbot.compiled.kernels.evaluate`, no
     conversion through CasADi's matrices: a kernel mapped by CasADi over the samples costs 40 times as much).
     """
 
@@ -170,7 +170,7 @@ class SampleData:
 
     def __call__(self, fn, *args) -> list[np.ndarray]:
         """``fn(D, *args)`` on every sample; args (N, k) or scalars; outputs as
-        :func:`chewbot.casadi_tools.evaluate` gives them: (N, rows) or (N, rows, cols)."""
+        :func:`chewbot.compiled.kernels.evaluate` gives them: (N, rows) or (N, rows, cols)."""
         return evaluate(fn, self.D, *args, *self.p)
 
 

@@ -22,12 +22,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import Symbolic, symbolic
 from chewbot.model import Model
-from chewbot.model_vector import c_name, cached_graph, graph_key, mechanism_of, parameter_input
+from chewbot.model.vector import c_name, cached_graph, graph_key, mechanism_of, parameter_input
 
 ORIENTATION = "euler-angles"
 

@@ -23,13 +23,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
 
 LAGRANGE_OUTPUTS = ("D", "J_theta", "J_qEE", "Q_B")
 

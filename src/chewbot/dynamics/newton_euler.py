@@ -35,16 +35,16 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from chewbot.analysis.indices import friction_share, performance_indices
-from chewbot.casadi_tools import KernelSpec, evaluate, native
+from chewbot.dynamics.indices import friction_share, performance_indices
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics, register
 from chewbot.dynamics.contact import add_normal_forces, bound_names, check_contact
 from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.model import Model
-from chewbot.model_vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
-from chewbot.results import Table
+from chewbot.model.vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.table import Table
 
 # Regularisation of sgn(theta_dot) and v_T/|v_T| (known inputs per sample): below these speeds Coulomb
 # friction fades linearly to zero instead of jumping (static friction is indeterminate at rest anyway).
@@ -387,7 +387,7 @@ def benchmark_cases() -> dict:
     The kinematics and the compiled kernels are built on the first call of each case.
     """
     from chewbot.kinematics.motion import solve_kinematics
-    from chewbot.params import load_model
+    from chewbot.model.params import load_model
     from chewbot.task.default import default_task
 
     models = {name: load_model(name) for name in ("target", "6rss")}

@@ -6,7 +6,7 @@ The stages, one module each, in the order the data takes: :mod:`~chewbot.identif
 torque model of a sample and its exact derivatives, compiled), :mod:`~chewbot.identification.estimate` (bounded
 least squares with the normal forces eliminated, standard errors, identifiability),
 :mod:`~chewbot.identification.identifier` (all of them: :func:`identify`) and :mod:`~chewbot.identification.output`
-(the model file and the table). The command line is :mod:`~chewbot.identification.command`. The names below load
+(the model file and the table). The command line is :mod:`~chewbot.commands.identify`. The names below load
 on first use, so that the command line starts fast.
 """
 

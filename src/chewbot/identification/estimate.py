@@ -25,8 +25,8 @@ import numpy as np
 from scipy.linalg import qr
 from scipy.optimize import least_squares
 
-from chewbot.casadi_tools import evaluate, native
-from chewbot.command import check_interrupted, pause_for_tests
+from chewbot.compiled.kernels import evaluate, native
+from chewbot.commands.common import check_interrupted, pause_for_tests
 from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
 from chewbot.identification import MAX_RELATIVE_SE, RCOND
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate, native
+from chewbot.compiled.kernels import evaluate, native
 from chewbot.dynamics.newton_euler import EPS_THETA_DOT
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.identification.log import RobotLog
@@ -28,7 +28,7 @@ from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
 from scipy.signal import savgol_coeffs
 from chewbot.task import smoothing
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # Gauss-Newton on the angles stops when the largest step is below this (m or rad).
 STEP_TOL = 1e-13

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chewbot.model import Model
-from chewbot.model_vector import parameter_index
+from chewbot.model.vector import parameter_index
 
 INERTIA_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 

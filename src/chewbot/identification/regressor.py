@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from chewbot.casadi_tools import KernelSpec
+from chewbot.compiled.kernels import KernelSpec
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.identification.parameters import N_X, p_entries
-from chewbot.model_vector import N_P, SymbolicModel, c_name, graph_key
+from chewbot.model.vector import N_P, SymbolicModel, c_name, graph_key
 
 ORIENTATION = "euler-angles"
 

@@ -27,7 +27,7 @@ def reciprocal_condition(J: np.ndarray) -> np.ndarray:
 
 def jacobian_conditioning(model, q: np.ndarray) -> np.ndarray:
     """kappa (N,) of J_theta1 at poses q (N, 4) (target: X, Y, alpha, beta) or (N, 6) (6RSS: X_EE), m and rad."""
-    from chewbot.casadi_tools import evaluate, native
+    from chewbot.compiled.kernels import evaluate, native
     from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 
     q = np.atleast_2d(q)

@@ -2,7 +2,7 @@
 
 Given a mechanism's name (``"target"``, ``"6rss"``) each function takes the model's parameter vector p as its
 last input (:meth:`chewbot.model.Model.vector`); given a :class:`~chewbot.model.Model` it has that model's numbers
-folded in and no p. Each is meant to be mapped over a trajectory with :func:`chewbot.casadi_tools.evaluate`.
+folded in and no p. Each is meant to be mapped over a trajectory with :func:`chewbot.compiled.kernels.evaluate`.
 :func:`kinematics_kernel` is the compiled kernel of :func:`chewbot.kinematics.motion.solve_kinematics`: the whole
 stage in one call.
 """
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from chewbot.casadi_tools import KernelSpec
+from chewbot.compiled.kernels import KernelSpec
 from chewbot.kinematics.symbolic import COORDINATES, Symbolic, Z_parasitic_sx, check_orientation, gamma_parasitic_sx, symbolic
 from chewbot.model import Model
-from chewbot.model_vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.rotation import matrix_from_euler_angles_sx
 
 

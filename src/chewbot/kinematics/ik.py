@@ -7,7 +7,7 @@ r = sqrt(A^2 + B^2); abs(C) > r means the chain cannot reach the pose, abs(C) = 
 configuration where crank and coupler are aligned and the two branches meet. The sign of
 dh_i/dtheta_i = r sin(theta - atan2(B, A)) tells the branch; the working branch is the one through
 theta = 0 at the home pose, kept along the whole trajectory. Its sign per chain is part of the model's parameter
-vector (:mod:`chewbot.model_vector`), so the compiled kinematics (:func:`chewbot.kinematics.functions.kinematics_kernel`)
+vector (:mod:`chewbot.model.vector`), so the compiled kinematics (:func:`chewbot.kinematics.functions.kinematics_kernel`)
 solves the same branch; this NumPy version is its independent reference.
 """
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model

@@ -1,6 +1,6 @@
 """The kinematics of a whole task: pose, parasitic motions, actuator angles and all rates, vectorised.
 
-:func:`solve_kinematics` is the entry point: a :class:`~chewbot.task.base.Task` and a model in, a
+:func:`solve_kinematics` is the entry point: a :class:`~chewbot.kinematics.task.Task` and a model in, a
 :class:`Kinematics` (arrays, samples first) out. The whole stage is one call of the compiled
 :func:`~chewbot.kinematics.functions.kinematics_kernel` over the task; the checks (reach, singular chains,
 sockets, parallel singularity, the parasitic e3's denominator) then read its outputs.
@@ -12,14 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate, native
+from chewbot.compiled.kernels import evaluate, native
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
 from chewbot.kinematics.conditioning import reciprocal_condition
 from chewbot.kinematics.ik import check_chains, continuous
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation
 from chewbot.model import Model
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # A 6-coordinate task given to the target must already satisfy its HKPs: Z and gamma may differ from the
 # parasitic values by no more than this (m and rad; 1 micrometre / 1 microradian).

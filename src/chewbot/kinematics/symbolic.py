@@ -1,6 +1,6 @@
 """The kinematics of both mechanisms as CasADi expressions: one graph per (mechanism, orientation).
 
-The model's numbers enter as the symbol p (:class:`~chewbot.model_vector.SymbolicModel`): ``symbolic("target",
+The model's numbers enter as the symbol p (:class:`~chewbot.model.vector.SymbolicModel`): ``symbolic("target",
 orientation)`` is the graph of every target model, ``symbolic(model, orientation)`` the same graph with one
 model's numbers folded in (no p).
 
@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.model import Model
-from chewbot.model_vector import SymbolicModel, cached_graph, symbols
+from chewbot.model.vector import SymbolicModel, cached_graph, symbols
 from chewbot.rotation import E_sx, R_omega_sx, matrix_from_euler_angles_sx, matrix_from_euler_parameters_sx
 
 ORIENTATIONS = ("euler-angles", "euler-parameters")

@@ -6,7 +6,7 @@ The stages, one module each, in the order the data takes (docs/recordings.md):
 :mod:`~chewbot.recordings.fit` (nearest admissible robot pose; its CasADi graphs in
 :mod:`~chewbot.recordings.robotfit`), :mod:`~chewbot.recordings.resample` (spline rates, bite force) and
 :mod:`~chewbot.recordings.importer` (all of them: :func:`import_motion`). The command line is
-:mod:`~chewbot.recordings.command`. The names below load on first use, so that the command line starts fast.
+:mod:`~chewbot.commands.import_motion`. The names below load on first use, so that the command line starts fast.
 """
 
 from __future__ import annotations

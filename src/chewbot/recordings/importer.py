@@ -16,15 +16,15 @@ import numpy as np
 from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
-from chewbot.params import load_model
+from chewbot.model.params import load_model
 from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
 from chewbot.recordings.formats import Recording, read_recording
 from chewbot.recordings.prepare import fill_gaps, low_pass, trim
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
 from chewbot.recordings.rigid import RigidFit, rigid_fit, scale_motion, to_base
-from chewbot.results import Table
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.table import Table
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
 BISECTIONS = 14

@@ -31,7 +31,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from chewbot.errors import RecordingError
-from chewbot.params import ROTATION_TOLERANCE, _format_validation_error
+from chewbot.model.params import ROTATION_TOLERANCE, _format_validation_error
 from chewbot.recordings.formats import known_length_units, length_factor
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]

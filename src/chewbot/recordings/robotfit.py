@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import compiled, evaluate, mapped
+from chewbot.compiled.kernels import compiled, evaluate, mapped
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
@@ -58,7 +58,7 @@ _SQP = {
 @dataclass(frozen=True, eq=False)
 class FitFunctions:
     """The fit's per-sample functions for one model (built once, cached on the model), called on NumPy arrays
-    (samples first; :func:`chewbot.casadi_tools.evaluate`): the rest of :mod:`chewbot.recordings` never calls a
+    (samples first; :func:`chewbot.compiled.kernels.evaluate`): the rest of :mod:`chewbot.recordings` never calls a
     CasADi function itself.
 
     ``coords``: names of q_EE; ``scale``: (n,) SI value of one unit of z (1e-3 for lengths, pi/180 for angles);

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.report.figures import _save, subplots
-from chewbot.results import Table
+from chewbot.table import Table
 
 JOINTS = range(1, 7)
 

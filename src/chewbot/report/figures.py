@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from chewbot.results import Table
+from chewbot.table import Table
 
 LEVELS = (("", "displacement"), ("d", "velocity"), ("dd", "acceleration"))
 DPI = 110

@@ -31,7 +31,7 @@ from string import Template
 
 import numpy as np
 
-from chewbot.analysis.indices import INDEX_UNITS
+from chewbot.dynamics.indices import INDEX_UNITS
 from chewbot.model import Model
 from chewbot.report.summary import (
     INDEX_NAMES,
@@ -44,7 +44,7 @@ from chewbot.report.summary import (
     solver_notes,
 )
 from chewbot.report.view import FRAME_STEP_S, MAX_FRAMES, RunView
-from chewbot.results import POSE_NAMES, Table
+from chewbot.table import POSE_NAMES, Table
 from chewbot.rotation import matrix_from_euler_angles
 
 FORCE_SCALE_MM_PER_N = 0.25  # bite-force arrow: 80 N is drawn 20 mm long

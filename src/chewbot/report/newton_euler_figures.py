@@ -13,7 +13,7 @@ import numpy as np
 
 from chewbot.report.dynamics_figures import JOINTS, _columns, _per_joint
 from chewbot.report.figures import _save, subplots
-from chewbot.results import Table
+from chewbot.table import Table
 
 
 def torques_and_contacts(table: Table, path: Path) -> Path:

@@ -8,7 +8,7 @@ import numpy as np
 
 from chewbot.report.dynamics_figures import _columns, _per_joint
 from chewbot.report.figures import _save, subplots
-from chewbot.results import Table
+from chewbot.table import Table
 
 # Display of a coordinate's error: lengths in mm, angles in deg.
 _DISPLAY = {"m": (1e3, "mm"), "rad": (180 / np.pi, "deg")}

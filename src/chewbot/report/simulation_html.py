@@ -15,7 +15,7 @@ import numpy as np
 
 from chewbot.report.html import RUN_NAV, _checks_section, _e, _f4, _fmt, _plots_section, _table, render_page, robot_figure
 from chewbot.report.view import PLOT_POINTS, RunView, ViewBuilder, every_kth
-from chewbot.results import Table, kinematics_table
+from chewbot.table import Table, kinematics_table
 
 
 def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path, nav=RUN_NAV) -> Path:
@@ -41,7 +41,7 @@ def controller_label(result) -> str:
 
 def write_simulation_report(result, path: Path, files: list[str] | None = None) -> Path:
     """Write ``report.html`` for a computed simulation; ``files`` names the other files of its folder."""
-    from chewbot.outputs import to_json
+    from chewbot.files import to_json
     from chewbot.simulation.run import simulation_json
 
     figures: dict[str, dict] = {}

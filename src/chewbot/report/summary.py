@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
-from chewbot.results import Table
+from chewbot.table import Table
 
 if TYPE_CHECKING:
     from chewbot.model import Model

@@ -30,7 +30,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from chewbot.report.summary import ColumnStats, ColumnTotals, NearSingularRuns
-from chewbot.results import Table
+from chewbot.table import Table
 
 FULL_SERIES = 10_000  # samples drawn one by one in the PNG figures (about ten per pixel of an axis)
 SERIES_BINS = 2_000  # bins of the PNG figures' envelope beyond that: 4000 points per line

@@ -29,7 +29,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, native
+from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.dynamics.core6rss import torque_kernel
 from chewbot.dynamics.dalembert import reduced_kernel
 from chewbot.dynamics.hessian import hessian_rates
@@ -39,7 +39,7 @@ from chewbot.dynamics.newton_euler import GOALS, check_goal, coefficients_kernel
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.model_vector import N_P, c_name, cached_graph, symbols
+from chewbot.model.vector import N_P, c_name, cached_graph, symbols
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation import CONTROLLERS
 from chewbot.simulation.reference import Reference
@@ -104,7 +104,7 @@ def _inverse(mechanism: str, method: str, goal: str | None, friction: bool) -> c
         D = coefficients_kernel(mechanism, ORIENTATION).graph()(kin["theta"], q, dq, ddq, F, B, m.p)[0]
         fl = 1.0 if friction else 0.0
         if redundant:
-            from chewbot.realtime import distribution_function
+            from chewbot.export.realtime import distribution_function
 
             tau = distribution_function(mechanism, ORIENTATION, goal, fl)(D, m.p)[0]
         else:

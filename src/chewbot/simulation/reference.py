@@ -18,7 +18,7 @@ import numpy as np
 
 from chewbot.kinematics.motion import task_coordinates
 from chewbot.model import Model
-from chewbot.task.base import Task
+from chewbot.kinematics.task import Task
 
 # Monomial coefficients of the quintic on s in [0, 1] from (p(0), p'(0), p''(0), p(1), p'(1), p''(1)).
 _ENDS = np.array([[1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 2, 0, 0, 0],

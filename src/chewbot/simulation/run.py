@@ -1,7 +1,7 @@
 """A simulation run: options -> the controller's model, the plant, the reference -> the closed loop -> a results folder.
 
-What ``chewbot simulate`` computes and writes, as :mod:`chewbot.pipeline` does for ``chewbot run``: the folder is
-written whole through :func:`chewbot.outputs.atomic_folder` (results.csv, run.json, figures, report.html) and is
+What ``chewbot simulate`` computes and writes, as :mod:`chewbot.run.pipeline` does for ``chewbot run``: the folder is
+written whole through :func:`chewbot.files.atomic_folder` (results.csv, run.json, figures, report.html) and is
 recognised later by its run.json (key ``chewbot_simulation``). ``--compare`` writes one such folder per controller
 inside one comparison folder, with the comparison's own run.json, table and report.
 
@@ -19,18 +19,18 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.casadi_tools import evaluate, native, prepare_kernels
-from chewbot.command import pause_for_tests
+from chewbot.compiled.kernels import evaluate, native, prepare_kernels
+from chewbot.commands.common import pause_for_tests
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import kinematics_kernel
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
-from chewbot.outputs import Marker, atomic_folder, to_json
-from chewbot.params import load_model, split_overrides
-from chewbot.pipeline import input_files as run_inputs
-from chewbot.pipeline import load_task, singularity_columns
+from chewbot.files import Marker, atomic_folder, to_json
+from chewbot.model.params import load_model, split_overrides
+from chewbot.run.pipeline import input_files as run_inputs
+from chewbot.run.pipeline import load_task, singularity_columns
 from chewbot.report.summary import crank_tips
-from chewbot.results import POSE_UNITS, RunOptions, Table, kinematics_table
+from chewbot.table import POSE_UNITS, RunOptions, Table, kinematics_table
 from chewbot.rotation import matrix_from_euler_angles
 from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
@@ -38,7 +38,7 @@ from chewbot.simulation.plant import Plant
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
 from chewbot.simulation.simulator import DEFAULT_RATE, Simulation, simulate
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 SIMULATION_FORMAT = 1
 SIMULATION_FOLDER = Marker("simulation folder", "run.json", "chewbot_simulation")
@@ -290,7 +290,7 @@ def input_files(options: SimulateOptions) -> list[Path]:
 
 def simulation_json(result: SimulateResult) -> dict:
     """run.json of a simulation: format, options, both models, task, versions, columns, checks, tracking, info."""
-    from chewbot.results import columns_record, environment_record, model_record, task_record
+    from chewbot.table import columns_record, environment_record, model_record, task_record
 
     return {
         "chewbot_simulation": SIMULATION_FORMAT,
@@ -328,7 +328,7 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> None:
 
 
 def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
-    """Write the results folder ``out`` atomically (see :func:`chewbot.pipeline.write`)."""
+    """Write the results folder ``out`` atomically (see :func:`chewbot.run.pipeline.write`)."""
     out = Path(out)
     with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(result.options)) as tmp:
         write_into(result, tmp, progress)

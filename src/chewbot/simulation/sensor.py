@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, native
+from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
-from chewbot.model_vector import c_name, graph_key, symbols
+from chewbot.model.vector import c_name, graph_key, symbols
 from chewbot.simulation.controllers import State
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 

@@ -26,10 +26,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, evaluate, native, prepare_kernels
-from chewbot.command import check_interrupted
+from chewbot.compiled.kernels import KernelSpec, evaluate, native, prepare_kernels
+from chewbot.commands.common import check_interrupted
 from chewbot.errors import KinematicsError
-from chewbot.model_vector import N_P, cached_graph
+from chewbot.model.vector import N_P, cached_graph
 from chewbot.simulation.controllers import ModelBasedController, State
 from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C
@@ -215,7 +215,7 @@ def _closed_loop_shared(plant: Plant, controller: ModelBasedController, limit: f
 def _reason(plant: Plant, state: PlantState) -> str:
     """Why a state is outside the workspace, in the words of the kinematics' own checks."""
     from chewbot.kinematics.motion import solve_kinematics
-    from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+    from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
     coords = TARGET_COORDS if plant.model.has_hkp else FULL_COORDS
     task = Task("simulated", np.array([state.t]), coords, state.q[None], state.dq[None], np.zeros((1, len(coords))),

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 # Version of study.json, the key "chewbot_study" by which chewbot recognises a study folder it wrote
-# (chewbot.outputs.STUDY_FOLDER).
+# (chewbot.files.STUDY_FOLDER).
 STUDY_FORMAT = 1
 
 

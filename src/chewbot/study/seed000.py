@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.analysis.coupling import coupling
-from chewbot.bench import TASK_CASES, Comparison, bench_task, ratios
+from chewbot.bench.benchmark import TASK_CASES, Comparison, bench_task, ratios
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.dynamics import inverse_dynamics
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.params import load_model
+from chewbot.model.params import load_model
 from chewbot.report import dynamics_figures
 from chewbot.task.default import default_task
 
@@ -67,7 +67,7 @@ def _burst_correlation(tau: np.ndarray, force: np.ndarray) -> float:
 
 def claims(results: dict, timings: dict[str, Comparison]) -> list[Claim]:
     """The claims table from the solved models (``results[name] = (model, kin, tau, coupling)``) and the bench's
-    comparisons (:func:`chewbot.bench.ratios`: interleaved runs, "within noise" where the spreads overlap)."""
+    comparisons (:func:`chewbot.bench.benchmark.ratios`: interleaved runs, "within noise" where the spreads overlap)."""
     rows = []
     for variant, (tname, sname) in VARIANTS.items():
         res = {mech: results[name] for mech, name in (("target", tname), ("6rss", sname))}
@@ -77,7 +77,7 @@ def claims(results: dict, timings: dict[str, Comparison]) -> list[Claim]:
                           f"max relative difference {diff_lag:.1e} (both mechanisms, both sides)", diff_lag <= AGREEMENT))
         if variant == "default":
             h_l = {m: timings[f"{m}: hessian / liang"] for m in ("target", "6rss")}
-            # the bench's rule (chewbot.bench.compare): a difference only where the two spreads do not overlap
+            # the bench's rule (chewbot.bench.benchmark.compare): a difference only where the two spreads do not overlap
             verdict = {m: "within noise" if c.within_noise else "faster" if c.ratio > 1 else "slower" for m, c in h_l.items()}
             faster = diff_liang <= AGREEMENT and all(v == "faster" for v in verdict.values())
             slower = diff_liang > AGREEMENT or any(v == "slower" for v in verdict.values())
@@ -152,7 +152,7 @@ def _figures(results: dict, folder: Path) -> list[Path]:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import STUDY_FOLDER, atomic_folder, check_output, to_json
+    from chewbot.files import STUDY_FOLDER, atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)

@@ -18,21 +18,21 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.analysis.checks import PULL_TOLERANCE_N
-from chewbot.analysis.indices import INDEX_UNITS
-from chewbot.bench import compare, interleaved
+from chewbot.dynamics.indices import INDEX_UNITS
+from chewbot.bench.benchmark import compare, interleaved
 from chewbot.dynamics.newton_euler import GOALS, newton_euler
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.symbolic import ORIENTATIONS
-from chewbot.params import load_model
+from chewbot.model.params import load_model
 from chewbot.report import newton_euler_figures
 from chewbot.report.figures import _save, subplots
-from chewbot.results import kinematics_table
+from chewbot.table import kinematics_table
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.task.default import default_task
 
 GOAL_LABELS = {"min-torque": "G1", "min-coupler-force": "G2", "min-hkp-force": "G3"}
 OWN_INDEX = {"min-torque": "F1", "min-coupler-force": "F2", "min-hkp-force": "F3"}
-REPEATS = 7  # timed runs per row after a first (warm-up) run, the rows interleaved (chewbot.bench.interleaved)
+REPEATS = 7  # timed runs per row after a first (warm-up) run, the rows interleaved (chewbot.bench.benchmark.interleaved)
 
 
 def _rows(step) -> list[dict]:
@@ -101,7 +101,7 @@ def claims(rows: list[dict]) -> list[Claim]:
         return next(r for r in rows if r["mechanism"] == mech and r["orientation"] == orientation and r["goal"] == goal)
 
     out = []
-    # the bench's rule (chewbot.bench.compare): a ratio whose spreads overlap is "within noise", no speed-up
+    # the bench's rule (chewbot.bench.benchmark.compare): a ratio whose spreads overlap is "within noise", no speed-up
     ratio, noise = {}, {}
     for mech, goals in (("target", ("G1", "G2", "G3")), ("6rss", ("-",))):
         pairs = [compare(row(mech, "euler-parameters", g)["_timing"], row(mech, "euler-angles", g)["_timing"]) for g in goals]
@@ -181,7 +181,7 @@ def normal_force_signs(rows: list[dict]) -> Claim:
 
 def run(out: Path, force: bool = False, progress=None) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
-    from chewbot.outputs import STUDY_FOLDER, atomic_folder, check_output, to_json
+    from chewbot.files import STUDY_FOLDER, atomic_folder, check_output, to_json
 
     step = progress or (lambda msg: None)
     out = Path(out)

@@ -27,7 +27,7 @@ class Evaluator:
     """Everything that stays the same over a SPEC's evaluations, and :meth:`evaluate` for a chunk of them."""
 
     def __init__(self, spec: Spec):
-        from chewbot.params import read_parameter_file, resolve_model_path
+        from chewbot.model.params import read_parameter_file, resolve_model_path
 
         self.spec = spec
         self._raw = {}
@@ -40,7 +40,7 @@ class Evaluator:
 
     def model(self, overrides: dict[str, float], name: str | None = None):
         """The model (``name``: the SPEC's by default) with ``overrides``, as ``load_model(name, overrides)`` gives it."""
-        from chewbot.params import apply_overrides, model_from_dict
+        from chewbot.model.params import apply_overrides, model_from_dict
 
         path, sha256, raw = self._raw[name or self.spec.model]
         if not overrides:
@@ -97,7 +97,7 @@ class Evaluation:
     """One parameter set, its run's stages computed when an output first needs them."""
 
     def __init__(self, evaluator: Evaluator, overrides: dict[str, float]):
-        from chewbot.params import split_overrides
+        from chewbot.model.params import split_overrides
 
         self.evaluator = evaluator
         self.spec = evaluator.spec
@@ -159,7 +159,7 @@ class Evaluation:
     def checks(self) -> list:
         """The validity checks of the run, on the columns its results.csv has."""
         from chewbot.analysis.checks import run_checks
-        from chewbot.results import kinematics_table
+        from chewbot.table import kinematics_table
 
         kin, dyn = self.kinematics, self.dynamics
         table = kinematics_table(kin)

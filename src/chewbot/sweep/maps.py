@@ -74,7 +74,7 @@ class PoseEvaluator:
     """The maps of a SPEC at chunks of poses (a worker keeps one per SPEC)."""
 
     def __init__(self, spec: Spec):
-        from chewbot.params import load_model, split_overrides
+        from chewbot.model.params import load_model, split_overrides
 
         self.spec = spec
         self.model = load_model(spec.model, split_overrides(spec.fixed)[0])
@@ -114,7 +114,7 @@ class PoseEvaluator:
 
 
 def _task(names, q: np.ndarray, side: str):
-    from chewbot.task.base import Task
+    from chewbot.kinematics.task import Task
 
     n = len(q)
     return Task(name="pose grid", t=np.arange(n, dtype=float), coords=tuple(names), q=q, dq=np.zeros_like(q),
@@ -156,7 +156,7 @@ def pose_reason(exc: KinematicsError) -> str:
 
 
 def _kernel_outputs(model, names, q: np.ndarray) -> dict[str, np.ndarray]:
-    from chewbot.casadi_tools import evaluate, native
+    from chewbot.compiled.kernels import evaluate, native
     from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
     from chewbot.kinematics.motion import task_coordinates
 
@@ -185,7 +185,7 @@ def force_capability(model, names, q: np.ndarray, side: str, directions: dict) -
     """{direction name: the largest bite force (N) the torque limits resist at each (reachable) pose at rest}."""
     from scipy.optimize import linprog
 
-    from chewbot.casadi_tools import evaluate, native
+    from chewbot.compiled.kernels import evaluate, native
     from chewbot.dynamics.dalembert import REDUCED_OUTPUTS, reduced_kernel
     from chewbot.dynamics.hessian import hessian_rates
     from chewbot.kinematics.motion import solve_kinematics

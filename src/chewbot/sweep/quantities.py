@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from chewbot.analysis.indices import INDEX_UNITS
+from chewbot.dynamics.indices import INDEX_UNITS
 
 NAN = float("nan")
 

@@ -4,7 +4,7 @@ A sweep takes minutes to hours, and what it has computed is worth keeping when i
 not written in a temporary place and renamed at the end, as a run's results folder is (docs/cli.md): it is
 created at the start, holding ``run.json`` with ``"complete": false`` and the SPEC, and every finished chunk of
 evaluations is written into ``chunks/`` as one Parquet file, under a temporary name renamed into place
-(:func:`chewbot.outputs.atomic_member`). An interrupt therefore leaves the finished chunks (results, not partial
+(:func:`chewbot.files.atomic_member`). An interrupt therefore leaves the finished chunks (results, not partial
 output) and nothing half written; ``--resume`` continues from them. The final files (``samples.parquet``, the
 indices or the optimum, ``report.html``) are written the same way, and ``run.json`` says ``"complete": true``
 last. ``--force`` replaces an existing sweep folder (only one chewbot wrote: its run.json has ``"chewbot_sweep"``)
@@ -18,7 +18,7 @@ import shutil
 from pathlib import Path
 
 from chewbot.errors import ChewbotError
-from chewbot.outputs import Marker, OutputExistsError, atomic_folder, atomic_member, check_output, remove_stale, to_json
+from chewbot.files import Marker, OutputExistsError, atomic_folder, atomic_member, check_output, remove_stale, to_json
 
 # Version of the sweep folder's format: run.json's "chewbot_sweep" (CHANGELOG.md).
 SWEEP_FORMAT = 1
@@ -37,7 +37,7 @@ class SweepFolder:
     @staticmethod
     def check(out: Path, force: bool = False, inputs=()) -> None:
         """Refuse to start a sweep in ``out`` (before any work) unless it is new, or a sweep folder chewbot wrote
-        and ``force`` is given (:func:`chewbot.outputs.check_output`)."""
+        and ``force`` is given (:func:`chewbot.files.check_output`)."""
         out = Path(out)
         if SWEEP_FOLDER.present(out) and not force:
             state = "a complete sweep" if _read_record(out).get("complete") else "an incomplete sweep"

@@ -27,9 +27,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from chewbot.command import check_interrupted, pause_for_tests, shield
+from chewbot.commands.common import check_interrupted, pause_for_tests, shield
 from chewbot.errors import ChewbotError
-from chewbot.outputs import atomic_member
+from chewbot.files import atomic_member
 from chewbot.sweep.record import SweepFolder
 
 # Chunks in flight per worker thread: enough that a worker never waits for the client, few enough that the

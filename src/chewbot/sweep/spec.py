@@ -260,7 +260,7 @@ def _parameter(key: str, table, kinds: tuple[str, ...], error) -> Parameter:
 
 def parse_spec(raw: dict, source: str = "<spec>", base: Path | None = None) -> Spec:
     """Validate a parsed SPEC (see :func:`read_spec`); relative paths resolve against ``base``."""
-    from chewbot.params import BUILTIN_MODELS
+    from chewbot.model.params import BUILTIN_MODELS
 
     top = _Reader(raw, source)
     kind = top.choice("kind", KINDS, required=True)
@@ -342,7 +342,7 @@ def parse_spec(raw: dict, source: str = "<spec>", base: Path | None = None) -> S
 
 
 def _mechanism(top: _Reader, model: str) -> str:
-    from chewbot.params import load_model
+    from chewbot.model.params import load_model
 
     try:
         return load_model(model).mechanism
@@ -489,7 +489,7 @@ def _optimizer(reader: _Reader) -> dict:
 def _check_against_model(spec: Spec, top: _Reader) -> None:
     """The parameter keys and fixed values name numbers that the model (and the counterpart) has, with values it
     accepts at the parameters' central values; the outputs exist for its mechanism."""
-    from chewbot.params import apply_overrides, model_from_dict, read_parameter_file, resolve_model_path, split_overrides
+    from chewbot.model.params import apply_overrides, model_from_dict, read_parameter_file, resolve_model_path, split_overrides
     from chewbot.sweep.quantities import OUTPUTS, needs_counterpart
     from chewbot.task.default import parameters_with
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from chewbot.errors import TaskError
 from chewbot.task import smoothing
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # Units by kind, as factors to SI.
 UNITS = {
@@ -240,7 +240,7 @@ def read_incisor_csv(path: str | Path) -> dict:
 
 def run_beside(path: Path) -> dict | None:
     """The run.json of the chewbot run whose results.csv ``path`` is (in the same folder), or None."""
-    from chewbot.outputs import RESULTS_FOLDER
+    from chewbot.files import RESULTS_FOLDER
 
     if not RESULTS_FOLDER.present(path.parent):
         return None

@@ -18,7 +18,7 @@ from numpy.polynomial import Polynomial
 
 from chewbot.errors import TaskError
 from chewbot.model import Model
-from chewbot.task.base import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 
 @dataclass(frozen=True)
@@ -144,7 +144,7 @@ def default_task(model: Model | None = None, side: str = "left", params: Chewing
 
 def lift_to_full(model: Model, task: Task) -> Task:
     """The same task with all six coordinates (Z and gamma from the model's sockets)."""
-    from chewbot.casadi_tools import evaluate
+    from chewbot.compiled.kernels import evaluate
     from chewbot.kinematics.functions import parasitic_function
 
     X, dX, ddX = evaluate(parasitic_function(model), task.q, task.dq, task.ddq)

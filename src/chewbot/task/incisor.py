@@ -28,13 +28,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import evaluate
+from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.symbolic import COORDINATES, check_orientation, symbolic
 from chewbot.model import Model
 from chewbot.rotation import euler_parameters_to_angles
-from chewbot.results import Table
-from chewbot.task.base import TARGET_COORDS, Task
+from chewbot.table import Table
+from chewbot.kinematics.task import TARGET_COORDS, Task
 
 PINNABLE = ("X", "Y", "alpha", "beta")
 LEVELS = ("displacement", "velocity", "acceleration")

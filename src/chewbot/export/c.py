@@ -4,10 +4,10 @@
 code generator: plain C99 with <math.h> only), a README describing every kernel's inputs and outputs with
 their units, a minimal example program that evaluates each kernel once on a known sample and prints the
 outputs, and a Makefile. The kernels are one robot's: its numbers are folded into the code as constants
-(:func:`chewbot.realtime.kernels` builds them for a model), so the exported functions have no parameter input. The example's numbers are the ones chewbot computes in Python for the same sample,
+(:func:`chewbot.export.realtime.kernels` builds them for a model), so the exported functions have no parameter input. The example's numbers are the ones chewbot computes in Python for the same sample,
 listed in the README, so the export can be checked on the target machine. ``chewbot-export.json`` names the
 kernels and chewbot's version; it is also how chewbot recognises a folder it exported (``--force`` replaces
-only such a folder, :data:`chewbot.outputs.EXPORT_FOLDER`).
+only such a folder, :data:`chewbot.files.EXPORT_FOLDER`).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import KernelSpec, as_spec
-from chewbot.outputs import EXPORT_FOLDER, atomic_folder, to_json
+from chewbot.compiled.kernels import KernelSpec, as_spec
+from chewbot.files import EXPORT_FOLDER, atomic_folder, to_json
 
 # Version of chewbot-export.json, the exported folder's marker.
 EXPORT_FORMAT = 1
@@ -149,7 +149,7 @@ def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", 
     ``kernels`` into the folder ``out``.
 
     The folder is written in a temporary sibling and moved into place; an existing folder is replaced only
-    with ``force`` and only if chewbot exported it (:func:`chewbot.outputs.atomic_folder`); ``inputs`` (the
+    with ``force`` and only if chewbot exported it (:func:`chewbot.files.atomic_folder`); ``inputs`` (the
     model files) may not lie inside it.
     """
     from chewbot import __version__

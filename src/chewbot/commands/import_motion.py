@@ -1,7 +1,7 @@
 """``chewbot import-motion``: a jaw-tracking recording in, a robot task and its residuals out.
 
 The command's options and files; the work is :func:`chewbot.recordings.importer.import_motion`. Both files are
-written together through :func:`chewbot.outputs.atomic_files` (all or none), each beginning with chewbot's marker
+written together through :func:`chewbot.files.atomic_files` (all or none), each beginning with chewbot's marker
 line, which names the command; an existing file is replaced only with ``--force`` and only if chewbot wrote it.
 """
 
@@ -63,7 +63,7 @@ def import_motion(
     """
     from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
-    from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
@@ -117,7 +117,7 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
 
 def _task_table(task):
     """The task as ``chewbot run --task`` reads it: t, coordinates, their rates, the bite force; SI units named."""
-    from chewbot.results import Table
+    from chewbot.table import Table
 
     table = Table()
     table.add("t", task.t, "s")

@@ -1,4 +1,4 @@
-"""``chewbot sweep``: the command's options, progress bar and summary; the work is :func:`chewbot.sweep.run.run_sweep`."""
+"""``chewbot sweep``: the command's options, progress bar and summary; the work is :func:`chewbot.outputs.sweep.run_sweep`."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def sweep(
     """
     from chewbot.cli import EXIT_BAD_INPUT, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
-    from chewbot.sweep.run import run_sweep
+    from chewbot.outputs.sweep import run_sweep
 
     if resume and force:
         fail(ChewbotError("--resume continues a sweep, --force starts it over: give one of them"), EXIT_BAD_INPUT)
@@ -62,7 +62,7 @@ def sweep(
 def _bar(quiet: bool):
     """A progress bar of the evaluations: done/total, the rate and the time left (on a terminal only)."""
     from chewbot.cli import console
-    from chewbot.command import check_interrupted
+    from chewbot.commands.common import check_interrupted
 
     if quiet or not console.is_terminal:
         yield lambda done, total: check_interrupted()
@@ -85,7 +85,7 @@ def _bar(quiet: bool):
 def _print_summary(stdout, result) -> None:
     from rich.markup import escape
 
-    from chewbot.sweep.run import REPORT_FILE
+    from chewbot.outputs.sweep import REPORT_FILE
 
     spec = result.spec
     rate = f", {result.computed / result.elapsed_s:.1f} evaluations/s" if result.computed and result.elapsed_s else ""

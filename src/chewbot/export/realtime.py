@@ -20,9 +20,9 @@ fixed cost, as a real-time loop needs. The kernel returns its last step and the 
 actuator-limit values, so the caller can verify all three; it does not handle active limits (the Python solver
 falls back to SQP there).
 
-:func:`chewbot.casadi_tools.native` wraps a kernel for calls from Python through ctypes (one sample in a few
+:func:`chewbot.compiled.kernels.native` wraps a kernel for calls from Python through ctypes (one sample in a few
 microseconds, or a whole trajectory in one C loop);
-:func:`chewbot.export.export_c` writes them as C for the controller.
+:func:`chewbot.export.c.export_c` writes them as C for the controller.
 """
 
 from __future__ import annotations
@@ -31,14 +31,14 @@ import casadi as ca
 import numpy as np
 
 from chewbot.analysis.coupling import coupling_kernel
-from chewbot.casadi_tools import FLAGS, KernelSpec, evaluate, native
+from chewbot.compiled.kernels import FLAGS, KernelSpec, evaluate, native
 from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
 from chewbot.dynamics.distribution import MEASURABLE
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns, start_sx
-from chewbot.export import Kernel
+from chewbot.export.c import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model_vector import cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.vector import cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.simulation.forward import NEWTON_ITERATIONS, forward_kernel
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
@@ -158,7 +158,7 @@ class LoopKernel:
     """
 
     def __init__(self, kernel: KernelSpec, flags: tuple[str, ...] = FLAGS):
-        from chewbot.casadi_tools import NativeFunction
+        from chewbot.compiled.kernels import NativeFunction
 
         fn = native(kernel, flags)
         if not isinstance(fn, NativeFunction):

@@ -9,11 +9,11 @@ claims by the same rule.
 
 Tables (:func:`benchmark`): the formulations on the whole default task (5001 samples, the kinematics computed
 once and left out, the first call apart), with the plain references: the Newton–Euler torques in vectorised
-NumPy (:func:`chewbot.reference.frictionless_torques`) and the friction-aware G1 distribution by SciPy's SLSQP
-with exact gradients, warm-started sample after sample (:func:`chewbot.reference.slsqp_min_torque`, timed on a
+NumPy (:func:`chewbot.bench.reference.frictionless_torques`) and the friction-aware G1 distribution by SciPy's SLSQP
+with exact gradients, warm-started sample after sample (:func:`chewbot.bench.reference.slsqp_min_torque`, timed on a
 stretch of :data:`SLSQP_SAMPLES` samples inside a bite and scaled to the task); ``chewbot run`` and ``chewbot
 --help`` as a user waits for them (separate processes, warm kernel cache); the in-loop kernels
-(:func:`chewbot.realtime.loop_kernel`) and the exported C (its example program, built with the flags of its
+(:func:`chewbot.export.realtime.loop_kernel`) and the exported C (its example program, built with the flags of its
 Makefile). With ``long``: runs of 10,000 to 1,000,000 samples, their time per sample and peak memory.
 """
 
@@ -145,14 +145,14 @@ class Case:
 
 
 def _slsqp(model, kin):
-    from chewbot.reference import slsqp_min_torque
+    from chewbot.bench.reference import slsqp_min_torque
 
     start = int(np.searchsorted(kin.t, 2.0))
     return slsqp_min_torque(model, kin, np.arange(start, start + SLSQP_SAMPLES))
 
 
 def _g1_kernel(model, kin):
-    from chewbot.realtime import g1_distribution
+    from chewbot.export.realtime import g1_distribution
 
     return g1_distribution(model, kin)
 
@@ -178,7 +178,7 @@ def _core_terms(model, kin):
 
 
 def _numpy_reference(model, kin):
-    from chewbot.reference import frictionless_torques
+    from chewbot.bench.reference import frictionless_torques
 
     return frictionless_torques(model, kin)
 
@@ -238,7 +238,7 @@ def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: st
     ``"MECHANISM: LABEL"``. Models are loaded fresh, so the first call of a case includes building its graph and
     loading (or compiling) its kernel."""
     from chewbot.kinematics.motion import solve_kinematics
-    from chewbot.params import load_model
+    from chewbot.model.params import load_model
     from chewbot.task.default import default_task
 
     models = {name: load_model(name) for name in BOTH}
@@ -297,12 +297,12 @@ def _quiet(command: list[str]) -> None:
 
 
 def bench_loop(calls: int = 20000, repeats: int = 11) -> dict[str, Timing]:
-    """One call of each in-loop kernel (:func:`chewbot.realtime.loop_kernel`) of the target on a sample inside a
-    bite, per call over ``calls // repeats`` calls per turn; beside it a :class:`~chewbot.casadi_tools.NativeFunction`
+    """One call of each in-loop kernel (:func:`chewbot.export.realtime.loop_kernel`) of the target on a sample inside a
+    bite, per call over ``calls // repeats`` calls per turn; beside it a :class:`~chewbot.compiled.kernels.NativeFunction`
     call of the same compiled kernel (inputs given as arrays and copied in, outputs copied out), interleaved."""
-    from chewbot.casadi_tools import native
-    from chewbot.params import load_model
-    from chewbot.realtime import LOOP_FLAGS, example_inputs, loop_kernel, loop_spec
+    from chewbot.compiled.kernels import native
+    from chewbot.model.params import load_model
+    from chewbot.export.realtime import LOOP_FLAGS, example_inputs, loop_kernel, loop_spec
 
     target = load_model("target")
     ex = example_inputs(target, load_model("6rss"))
@@ -326,13 +326,13 @@ def _repeat(fn, n: int) -> None:
 
 
 def bench_export(calls: int = 200000, repeats: int = 7) -> tuple[str, list[Timing]]:
-    """The exported C (:func:`chewbot.export.export_c`) built by its own Makefile and its example program run
+    """The exported C (:func:`chewbot.export.c.export_c`) built by its own Makefile and its example program run
     ``repeats`` times with ``calls`` calls of each kernel: (the compiler and flags, a timing per kernel, in ns per
     call)."""
-    from chewbot.casadi_tools import c_compiler
-    from chewbot.export import export_c
-    from chewbot.params import load_model
-    from chewbot.realtime import kernels
+    from chewbot.compiled.kernels import c_compiler
+    from chewbot.export.c import export_c
+    from chewbot.model.params import load_model
+    from chewbot.export.realtime import kernels
 
     cc = c_compiler()
     if cc is None:
@@ -442,7 +442,7 @@ def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk
     evaluations of the whole study."""
     from chewbot.sweep.evaluate import evaluate_chunk
     from chewbot.sweep.record import SweepFolder
-    from chewbot.sweep.run import output_units, prepare
+    from chewbot.outputs.sweep import output_units, prepare
     from chewbot.sweep.runner import ChunkRunner, dask_client
     from chewbot.sweep.samplers import sobol_design
     from chewbot.sweep.spec import read_spec
@@ -561,7 +561,7 @@ def _ratio_lines(comparisons: dict[str, Comparison]) -> list[str]:
 
 
 def _loop_table(timings: dict[str, Timing]) -> list[str]:
-    lines = ["One sample from Python, target (`chewbot.realtime.loop_kernel`: preallocated arrays, no copy; a "
+    lines = ["One sample from Python, target (`chewbot.export.realtime.loop_kernel`: preallocated arrays, no copy; a "
              "`NativeFunction` call: inputs given as arrays, outputs returned as new ones):", "",
              "| kernel | in-loop call (us) | NativeFunction call (us) |", "|---|---|---|"]
     for kind in ("tau", "dynamics", "g1"):

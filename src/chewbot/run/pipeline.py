@@ -13,7 +13,7 @@ previous sample). A task in chunks gives the results of the whole task in one pi
 How the formulation's ``info`` combines across chunks is set per key in :data:`INFO_RULES` (sample indices are
 shifted, counts added, means weighted by the chunk's samples); any other entry must be the same in every chunk.
 
-The folder is written in a temporary sibling and moved into place at the end (:func:`chewbot.outputs.atomic_folder`):
+The folder is written in a temporary sibling and moved into place at the end (:func:`chewbot.files.atomic_folder`):
 a failed or interrupted run leaves nothing behind, and an existing folder is replaced only when ``force`` is
 given and chewbot wrote it. The folder is written whatever the checks say; the command decides the exit code.
 """
@@ -28,11 +28,11 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from chewbot.command import pause_for_tests
+from chewbot.commands.common import pause_for_tests
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.model import Model
-from chewbot.results import RunOptions, RunRecord, RunResult, Table, kinematics_table, run_record
-from chewbot.task.base import Task
+from chewbot.table import RunOptions, RunRecord, RunResult, Table, kinematics_table, run_record
+from chewbot.kinematics.task import Task
 
 __all__ = ["CHUNK_SAMPLES", "INFO_RULES", "RunOptions", "RunResult", "compute", "input_files", "load_task", "run",
            "run_json", "run_kernels", "write"]
@@ -60,7 +60,7 @@ def load_task(spec: str, model: Model, side: str | None, overrides: dict[str, fl
 
 def input_files(options: RunOptions) -> list[Path]:
     """The files a run reads (its task file, its parameter file), which its output must not contain."""
-    from chewbot.params import BUILTIN_MODELS
+    from chewbot.model.params import BUILTIN_MODELS
 
     return [Path(p) for p in (options.task, options.model) if p not in ("default", *BUILTIN_MODELS)]
 
@@ -80,7 +80,7 @@ def run_kernels(model: Model, options: RunOptions) -> list:
 
 def _inputs(options: RunOptions) -> tuple[RunOptions, Model, Task]:
     """The model and the task of a run, and its options with the side in effect (as run.json records it)."""
-    from chewbot.params import load_model, split_overrides
+    from chewbot.model.params import load_model, split_overrides
 
     model_overrides, task_overrides = split_overrides(options.overrides)
     model = load_model(options.model, model_overrides)
@@ -145,7 +145,7 @@ def singularity_columns(table: Table, kin) -> None:
 def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHUNK_SAMPLES, progress=None) -> Iterator[Chunk]:
     """The task through the stages, ``size`` samples at a time (None: in one piece), in order. ``progress(message,
     done=samples)`` is told each stage."""
-    from chewbot.casadi_tools import prepare_kernels
+    from chewbot.compiled.kernels import prepare_kernels
 
     step = _stepper(progress)
     size = task.n if size is None else int(size)
@@ -241,7 +241,7 @@ def merge_info(parts: list[tuple[int, int, dict]]) -> dict:
         elif all(v == values[0][2] for _, _, v in values):
             merged[key] = values[0][2]
         else:
-            raise RuntimeError(f"the formulation's info {key!r} differs between chunks and chewbot.pipeline.INFO_RULES "
+            raise RuntimeError(f"the formulation's info {key!r} differs between chunks and chewbot.run.pipeline.INFO_RULES "
                                "has no rule to combine it")
     return merged
 
@@ -333,7 +333,7 @@ def _stepper(progress):
 
 
 def run_json(result: RunResult) -> dict:
-    """The run record (run.json) of a run computed in memory (:func:`chewbot.results.run_record`)."""
+    """The run record (run.json) of a run computed in memory (:func:`chewbot.table.run_record`)."""
     return run_record(result.options, result.model, result.task, result.table, result.checks, result.info)
 
 
@@ -371,7 +371,7 @@ def _figures_and_report(record: Callable[[], dict], method: str | None, model: M
 
 def _write_record(record: dict, folder: Path) -> dict:
     """Write run.json into ``folder``; the record as it reads back."""
-    from chewbot.outputs import to_json
+    from chewbot.files import to_json
 
     text = to_json(record)
     (folder / "run.json").write_text(text)
@@ -385,7 +385,7 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
     Everything is written in a temporary sibling folder that replaces ``out`` only once complete: a failure or a
     signal at any step (a figure, the report) leaves ``out`` as it was. ``progress(message)`` is told each step.
     """
-    from chewbot.outputs import RESULTS_FOLDER, atomic_folder
+    from chewbot.files import RESULTS_FOLDER, atomic_folder
 
     step = _stepper(progress)
     out = Path(out)
@@ -408,8 +408,8 @@ def run(options: RunOptions, out: Path, force: bool = False, progress=None, figu
     chunk's rows are appended to results.csv in the temporary folder, then run.json, the figures and report.html
     are written from what was accumulated. Atomic as :func:`write`. ``progress(message, done=samples, total=samples)``
     is told each stage."""
-    from chewbot.outputs import RESULTS_FOLDER, atomic_folder
-    from chewbot.results import CsvWriter
+    from chewbot.files import RESULTS_FOLDER, atomic_folder
+    from chewbot.table import CsvWriter
 
     step = _stepper(progress)
     step("task")
@@ -460,16 +460,16 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     """Draw the figures and write report.html of the results folder ``folder`` from its run.json and results.csv
     (read ``chunk`` rows at a time: constant memory), as the run would have (``chewbot report DIR``).
 
-    Only the figures and report.html are written (:func:`chewbot.outputs.atomic_members`: all or none, each under
+    Only the figures and report.html are written (:func:`chewbot.files.atomic_members`: all or none, each under
     a temporary name until all are complete); results.csv and run.json are read, never written. An existing figure
     or report is replaced only with ``force``. The model is loaded from the parameter file run.json names, with
     the run's overrides, and must have the run's parameters (their SHA-256 in run.json)."""
     from chewbot.errors import ChewbotError
-    from chewbot.model_vector import vector_digest
-    from chewbot.outputs import RESULTS_FOLDER, atomic_members
-    from chewbot.params import BUILTIN_MODELS, load_model, split_overrides
+    from chewbot.model.vector import vector_digest
+    from chewbot.files import RESULTS_FOLDER, atomic_members
+    from chewbot.model.params import BUILTIN_MODELS, load_model, split_overrides
     from chewbot.report.figures import figure_names
-    from chewbot.results import READABLE_FORMATS, read_csv_chunks
+    from chewbot.table import READABLE_FORMATS, read_csv_chunks
 
     step = _stepper(progress)
     folder = Path(folder)
@@ -530,7 +530,7 @@ def _data_lines(path: Path):
 
 
 def _not_ours(folder: Path):
-    from chewbot.outputs import RESULTS_FOLDER, OutputError
+    from chewbot.files import RESULTS_FOLDER, OutputError
 
     return OutputError(f"{folder}: not a results folder written by chewbot (no {RESULTS_FOLDER.file} of chewbot's); "
                        "chewbot draws figures and reports into its own results folders only")

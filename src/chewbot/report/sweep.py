@@ -29,8 +29,8 @@ NAV = (("summary", "Summary"), ("results", "Results"), ("failures", "Failures"),
 
 
 def write_report(result, path: Path) -> Path:
-    """Write the report of a finished sweep (``result``: :class:`chewbot.sweep.run.SweepResult`)."""
-    from chewbot.sweep.run import SAMPLES_FILE, output_descriptions
+    """Write the report of a finished sweep (``result``: :class:`chewbot.outputs.sweep.SweepResult`)."""
+    from chewbot.outputs.sweep import SAMPLES_FILE, output_descriptions
 
     spec = result.spec
     samples = pq.ParquetFile(result.folder / SAMPLES_FILE)

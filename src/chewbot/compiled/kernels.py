@@ -43,8 +43,8 @@ DEFAULT_MAX_MB = 200  # cap of the kernel cache; a full set of chewbot's kernels
 FLAGS = ("-O1",)
 # Modules of the package that build no compiled kernel, left out of the source hash of the cache key (so that
 # editing them does not recompile every kernel). Everything else in the package is in it, new modules included.
-NOT_IN_KEY = ("cli.py", "pipeline.py", "outputs.py", "results.py", "bench.py", "reference.py", "export.py",
-              "report", "study", "task", "sweep")
+NOT_IN_KEY = ("cli.py", "commands", "run", "files.py", "table.py", "outputs", "bench", "export", "report", "study", "task",
+              "sweep")
 _OWN_DIR = re.compile(r"^(chewbot-[^/]+-casadi-[^/]+|casadi-[0-9][^/]*)$")  # casadi-X: the layout before version folders
 _TEMP = re.compile(r"^\.(?:.+)\.(?P<pid>\d+)\.[A-Za-z0-9_]+\.(?:tmp|build)$")
 _GRAPHS: dict[tuple, ca.Function] = {}
@@ -127,7 +127,7 @@ def max_cache_bytes() -> int:
 def source_digest(root: Path | None = None) -> str:
     """SHA-256 of the package's Python source (``root``: the package folder, by default this one's), without the
     modules of :data:`NOT_IN_KEY`."""
-    root = root or Path(__file__).resolve().parent
+    root = root or Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(root)

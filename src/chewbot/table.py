@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from chewbot.kinematics.motion import Kinematics
     from chewbot.model import Model
     from chewbot.report.view import RunView
-    from chewbot.task.base import Task
+    from chewbot.kinematics.task import Task
 
 # Version of the results folder's format, the value of run.json's "chewbot_run" (CHANGELOG.md): 2 puts each
 # column's unit in the header of results.csv (`tau1 [N*m]`) and adds the transmission angles, kappa_J and the
@@ -104,7 +104,7 @@ class Table:
     def to_csv(self, path: Path, first_line: str | None = None) -> None:
         """Write as CSV (:class:`CsvWriter`): a header of ``name [unit]``, one row per sample, each float in its
         shortest form that reads back exactly (and 0.0 for -0.0). ``first_line``: a comment line above the header
-        (e.g. chewbot's marker, :func:`chewbot.outputs.marker_line`)."""
+        (e.g. chewbot's marker, :func:`chewbot.files.marker_line`)."""
         with CsvWriter(path, first_line) as writer:
             writer.write(self)
 
@@ -283,7 +283,7 @@ def versions(*extra: str) -> dict[str, str]:
 
 def model_record(model: Model) -> dict:
     """A model's identity in run.json: name, mechanism, file and its hash, assumed keys, the parameters' hash."""
-    from chewbot.model_vector import vector_digest
+    from chewbot.model.vector import vector_digest
 
     return {"name": model.name, "mechanism": model.mechanism, "file": model.source, "sha256": model.sha256,
             "assumed": list(model.assumed), "parameters_sha256": vector_digest(model)}

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.command import shield
+from chewbot.commands.common import shield
 from chewbot.errors import ChewbotError
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from chewbot.errors import ParameterError
-from chewbot.model import Contact, Friction, HKPGeometry, Limits, Model
+from chewbot.model.model import Contact, Friction, HKPGeometry, Limits, Model
 
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.results import environment_record
+from chewbot.table import environment_record
 from chewbot.sweep.evaluate import evaluate_chunk
 from chewbot.sweep.quantities import OUTPUTS
 from chewbot.sweep.record import SweepFolder
@@ -53,7 +53,7 @@ class SweepResult:
 
 def input_files(spec: Spec) -> dict[str, str]:
     """The files the sweep reads (the models, a task file) with their SHA-256: part of the SPEC's digest."""
-    from chewbot.params import resolve_model_path
+    from chewbot.model.params import resolve_model_path
 
     paths = [resolve_model_path(m) for m in (spec.model, spec.counterpart or COUNTERPARTS.get(spec.model)) if m]
     if spec.task != "default":
@@ -80,10 +80,10 @@ def output_descriptions(spec: Spec) -> dict[str, dict]:
 
 def prepare(spec: Spec) -> None:
     """Compile the kernels the evaluations use (missing ones, side by side), so that the workers only load them."""
-    from chewbot.casadi_tools import prepare_kernels
-    from chewbot.params import load_model
-    from chewbot.pipeline import run_kernels
-    from chewbot.results import RunOptions
+    from chewbot.compiled.kernels import prepare_kernels
+    from chewbot.model.params import load_model
+    from chewbot.run.pipeline import run_kernels
+    from chewbot.table import RunOptions
 
     names = [spec.model] + ([spec.counterpart or COUNTERPARTS[spec.model]] if any("ratio_MCI" in o for o in spec.computed_outputs) else [])
     kernels = []
@@ -144,7 +144,7 @@ def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = Non
     result.failed = _failed(folder.path / SAMPLES_FILE)
     written = _write_results(result, folder)
     step("writing report.html")
-    from chewbot.sweep.report import write_report
+    from chewbot.report.sweep import write_report
 
     write_report(result, folder.path / REPORT_FILE)
     rate = runner.evaluations / runner.compute_s if runner.compute_s > 0 else None
@@ -190,7 +190,7 @@ def _failed(path: Path) -> int:
 
 def _write_results(result: SweepResult, folder: SweepFolder) -> list[str]:
     """The kind's own result files (CSV, whole by rename); returns their names."""
-    from chewbot.outputs import atomic_member
+    from chewbot.files import atomic_member
 
     spec, written = result.spec, []
 

@@ -80,7 +80,7 @@ def simulate(
     """
     from chewbot.cli import EXIT_BAD_INPUT, _overrides, errors_reported, exit_after_checks, fail, progress, stdout
     from chewbot.errors import ChewbotError
-    from chewbot.outputs import check_output
+    from chewbot.files import check_output
     from chewbot.simulation.controllers import METHODS
     from chewbot.simulation.run import SIMULATION_FOLDER, SimulateOptions, input_files
 

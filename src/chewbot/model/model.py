@@ -22,7 +22,7 @@ TOML file). Arrays are read-only; a model is hashable by identity and safe to sh
 | ``friction``, ``limits``, ``contact`` | | | :class:`Friction`, :class:`Limits`, :class:`Contact` |
 
 :meth:`Model.vector` gives the numbers the CasADi graphs take as their input ``p``, in the fixed layout of
-:mod:`chewbot.model_vector`.
+:mod:`chewbot.model.vector`.
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ class Contact:
 
 class MechanismMixin:
     """What follows from the mechanism's name, shared by :class:`Model` and its symbolic counterpart
-    (:class:`chewbot.model_vector.SymbolicModel`)."""
+    (:class:`chewbot.model.vector.SymbolicModel`)."""
 
     mechanism: str
 
@@ -165,8 +165,8 @@ class Model(MechanismMixin):
 
     def vector(self) -> np.ndarray:
         """The model's numbers as one read-only vector (n_p,) in SI, the input ``p`` of every kernel
-        (layout: :mod:`chewbot.model_vector`)."""
-        from chewbot.model_vector import model_vector
+        (layout: :mod:`chewbot.model.vector`)."""
+        from chewbot.model.vector import model_vector
 
         return self.cached("vector", lambda: model_vector(self))
 

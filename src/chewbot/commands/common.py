@@ -4,7 +4,7 @@ This module imports nothing but the standard library, so that :func:`main` can t
 anything heavy is imported. Writing a new command: docs/cli.md ("Writing a new command").
 
 Signals. :func:`main` turns SIGINT (Ctrl-C) and SIGTERM into :class:`Interrupted`, an exception that unwinds
-the stack like KeyboardInterrupt: every ``finally`` runs, so :mod:`chewbot.outputs` removes its temporary
+the stack like KeyboardInterrupt: every ``finally`` runs, so :mod:`chewbot.files` removes its temporary
 folders and files; then :func:`main` prints one line and exits with 128 + the signal's number (130, 143).
 Code that must not be cut in half (renaming an output into place, removing a temporary folder) runs inside
 :func:`shield`, which holds a signal back until the block ends. Libraries that catch the exception and turn it

@@ -2,7 +2,7 @@
 
 The command's options and files; the work is :func:`chewbot.identification.identifier.identify`. The model file and
 the table beside it (``MODEL.identification.csv``) are written together through
-:func:`chewbot.outputs.atomic_files` (all or none), each beginning with chewbot's marker line; an existing file is
+:func:`chewbot.files.atomic_files` (all or none), each beginning with chewbot's marker line; an existing file is
 replaced only with ``--force`` and only if chewbot wrote it.
 """
 
@@ -45,8 +45,8 @@ def identify(
     from chewbot.identification.identifier import STEPS, identify as run_identify
     from chewbot.identification.log import read_log
     from chewbot.identification.output import model_text, table_text
-    from chewbot.outputs import WRITTEN_FILE, atomic_files, check_output, marker_line
-    from chewbot.params import load_model
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.model.params import load_model
 
     table = out.with_name(out.stem + ".identification.csv")
     if side not in ("left", "right"):

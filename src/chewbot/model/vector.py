@@ -23,8 +23,8 @@ from functools import cache
 import casadi as ca
 import numpy as np
 
-from chewbot.casadi_tools import GRAPH_LOCK
-from chewbot.model import MechanismMixin
+from chewbot.compiled.kernels import GRAPH_LOCK
+from chewbot.model.model import MechanismMixin
 
 MM, G_MM2 = 1e-3, 1e-9  # mm -> m, g mm^2 -> kg m^2
 
@@ -120,7 +120,7 @@ def parameter_index(key: str) -> int:
     ``"chains.G_mm[2][1]"``); the entry holds the file's value times its block's ``scale`` (SI)."""
     k = _index().get(re.sub(r"\s+", "", key))
     if k is None:
-        raise KeyError(f"{key!r} names no entry of the parameter vector (see chewbot.model_vector.parameter_names())")
+        raise KeyError(f"{key!r} names no entry of the parameter vector (see chewbot.model.vector.parameter_names())")
     return k
 
 
@@ -232,7 +232,7 @@ def cached_graph(model_or_mechanism, key, build):
 
 
 def graph_key(model_or_mechanism, *parts) -> tuple:
-    """The key of a kernel (:class:`chewbot.casadi_tools.KernelSpec`): the mechanism and ``parts``, and for a
+    """The key of a kernel (:class:`chewbot.compiled.kernels.KernelSpec`): the mechanism and ``parts``, and for a
     model (numbers folded in) the digest of its p."""
     if isinstance(model_or_mechanism, str):
         return (model_or_mechanism, *parts)
