@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE, app
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE
 from chewbot.model.params import BUILTIN_MODELS, builtin_model_path
 
 runner = CliRunner()

@@ -17,7 +17,8 @@ import typer
 from typer.testing import CliRunner
 
 from chewbot.analysis.checks import results_from_json
-from chewbot.cli import EXIT_CHECK_FAILED, EXIT_OUTPUT, app, exit_after_checks
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_CHECK_FAILED, EXIT_OUTPUT, exit_after_checks
 from chewbot.files import (
     RESULTS_FOLDER,
     WRITTEN_FILE,

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from chewbot.cli import EXIT_BAD_INPUT, app
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT
 from chewbot.dynamics import inverse_dynamics
 from chewbot.errors import ParameterError, TaskError
 from chewbot.kinematics.motion import solve_kinematics

@@ -17,7 +17,8 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
-from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE, app
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_OUTPUT, EXIT_UNREACHABLE
 from chewbot.errors import RecordingError
 from chewbot.recordings.formats import read_artisynth, read_csv, read_recording
 from chewbot.recordings.importer import ImportOptions, import_motion

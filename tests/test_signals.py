@@ -32,7 +32,7 @@ WAIT_S = 120  # a stage must be reached within this (a cold kernel cache on a lo
 def _start(args: list[str], cwd: Path, prelude: str = "", **env) -> subprocess.Popen:
     """`chewbot ARGS` in a new process (through chewbot.commands.common.main, as the installed program), ``prelude``
     run first (a test's own instrumentation)."""
-    code = f"{prelude}\nimport sys\nfrom chewbot.commands.common import main\nsys.exit(main(sys.argv[1:]))"
+    code = f"{prelude}\nimport sys\nfrom chewbot.__main__ import main\nsys.exit(main(sys.argv[1:]))"
     return subprocess.Popen([sys.executable, "-c", code, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, **env})
 

@@ -276,7 +276,8 @@ def test_simulate_writes_a_results_folder(tmp_path):
     is refused (exit 5) and leaves the folder as it was; bad options exit 2 before anything is written."""
     from typer.testing import CliRunner
 
-    from chewbot.cli import EXIT_BAD_INPUT, EXIT_OUTPUT, app
+    from chewbot.cli import app
+    from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_OUTPUT
 
     runner = CliRunner()
     out = tmp_path / "pd"

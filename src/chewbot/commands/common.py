@@ -1,15 +1,17 @@
-"""What every chewbot command shares: the exit codes, the handling of SIGINT and SIGTERM, and the entry point.
+"""What every chewbot command shares: the exit codes, the handling of SIGINT and SIGTERM, the consoles, errors
+and progress display, ``--set`` parsing and the test pause hook.
 
-This module imports nothing but the standard library, so that :func:`main` can take over the signals before
+This module imports nothing but the standard library at its top (rich, typer and chewbot's modules inside the
+functions that use them), so that the entry point (:func:`chewbot.__main__.main`) can take over the signals before
 anything heavy is imported. Writing a new command: docs/cli.md ("Writing a new command").
 
-Signals. :func:`main` turns SIGINT (Ctrl-C) and SIGTERM into :class:`Interrupted`, an exception that unwinds
+Signals. :func:`chewbot.__main__.main` turns SIGINT (Ctrl-C) and SIGTERM into :class:`Interrupted`, an exception that unwinds
 the stack like KeyboardInterrupt: every ``finally`` runs, so :mod:`chewbot.files` removes its temporary
-folders and files; then :func:`main` prints one line and exits with 128 + the signal's number (130, 143).
+folders and files; then the entry point prints one line and exits with 128 + the signal's number (130, 143).
 Code that must not be cut in half (renaming an output into place, removing a temporary folder) runs inside
 :func:`shield`, which holds a signal back until the block ends. Libraries that catch the exception and turn it
 into their own (CasADi's solvers raise a RuntimeError saying "KeyboardInterrupt") still end the same way:
-:func:`main` looks at whether a signal arrived, not at the exception's type. Where a library swallows it
+the entry point looks at whether a signal arrived, not at the exception's type. Where a library swallows it
 altogether, :func:`check_interrupted` (called by each step of the progress display) stops the command at the
 next step.
 """
@@ -21,6 +23,7 @@ import signal
 import sys
 import time
 from contextlib import contextmanager
+from enum import Enum
 
 # Exit codes (docs/cli.md), the same for every command. 1 is left to Python: a bug, printed with its traceback.
 EXIT_OK = 0
@@ -124,26 +127,181 @@ def interrupted_message(signum: int) -> str:
     return f"interrupted: {signal.Signals(signum).name} ({what}); stopped, no partial output left"
 
 
-def main(argv: list[str] | None = None) -> int:
-    """The ``chewbot`` program: the signal handlers first, then the command line (:mod:`chewbot.cli`).
+# --- what a command prints and how it ends ----------------------------------------------------------------------
 
-    Returns the exit code. A signal ends the program with one line on standard error and 128 + its number;
-    any other unexpected exception propagates (Python prints its traceback, exit code 1).
-    """
-    install_signal_handlers()
+PROGRESS_DELAY_S = 1.0  # a run shows its progress bar once it has taken this long
+FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything else is never replaced)."
+SET_HELP = ("Override one number of the model (a parameter-file key in the file's units, 1-based indices: "
+            "friction.hkp_coulomb=0.2, chains.crank_length_mm[3]=12, chains.G_mm[2][1]=24) or of the default task "
+            "(task.force_z_N=-100); repeatable. Values that follow from it stay consistent (docs/models.md).")
+
+_CONSOLES: dict = {}
+
+
+def _console(name: str = "console"):
+    if name not in _CONSOLES:
+        from rich.console import Console
+
+        _CONSOLES[name] = Console(stderr=name == "console", soft_wrap=True)  # paths unwrapped
+    return _CONSOLES[name]
+
+
+def __getattr__(name: str):
+    """``console`` (standard error: progress, warnings, errors) and ``stdout`` (results, for scripts): rich consoles,
+    made on first use so that the entry point imports nothing heavy before it takes over the signals."""
+    if name in ("console", "stdout"):
+        return _console(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def flag(*names: str, help: str) -> bool:
+    """A boolean option that is off unless given (``--force``)."""
+    import typer
+
+    return typer.Option(False, *names, help=help)
+
+
+def exit_code(exc: BaseException) -> int:
+    """The exit code for an error chewbot raised on purpose (the table in docs/cli.md). Exit code 4 is not an
+    error's: it follows a complete output whose validity checks failed (:func:`exit_after_checks`)."""
+    from chewbot.errors import KinematicsError
+    from chewbot.files import OutputError
+
+    for kind, code in ((KinematicsError, EXIT_UNREACHABLE), (OutputError, EXIT_OUTPUT)):
+        if isinstance(exc, kind):
+            return code
+    return EXIT_BAD_INPUT
+
+
+
+
+def fail(exc: Exception, code: int | None = None) -> None:
+    """Print the error (its message names the file, row, key or sample) and exit with its code."""
+    import typer
+    from rich.markup import escape
+
+    _console().print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)  # unwrapped: paths stay whole
+    raise typer.Exit(exit_code(exc) if code is None else code)
+
+
+@contextmanager
+def errors_reported():
+    """Turn the errors chewbot raises on purpose into one line on standard error and their exit code."""
+    from chewbot.errors import ChewbotError
+
     try:
-        pause_for_tests("import")
-        from chewbot.cli import app
+        yield
+    except ChewbotError as exc:
+        fail(exc)
 
-        app(args=argv, prog_name="chewbot")  # standalone: ends with SystemExit
-        code = EXIT_OK
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else (EXIT_OK if exc.code is None else EXIT_BAD_INPUT)
-    except BaseException:
-        if _received is None:
-            raise
-        code = EXIT_OK
-    if _received is not None:  # whatever the exception became on its way out (or a library swallowed it)
-        sys.stderr.write(interrupted_message(_received) + "\n")
-        return 128 + _received
-    return code
+
+def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> None:
+    """After the output is written: print a table of the failed checks (standard error) and exit 4 if one of them
+    fails the run, unless ``allow_violations``. With ``quiet`` only the checks that make it exit 4 are printed
+    (they are its error)."""
+    from chewbot.analysis.checks import run_fails
+
+    stops = run_fails(checks) and not allow_violations
+    if quiet:
+        failed = [c for c in checks if c.fails_run] if stops else []
+    else:
+        failed = [c for c in checks if not c.passed]
+    if failed:
+        from rich import box
+        from rich.markup import escape
+        from rich.table import Table as RichTable
+
+        table = RichTable(title="failed validity checks (details: run.json, \"checks\", and report.html)", title_justify="left",
+                          box=box.SIMPLE_HEAD, pad_edge=False)
+        for col, justify in (("check", "left"), ("counts as", "left"), ("samples", "right"), ("first at t [s]", "right"), ("worst", "right")):
+            table.add_column(escape(col), justify=justify, no_wrap=True)
+        for c in failed:
+            worst = "" if c.worst is None else f"{c.worst['value']:.4g} {c.worst['unit']}"
+            first = "" if c.first_sample is None else f"{c.first_sample['t']:.4g}"
+            table.add_row(c.name, "failure" if c.fails_run else "warning", str(c.samples), first, escape(worst))
+        _console().print(table)
+    if stops:
+        import typer
+
+        raise typer.Exit(EXIT_CHECK_FAILED)
+    if run_fails(checks) and not quiet:
+        _console().print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
+
+
+class Side(str, Enum):
+    left = "left"
+    right = "right"
+
+
+class Orientation(str, Enum):
+    euler_angles = "euler-angles"
+    euler_parameters = "euler-parameters"
+
+
+class Goal(str, Enum):
+    """Optimal distribution of the target's redundant actuation (Newton-Euler, seed 001 Sect. 4.5)."""
+
+    min_torque = "min-torque"
+    min_coupler_force = "min-coupler-force"
+    min_hkp_force = "min-hkp-force"
+
+
+class Switch(str, Enum):
+    on = "on"
+    off = "off"
+
+
+class Contact(str, Enum):
+    """How the HKP planes hold the condyles (docs/contact.md)."""
+
+    bilateral = "bilateral"
+    unilateral = "unilateral"
+
+
+def set_overrides(arguments: list[str]) -> dict[str, float]:
+    """``--set KEY=VALUE`` arguments as a dict, in order (a key given twice: the last value); exit 2 on a bad one."""
+    from chewbot.model.params import parse_override
+
+    with errors_reported():
+        return dict(parse_override(a) for a in arguments)
+
+
+@contextmanager
+def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0.0):
+    """A progress bar that names the current step (nothing with --quiet, nor where standard error is not a
+    terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None)`` starts a step:
+    with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by one
+    step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
+    the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
+    arrived that a library swallowed (:func:`chewbot.commands.common.check_interrupted`)."""
+    if quiet or not _console().is_terminal:
+        yield lambda msg, done=None, total=None: check_interrupted()
+        return
+    import time
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                   console=_console(), transient=True)
+    task = bar.add_task(label, total=total)
+    start, shown, started = time.monotonic(), False, False
+
+    def step(msg: str, done: int | None = None, total: int | None = None) -> None:
+        nonlocal shown, started
+        check_interrupted()
+        if total is not None:
+            bar.update(task, total=total)
+        if done is not None:
+            bar.update(task, description=f"{label}: {msg}", completed=done)
+        else:
+            bar.update(task, description=f"{label}: {msg}", advance=1 if started else 0)
+        started = True
+        if not shown and time.monotonic() - start >= delay:
+            bar.start()
+            shown = True
+
+    try:
+        yield step
+    finally:
+        bar.stop()
+

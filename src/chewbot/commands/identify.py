@@ -40,7 +40,7 @@ def identify(
 
       chewbot identify log.csv --model my_robot.toml --out my_robot_identified.toml --fix mandible.mass_g
     """
-    from chewbot.cli import EXIT_BAD_INPUT, console, errors_reported, fail, progress, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
     from chewbot.identification.identifier import STEPS, identify as run_identify
     from chewbot.identification.log import read_log

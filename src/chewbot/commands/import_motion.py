@@ -61,7 +61,7 @@ def import_motion(
 
       chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
     """
-    from chewbot.cli import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
     from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import

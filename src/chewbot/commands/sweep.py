@@ -42,7 +42,7 @@ def sweep(
 
       chewbot sweep my_study.toml --out runs/study --scheduler tcp://10.0.0.5:8786
     """
-    from chewbot.cli import EXIT_BAD_INPUT, errors_reported, fail, progress, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
     from chewbot.outputs.sweep import run_sweep
 
@@ -61,7 +61,7 @@ def sweep(
 @contextmanager
 def _bar(quiet: bool):
     """A progress bar of the evaluations: done/total, the rate and the time left (on a terminal only)."""
-    from chewbot.cli import console
+    from chewbot.commands.common import console
     from chewbot.commands.common import check_interrupted
 
     if quiet or not console.is_terminal:

@@ -1,0 +1,55 @@
+"""``chewbot bench``: the timings a user waits for, as Markdown tables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from chewbot.commands.common import EXIT_BAD_INPUT, FORCE_HELP, errors_reported, fail, flag, progress, stdout
+from chewbot.errors import ChewbotError
+
+
+def bench(
+    repeats: int = typer.Option(11, "--repeats", min=3, help="Timed runs per case after the first, interleaved (median and spread reported)."),
+    calls: int = typer.Option(20000, "--calls", min=100, help="Calls per in-loop kernel for the one-sample timings."),
+    long: bool = flag("--long", help="Also run tasks of 10,000 to 1,000,000 samples with every method: time per "
+                      "sample and peak memory (about half an hour)."),
+    sweep: int = typer.Option(0, "--sweep", metavar="N", min=0, help="Also time the sweep's scale study (the built-in "
+                              "SPEC sobol-scale) with N base samples, a power of 2 (10 N evaluations), in this process and "
+                              "on local clusters of 1 and 2 workers, and project the whole study (1,024 base samples)."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
+                                    "file written by chewbot bench with --force)."),
+    force: bool = flag("--force", help=FORCE_HELP),
+) -> None:
+    """Time what a user waits for: chewbot run and --help, every formulation on the default task (5001 samples),
+    both mechanisms, the in-loop kernels and the exported C.
+
+    Every timing is repeated, and the variants a table compares run interleaved: medians with the interquartile
+    range of the runs; a ratio whose two spreads overlap is printed as "within noise". The machine and its load
+    average are written above the tables. Timings are not tests: pin to one core for single-core figures.
+
+    Examples:
+
+      chewbot bench --out docs/benchmark.md --force
+
+      taskset -c 0 chewbot bench --long --out bench.md
+
+      chewbot bench --sweep 32 --out bench.md
+    """
+    from chewbot.bench.benchmark import bench_sweep, benchmark, sweep_markdown
+    from chewbot.files import WRITTEN_FILE, atomic_file, check_output, marker_line
+
+    if sweep & (sweep - 1):
+        fail(ChewbotError(f"--sweep {sweep}: the base samples of a Sobol' study must be a power of 2 (8, 16, 32, ...)"), EXIT_BAD_INPUT)
+    with errors_reported():
+        if out is not None:
+            check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
+        with progress(False, "timing") as step:
+            text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
+            if sweep:
+                text += sweep_markdown(*bench_sweep(sweep, progress=step))
+        stdout.print(text, markup=False, highlight=False)
+        if out is not None:
+            with atomic_file(out, force) as tmp:
+                tmp.write_text(marker_line("<!--", "chewbot bench") + "\n" + text)

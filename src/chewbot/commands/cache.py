@@ -1,0 +1,54 @@
+"""``chewbot cache``: where the compiled kernels are kept, and emptying it."""
+
+from __future__ import annotations
+
+import typer
+
+from chewbot.commands.common import EXIT_OUTPUT, fail, stdout
+from chewbot.errors import ChewbotError
+
+cache_app = typer.Typer(help="The kernel cache: where the compiled kernels are kept.", no_args_is_help=False,
+                        add_completion=False, pretty_exceptions_enable=False)
+
+
+@cache_app.callback(invoke_without_command=True)
+def cache(context: typer.Context) -> None:
+    """Print the kernel cache's location, its number of libraries and their size; `chewbot cache clear` empties it.
+
+    The cache is $CHEWBOT_CACHE, else $XDG_CACHE_HOME/chewbot, else ~/.cache/chewbot; its size is capped at
+    $CHEWBOT_CACHE_MAX_MB megabytes (default 200), the least recently used libraries removed first.
+
+    Examples:
+
+      chewbot cache
+
+      chewbot cache clear
+    """
+    if context.invoked_subcommand is not None:
+        return
+    from chewbot.compiled.kernels import cache_info
+
+    try:
+        info = cache_info()
+    except (OSError, ValueError) as exc:
+        fail(ChewbotError(f"the kernel cache cannot be read: {exc}"), EXIT_OUTPUT)
+    stdout.print(f"location: {info['location']}\nlibraries: {info['libraries']}\n"
+                 f"size: {info['bytes'] / 1e6:.1f} MB (cap {info['max_bytes'] / 1e6:.0f} MB)", highlight=False, markup=False)
+
+
+@cache_app.command("clear")
+def cache_clear() -> None:
+    """Remove chewbot's compiled kernels from the cache (nothing else in the folder); they are compiled again when
+    next needed.
+
+    Example:
+
+      chewbot cache clear
+    """
+    from chewbot.compiled.kernels import cache_root, clear_cache
+
+    try:
+        count, size = clear_cache()
+    except OSError as exc:
+        fail(ChewbotError(f"{cache_root()}: cannot clear the kernel cache ({exc.strerror or exc})"), EXIT_OUTPUT)
+    stdout.print(f"removed {count} libraries ({size / 1e6:.1f} MB) from {cache_root()}", highlight=False, markup=False)
