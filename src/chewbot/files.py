@@ -25,13 +25,14 @@ import os
 import re
 import secrets
 import shutil
+import signal
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from chewbot.commands.common import shield
 from chewbot.errors import ChewbotError
 
 
@@ -41,6 +42,38 @@ class OutputError(ChewbotError):
 
 class OutputExistsError(OutputError):
     """The output exists, and ``force`` was not given or chewbot did not write it."""
+
+
+# --- signals held back -------------------------------------------------------------------------------------------
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def shield():
+    """Hold SIGINT and SIGTERM back while the block runs; one that arrived meanwhile is handed, at the block's end,
+    to the handler that was in place (the command's, which then raises): the short steps that must not be cut in
+    half (renaming an output into place, removing temporary files) run whole. Python runs signal handlers in the
+    main thread only, so elsewhere (and where a handler was not set from Python) the block just runs."""
+    previous = {s: signal.getsignal(s) for s in SIGNALS}
+    if threading.current_thread() is not threading.main_thread() or None in previous.values():
+        yield
+        return
+    held: list[tuple[int, object]] = []
+    for s in SIGNALS:
+        signal.signal(s, lambda signum, frame: held.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if held:
+        signum, frame = held[0]
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, frame)
+        elif handler == signal.SIG_DFL:
+            os.kill(os.getpid(), signum)
 
 
 # --- what chewbot wrote ----------------------------------------------------------------------------------

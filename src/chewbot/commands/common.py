@@ -9,11 +9,11 @@ Signals. :func:`chewbot.__main__.main` turns SIGINT (Ctrl-C) and SIGTERM into :c
 the stack like KeyboardInterrupt: every ``finally`` runs, so :mod:`chewbot.files` removes its temporary
 folders and files; then the entry point prints one line and exits with 128 + the signal's number (130, 143).
 Code that must not be cut in half (renaming an output into place, removing a temporary folder) runs inside
-:func:`shield`, which holds a signal back until the block ends. Libraries that catch the exception and turn it
+:func:`chewbot.files.shield`, which holds a signal back until the block ends. Libraries that catch the exception and turn it
 into their own (CasADi's solvers raise a RuntimeError saying "KeyboardInterrupt") still end the same way:
 the entry point looks at whether a signal arrived, not at the exception's type. Where a library swallows it
-altogether, :func:`check_interrupted` (called by each step of the progress display) stops the command at the
-next step.
+altogether, :func:`check_interrupted` (called by each step of the progress display, and passed down as ``check``
+to the loops that call such libraries) stops the command there.
 """
 
 from __future__ import annotations
@@ -53,17 +53,12 @@ class Interrupted(BaseException):
 
 
 _received: int | None = None  # the first signal that arrived
-_shielded = 0  # depth of shield() blocks
-_held = False  # a signal arrived inside a shield() block
 
 
 def _on_signal(signum: int, frame) -> None:
-    global _received, _held
+    global _received
     if _received is None:
         _received = signum
-    if _shielded:
-        _held = True
-        return
     raise Interrupted(signum)
 
 
@@ -79,25 +74,11 @@ def received_signal() -> int | None:
 
 
 def check_interrupted() -> None:
-    """Raise :class:`Interrupted` if a signal arrived, even one a library caught and turned into something else."""
-    if _received is not None and not _shielded:
-        raise Interrupted(_received)
+    """Raise :class:`Interrupted` if a signal arrived, even one a library caught and turned into something else.
 
-
-@contextmanager
-def shield():
-    """Hold SIGINT and SIGTERM back while the block runs; a signal that arrived meanwhile is raised at its end.
-
-    For the short steps that must not be cut in half: renaming an output into place, removing temporary files.
-    """
-    global _shielded, _held
-    _shielded += 1
-    try:
-        yield
-    finally:
-        _shielded -= 1
-    if _held and not _shielded:
-        _held = False
+    The loops of the lower layers are given this function (their ``check`` argument) where a library may swallow a
+    signal: they know nothing of the command line."""
+    if _received is not None:
         raise Interrupted(_received)
 
 
@@ -108,7 +89,8 @@ def pause_for_tests(stage: str) -> None:
     Stages: ``import`` (between the entry point and the command's imports), ``dynamics`` (a run's inverse
     dynamics is about to start), ``writing`` (a run's results.csv is written in the temporary folder), ``fit``
     (``identify``'s least squares are about to start), ``chunk`` (a sweep has written a chunk of evaluations to its
-    folder).
+    folder), ``simulation`` (a simulation's loop is about to start). The lower layers name a stage in their progress
+    callback (``step(message, stage="dynamics")``), which calls this.
     """
     spec = os.environ.get(TEST_PAUSE_VARIABLE, "")
     name, _, flag = spec.partition(":")
@@ -269,13 +251,19 @@ def set_overrides(arguments: list[str]) -> dict[str, float]:
 @contextmanager
 def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0.0):
     """A progress bar that names the current step (nothing with --quiet, nor where standard error is not a
-    terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None)`` starts a step:
-    with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by one
-    step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
+    terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None, stage=None)`` starts
+    a step: with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by
+    one step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
     the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
-    arrived that a library swallowed (:func:`chewbot.commands.common.check_interrupted`)."""
+    arrived that a library swallowed (:func:`check_interrupted`), and a step that names its ``stage`` is where
+    the test hook may pause (:func:`pause_for_tests`)."""
     if quiet or not _console().is_terminal:
-        yield lambda msg, done=None, total=None: check_interrupted()
+        def quiet_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
+            check_interrupted()
+            if stage:
+                pause_for_tests(stage)
+
+        yield quiet_step
         return
     import time
 
@@ -286,9 +274,11 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     task = bar.add_task(label, total=total)
     start, shown, started = time.monotonic(), False, False
 
-    def step(msg: str, done: int | None = None, total: int | None = None) -> None:
+    def step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
         nonlocal shown, started
         check_interrupted()
+        if stage:
+            pause_for_tests(stage)
         if total is not None:
             bar.update(task, total=total)
         if done is not None:

@@ -40,7 +40,7 @@ def identify(
 
       chewbot identify log.csv --model my_robot.toml --out my_robot_identified.toml --fix mandible.mass_g
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, console, errors_reported, fail, progress, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
     from chewbot.identification.identifier import STEPS, identify as run_identify
     from chewbot.identification.log import read_log
@@ -59,7 +59,7 @@ def identify(
         data = read_log(log)
         with progress(False, "identify", total=STEPS) as step:
             result = run_identify(m, data, side=side, window_s=window, fix=tuple(fix), max_relative_se=max_relative_se,
-                                  progress=step)
+                                  progress=step, check=check_interrupted)
         args = [str(log), "--model", model, "--out", str(out), "--side", side, "--window", f"{window:g}",
                 *[a for key in fix for a in ("--fix", key)], "--max-relative-se", f"{max_relative_se:g}"]
         about = f"chewbot identify {shlex.join(args)}"

@@ -8,7 +8,7 @@ import typer
 from rich.markup import escape
 
 from chewbot.commands.common import (EXIT_BAD_INPUT, FORCE_HELP, PROGRESS_DELAY_S, SET_HELP, Contact, Goal, Orientation, Side,
-                                     Switch, errors_reported, exit_after_checks, fail, flag, progress, set_overrides, stdout)
+                                     Switch, check_interrupted, errors_reported, exit_after_checks, fail, flag, progress, set_overrides, stdout)
 from chewbot.errors import ChewbotError
 
 
@@ -92,7 +92,8 @@ def run(
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:
-            done = run_to_folder(options, out, force=force, progress=step, figures=not no_figures, report=not no_report)
+            done = run_to_folder(options, out, force=force, progress=step, figures=not no_figures, report=not no_report,
+                                 check=check_interrupted)
     if not quiet:
         _print_run_summary(done, out)
     exit_after_checks(done.checks, allow_violations, quiet)

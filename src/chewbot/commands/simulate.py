@@ -78,7 +78,7 @@ def simulate(
 
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, errors_reported, exit_after_checks, fail, progress, set_overrides, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress, set_overrides, stdout
     from chewbot.errors import ChewbotError
     from chewbot.files import check_output
     from chewbot.simulation.controllers import METHODS
@@ -104,13 +104,13 @@ def simulate(
             from chewbot.simulation.run import compare as run_compare, write_comparison
 
             with progress(quiet, "simulate --compare", total=3 * SIMULATE_STEPS) as step:
-                results = run_compare(options, progress=step)
+                results = run_compare(options, progress=step, check=check_interrupted)
                 write_comparison(results, out, force=force, progress=step)
         else:
             from chewbot.simulation.run import compute, write
 
             with progress(quiet, "simulate", total=SIMULATE_STEPS) as step:
-                results = {controller: compute(options, progress=step)}
+                results = {controller: compute(options, progress=step, check=check_interrupted)}
                 write(results[controller], out, force=force, progress=step)
     if not quiet:
         _print_summary(stdout, results, out, compare)

@@ -42,7 +42,7 @@ def sweep(
 
       chewbot sweep my_study.toml --out runs/study --scheduler tcp://10.0.0.5:8786
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, errors_reported, fail, progress, stdout
+    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError
     from chewbot.outputs.sweep import run_sweep
 
@@ -53,7 +53,7 @@ def sweep(
     with errors_reported():
         with progress(quiet, "sweep") as step, _bar(quiet) as bar:
             result = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume, force=force,
-                               progress=bar, step=step)
+                               progress=bar, step=step, check=check_interrupted)
     if not quiet:
         _print_summary(stdout, result)
 
@@ -61,11 +61,15 @@ def sweep(
 @contextmanager
 def _bar(quiet: bool):
     """A progress bar of the evaluations: done/total, the rate and the time left (on a terminal only)."""
-    from chewbot.commands.common import console
-    from chewbot.commands.common import check_interrupted
+    from chewbot.commands.common import check_interrupted, console, pause_for_tests
 
     if quiet or not console.is_terminal:
-        yield lambda done, total: check_interrupted()
+        def quiet_update(done: int, total: int, stage: str | None = None) -> None:
+            check_interrupted()
+            if stage:
+                pause_for_tests(stage)
+
+        yield quiet_update
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -74,8 +78,10 @@ def _bar(quiet: bool):
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True) as p:
         task = p.add_task("evaluations", total=None, rate="")
 
-        def update(done: int, total: int) -> None:
+        def update(done: int, total: int, stage: str | None = None) -> None:
             check_interrupted()
+            if stage:
+                pause_for_tests(stage)
             speed = p.tasks[0].speed
             p.update(task, completed=done, total=total, rate=f"{speed:.1f}/s" if speed else "")
 

@@ -29,7 +29,6 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.commands.common import check_interrupted
 from chewbot.errors import InfeasibleError
 
 # Newton stops when the step is below STEP_TOL (1 + |x|) (x in N: 1e-10 N on forces of tens of newtons).
@@ -183,11 +182,14 @@ def broken_limits(problem: Problem, data: SampleData, x: np.ndarray, friction: f
 
 
 def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bound: np.ndarray, strict: bool = False,
-          lower: np.ndarray | None = None, lower_names: list[str] | None = None, previous: np.ndarray | None = None) -> Solution:
+          lower: np.ndarray | None = None, lower_names: list[str] | None = None, previous: np.ndarray | None = None,
+          check: Callable[[], None] | None = None) -> Solution:
     """Distribute x at every sample (see the module docstring). ``t``: sample times, for the reports;
     ``bound``: the limits' bounds, |c| <= bound; ``lower``: lower bounds on x (nx,), constraints of the problem like
     the limits (None: x is free), named ``lower_names`` where a sample breaks them; ``previous``: the solution of
-    the sample before the first one (a task solved in chunks), the SQP's warm start there."""
+    the sample before the first one (a task solved in chunks), the SQP's warm start there; ``check()``: called before
+    each sample's SQP, raises to stop (CasADi's solver may swallow a signal: the command line passes a check that
+    raises when one arrived)."""
     bound = np.asarray(bound, dtype=float)
     if lower is not None:
         lower = np.broadcast_to(np.asarray(lower, dtype=float), (problem.nx,))
@@ -210,7 +212,7 @@ def solve(problem: Problem, data: SampleData, friction: float, t: np.ndarray, bo
     constrained, infeasible = [], []
     status = {}
     if problem.nx and rows.size:
-        x, constrained, status = _constrained(problem, data, x, friction, rows, bound, lower, previous)
+        x, constrained, status = _constrained(problem, data, x, friction, rows, bound, lower, previous, check)
         broken = broken_limits(problem, data, x, friction, bound, lower)
         rows = np.flatnonzero(broken.any(axis=1))
     for k in rows:
@@ -284,7 +286,7 @@ def _on_bounds(problem: Problem, data: SampleData, x, friction, lower, below):
     return x
 
 
-def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, lower, previous=None):
+def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, lower, previous=None, check=None):
     """SQP with the limits (and the lower bounds on x), sample after sample in time order, each warm-started from
     the previous one (the first sample from ``previous``, the solution before it, where given; else from its own
     optimum without the limits)."""
@@ -294,7 +296,8 @@ def _constrained(problem: Problem, data: SampleData, x, friction, rows, bound, l
     params = [np.asarray(p).ravel() for p in data.p]
     lbx = -np.inf if lower is None else lower
     for k in rows:
-        check_interrupted()  # CasADi's solver may catch a SIGINT and return a failure status: stop here
+        if check:  # CasADi's solver may catch a SIGINT and return a failure status: stop here
+            check()
         x0 = x[k - 1] if k > 0 else x[k] if previous is None else previous
         sol = solver(x0=x0, p=np.concatenate([data.column(k), [friction], *params]), lbg=-bound, ubg=bound, lbx=lbx)
         xk = np.asarray(sol["x"]).ravel()

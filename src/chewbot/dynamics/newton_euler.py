@@ -324,7 +324,7 @@ def check_goal(goal: str) -> None:
 @register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
                  friction: bool = True, contact: str = "bilateral", strict: bool = False, carry: dict | None = None,
-                 **ignored) -> Dynamics:
+                 check=None, **ignored) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
 
     ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
@@ -332,7 +332,8 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
     ``model.contact.preload`` to the distribution's constraints (:mod:`chewbot.dynamics.contact`); ``strict``: raise
     :class:`~chewbot.errors.InfeasibleError` at a sample with no admissible distribution instead of recording
     it in ``info["infeasible"]``; ``carry``: the previous chunk's ``Dynamics.carry`` (its last distribution, the
-    warm start of the SQP at this chunk's first sample). Columns of the table: see docs/newton_euler.md.
+    warm start of the SQP at this chunk's first sample); ``check``: called between the samples the SQP solves (see
+    :func:`chewbot.dynamics.distribution.solve`). Columns of the table: see docs/newton_euler.md.
     """
     check_goal(goal)
     check_contact(contact)
@@ -342,7 +343,7 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
     preload = model.contact.preload
     sol = solve(problem(model.mechanism, goal), data, fl, kin.t, limit_bounds(model), strict=strict,
                 lower=np.full(2, preload) if unilateral else None, lower_names=bound_names(preload),
-                previous=(carry or {}).get("x"))
+                previous=(carry or {}).get("x"), check=check)
     forces = native(forces_kernel(model.mechanism))
     out = dict(zip(forces.name_out(), data(forces, sol.x, fl)))
     table = Table()

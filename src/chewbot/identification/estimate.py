@@ -26,7 +26,6 @@ from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from chewbot.compiled.kernels import evaluate, native
-from chewbot.commands.common import check_interrupted, pause_for_tests
 from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
 from chewbot.identification import MAX_RELATIVE_SE, RCOND
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
@@ -61,7 +60,7 @@ class Evaluation:
 class ReducedProblem:
     """The residual of a log with the normal forces eliminated, as a function of x (:meth:`evaluate_at`)."""
 
-    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray, used: np.ndarray | None = None):
+    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray, used: np.ndarray | None = None, check=None):
         self.model, self.kin, self.tau = model, kin, np.asarray(tau, dtype=float)
         self.used = np.ones(kin.n, dtype=bool) if used is None else used  # samples in the fit; others weigh 0
         self.nN = n_unknowns(model)
@@ -72,10 +71,12 @@ class ReducedProblem:
         self.inputs = (kin.theta, kin.q, kin.dq, kin.ddq, kin.force)
         self.evaluations = 0
         self._N = None  # the last normal forces: the next evaluation starts from them
+        self.check = check  # called at each evaluation; raises to stop (a signal the solvers may swallow)
 
     def evaluate_at(self, x: np.ndarray, jacobian: bool = False) -> Evaluation:
         """The residual at x with each sample's normal forces at their optimum, and the reduced Jacobian."""
-        check_interrupted()
+        if self.check is not None:
+            self.check()
         self.evaluations += 1
         p = p_with(self.model, x)
         n = self.kin.n
@@ -231,7 +232,6 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
         _hold(held, reasons, int(free_idx[pivot]), "the torques do not depend on it (with the other parameters)")
     phi = phi0.copy()
     cache: dict[bytes, tuple] = {}
-    pause_for_tests("fit")
     solver, x, ev, C = None, x0, start, np.zeros((0, 0))
     while True:
         idx = np.flatnonzero(free & ~held)
@@ -248,8 +248,8 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
                 cache[key] = (full, x, dx[:, idx], problem.evaluate_at(x, jacobian=True))
             return cache[key]
 
-        if progress:
-            progress(f"least squares ({idx.size} of {free_idx.size} parameters)")
+        if progress:  # the first: the stage "fit"
+            progress(f"least squares ({idx.size} of {free_idx.size} parameters)", stage="fit" if solver is None else None)
         solver = least_squares(lambda z: evaluated(z)[3].r.ravel(), np.clip(phi[idx], lo[idx], hi[idx]),
                                lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
                                x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,

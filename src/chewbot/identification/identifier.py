@@ -135,14 +135,15 @@ def references(model: Model, x0: np.ndarray) -> np.ndarray:
 
 def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
              fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
-             progress=None) -> Identification:
+             progress=None, check=None) -> Identification:
     """Estimate the friction and the mandible's inertia of ``model`` from ``log`` (see the module docstring).
 
     ``fix``: parameter-file keys (:data:`chewbot.identification.parameters.GROUPS`) kept at the model's values;
     ``window_s``: the smoothing window of the rates; ``rcond``, ``max_relative_se``: the identifiability
-    thresholds (:mod:`chewbot.identification.estimate`).
+    thresholds (:mod:`chewbot.identification.estimate`); ``progress(message, stage=None)`` is told each stage (the
+    least squares as the stage ``fit``); ``check()`` is called at each evaluation of the residual and raises to stop.
     """
-    step = progress or (lambda msg: None)
+    step = progress or (lambda msg, stage=None: None)
     for key in fix:
         if key not in GROUPS:
             raise ChewbotError(f"--fix {key}: not an identified key; choose among {', '.join(GROUPS)}")
@@ -166,7 +167,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
         raise ChewbotError(f"{log.source}: only {int(used.sum())} of {log.n} samples have every crank turning (faster than "
                            f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
-    problem = ReducedProblem(model, motion.kin, log.tau, used)
+    problem = ReducedProblem(model, motion.kin, log.tau, used, check)
     step("the start model")
     result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
     step("results")

@@ -103,13 +103,15 @@ def _now() -> str:
 
 
 def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = None, workers: int | None = None,
-              resume: bool = False, force: bool = False, progress=None, step=None, processes: bool = True) -> SweepResult:
+              resume: bool = False, force: bool = False, progress=None, step=None, processes: bool = True,
+              check=None) -> SweepResult:
     """Run the sweep of ``spec_source`` (a SPEC file or a built-in SPEC's name) into the folder ``out``.
 
     ``scheduler``: address of an existing Dask scheduler (default: a LocalCluster of ``workers`` processes, the
     cores by default; ``processes=False``: threads in this process, for tests). ``resume``: continue the
     interrupted sweep in ``out``; ``force``: replace an existing sweep folder. ``progress(done, total)``: the
-    evaluations done; ``step(message)``: the stage.
+    evaluations done (a chunk written as the stage ``chunk``); ``step(message)``: the stage; ``check()``: raises
+    to stop (:class:`~chewbot.sweep.runner.ChunkRunner`).
     """
     step = step or (lambda msg: None)
     spec = read_spec(spec_source)
@@ -135,7 +137,7 @@ def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = Non
         cluster = cluster_description(client)
         folder.save(cluster=cluster, resumed=_now() if resume else None)
         step(f"evaluating on {cluster['workers']} worker(s)")
-        runner = ChunkRunner(client, folder, evaluate_chunk, spec, spec.chunk, output_units(spec), progress)
+        runner = ChunkRunner(client, folder, evaluate_chunk, spec, spec.chunk, output_units(spec), progress, check)
         _evaluate(spec, runner, result)
     result.elapsed_s = time.perf_counter() - started
     result.reused_chunks, result.computed_chunks, result.computed = runner.reused, runner.computed, runner.evaluations

@@ -28,7 +28,6 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from chewbot.commands.common import pause_for_tests
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.model import Model
 from chewbot.table import RunOptions, RunRecord, RunResult, Table, kinematics_table, run_record
@@ -142,9 +141,12 @@ def singularity_columns(table: Table, kin) -> None:
     table.add("kappa_J", kin.kappa, "1", "reciprocal condition number of the chains' Jacobian J_theta1, columns scaled (0: singular)")
 
 
-def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHUNK_SAMPLES, progress=None) -> Iterator[Chunk]:
+def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHUNK_SAMPLES, progress=None,
+           check: Callable[[], None] | None = None) -> Iterator[Chunk]:
     """The task through the stages, ``size`` samples at a time (None: in one piece), in order. ``progress(message,
-    done=samples)`` is told each stage."""
+    done=samples, stage=None)`` is told each stage (the first chunk's inverse dynamics as the stage ``dynamics``);
+    ``check()`` is called inside the loops of the formulations where a library may swallow a signal, and raises to
+    stop."""
     from chewbot.compiled.kernels import prepare_kernels
 
     step = _stepper(progress)
@@ -169,11 +171,9 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
             from chewbot.analysis.coupling import coupling
             from chewbot.dynamics import inverse_dynamics
 
-            step(f"inverse dynamics ({o.method})", done=start)
-            if start == 0:
-                pause_for_tests("dynamics")
+            step(f"inverse dynamics ({o.method})", done=start, stage="dynamics" if start == 0 else None)
             t0 = time.perf_counter()
-            dyn = inverse_dynamics(model, kin, o.method, carry=carry, **used)
+            dyn = inverse_dynamics(model, kin, o.method, carry=carry, check=check, **used)
             carry = dyn.carry
             timings[f"dynamics_{o.method}_s"] = time.perf_counter() - t0
             table.add_block([f"tau{i + 1}" for i in range(6)], dyn.tau, "N*m", f"actuator torques ({o.method})")
@@ -300,7 +300,7 @@ def _joined(parts: list, cls):
     return cls(**values)
 
 
-def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLES) -> RunResult:
+def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None) -> RunResult:
     """Compute a run in memory (no files), ``chunk`` samples at a time (None: the task in one piece; the results
     are the same)."""
     from chewbot.kinematics.motion import Kinematics
@@ -310,7 +310,7 @@ def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLE
     options, model, task = _inputs(options)
     totals = Totals(model, options)
     parts = []
-    for part in chunks(model, task, options, chunk, step):
+    for part in chunks(model, task, options, chunk, step, check):
         totals.add(part)
         parts.append(part)
     result = RunResult(options=options, model=model, task=task, kinematics=_joined([p.kinematics for p in parts], Kinematics),
@@ -329,7 +329,7 @@ def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLE
 def _stepper(progress):
     """The progress callback ``step(message, done=None, total=None)`` (samples done, of total), or one that does
     nothing."""
-    return progress or (lambda msg, done=None, total=None: None)
+    return progress or (lambda msg, done=None, total=None, stage=None: None)
 
 
 def run_json(result: RunResult) -> dict:
@@ -392,7 +392,7 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
     with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp:
         step("writing results.csv")
         result.table.to_csv(tmp / "results.csv")
-        pause_for_tests("writing")
+        step("writing run.json", stage="writing")
         record = _write_record(run_json(result), tmp)
         view = _view_builder(result.model, result.task.t, result.options.contact)
         view.update(result.table)
@@ -403,7 +403,7 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
 
 
 def run(options: RunOptions, out: Path, force: bool = False, progress=None, figures: bool = True, report: bool = True,
-        chunk: int | None = CHUNK_SAMPLES) -> RunRecord:
+        chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None) -> RunRecord:
     """Compute a run chunk by chunk and write its folder ``out`` as it goes (what ``chewbot run`` does): each
     chunk's rows are appended to results.csv in the temporary folder, then run.json, the figures and report.html
     are written from what was accumulated. Atomic as :func:`write`. ``progress(message, done=samples, total=samples)``
@@ -428,7 +428,7 @@ def run(options: RunOptions, out: Path, force: bool = False, progress=None, figu
                 totals.timings["results_csv_s"] = totals.timings.get("results_csv_s", 0.0) + time.perf_counter() - t0
 
             last = None
-            for part in chunks(model, task, options, chunk, step):
+            for part in chunks(model, task, options, chunk, step, check):
                 totals.add(part)
                 view.update(part.table)
                 if last is not None:
@@ -441,7 +441,7 @@ def run(options: RunOptions, out: Path, force: bool = False, progress=None, figu
             def record() -> dict:  # while the figures are drawn: the last chunk's rows, then run.json
                 rows(last)
                 csv.close()
-                pause_for_tests("writing")
+                step("writing run.json", stage="writing")
                 content.update(_write_record(run_record(options, model, task, last.table.rows(0, 0), checks, totals.info()), tmp))
                 return content
 

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.compiled.kernels import evaluate, native, prepare_kernels
-from chewbot.commands.common import pause_for_tests
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import kinematics_kernel
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
@@ -133,16 +132,17 @@ def build(options: SimulateOptions):
     return model, plant_model, task, reference, gains, controller, plant, sensor
 
 
-def compute(options: SimulateOptions, progress=None) -> SimulateResult:
-    """Simulate in memory (no files). ``progress(message)`` is told each stage."""
-    step = progress or (lambda msg: None)
+def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResult:
+    """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
+    ``simulation``); ``check()`` is called in the loop and raises to stop it."""
+    step = progress or (lambda msg, stage=None: None)
     step("models and task")
     model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
     options = replace(options, side=task.side, goal=controller.goal)
-    step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})")
-    pause_for_tests("simulation")
+    step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
+         stage="simulation")
     t0 = time.perf_counter()
-    sim = simulate(plant, controller, reference, options.rate, sensor)
+    sim = simulate(plant, controller, reference, options.rate, sensor, check=check)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -310,11 +310,10 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> None:
     from chewbot.report import dynamics_figures, figures, simulation_figures
     from chewbot.report.simulation_html import controller_label, write_simulation_report
 
-    step = progress or (lambda msg: None)
+    step = progress or (lambda msg, stage=None: None)
     step("writing results.csv")
     result.table.to_csv(folder / "results.csv")
-    pause_for_tests("writing")
-    step("drawing figures")
+    step("drawing figures", stage="writing")
     result.figures = [
         simulation_figures.tracking_error(result.table, folder / "tracking_error.png", controller_label(result)),
         dynamics_figures.torques(result.table, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
@@ -336,9 +335,9 @@ def write(result: SimulateResult, out: Path, force: bool = False, progress=None)
     return out
 
 
-def compare(options: SimulateOptions, progress=None) -> dict[str, SimulateResult]:
+def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress) for kind in CONTROLLERS}
+    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
 
 
 def comparison_table(results: dict[str, SimulateResult]) -> Table:

@@ -27,7 +27,6 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native, prepare_kernels
-from chewbot.commands.common import check_interrupted
 from chewbot.errors import KinematicsError
 from chewbot.model.vector import N_P, cached_graph
 from chewbot.simulation.controllers import ModelBasedController, State
@@ -113,13 +112,14 @@ def closed_loop_kernel(controller: ModelBasedController) -> KernelSpec:
 
 
 def simulate(plant: Plant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
-             sensor: CrankSensor | None = None, progress=None) -> Simulation:
+             sensor: CrankSensor | None = None, progress=None, check=None) -> Simulation:
     """Simulate ``plant`` under ``controller`` following ``reference`` from its first to its last sample, starting on
     the reference (its first sample's position and rate).
 
     ``rate``: the control rate (Hz; ticks t_0 + k / rate), or None for the controller at every integrator stage
     (rows at the reference's samples; a built-in controller). ``sensor``: noisy crank encoders and the estimator the
-    controller then gets its state from (held rates only). ``progress(fraction)`` is called now and then.
+    controller then gets its state from (held rates only). ``progress(fraction)`` is called now and then, and
+    ``check()`` too, which raises to stop the loop (a signal a library swallowed: the command line's check).
     """
     if rate is None:
         if not isinstance(controller, ModelBasedController):
@@ -166,9 +166,11 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
             data = _held_data(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
         if k == K - 1:
             break
-        if progress is not None and k % 250 == 0:
-            progress(k / K)
-            check_interrupted()
+        if k % 250 == 0:
+            if progress is not None:
+                progress(k / K)
+            if check is not None:
+                check()
         state = plant.advance(state, times[k + 1] - times[k], data, kernel, shared)
         if not state.margin > 0:
             stopped, last = {"t": float(times[k + 1]), "sample": k + 1, "reason": _reason(plant, state)}, k

@@ -27,9 +27,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from chewbot.commands.common import check_interrupted, pause_for_tests, shield
 from chewbot.errors import ChewbotError
-from chewbot.files import atomic_member
+from chewbot.files import atomic_member, shield
 from chewbot.sweep.record import SweepFolder
 
 # Chunks in flight per worker thread: enough that a worker never waits for the client, few enough that the
@@ -123,14 +122,17 @@ class ChunkRunner:
 
     ``task(spec_payload, values) -> {column: (n,) array, "error": [str | None]}`` is the function mapped over the
     chunks (:func:`chewbot.sweep.evaluate.evaluate_chunk` for chewbot's model); ``units`` gives the unit of each
-    output column (Parquet field metadata). ``progress(done, total)`` is told the evaluations done.
+    output column (Parquet field metadata). ``progress(done, total, stage=None)`` is told the evaluations done (after
+    a chunk written to the folder, as the stage ``chunk``); ``check()`` is called as each chunk arrives, and raises
+    to stop (a signal that Dask's machinery may swallow).
     """
 
     def __init__(self, client, folder: SweepFolder, task: Callable, payload, chunk: int, units: dict[str, str],
-                 progress: Callable[[int, int], None] | None = None):
+                 progress: Callable[..., None] | None = None, check: Callable[[], None] | None = None):
         self.client, self.folder, self.task, self.payload, self.chunk = client, folder, task, payload, chunk
         self.units = units
-        self.progress = progress or (lambda done, total: None)
+        self.progress = progress or (lambda done, total, stage=None: None)
+        self.check = check or (lambda: None)
         self.reused = self.computed = 0  # chunks read back from an interrupted run, and chunks evaluated
         self.evaluations = 0
         self.compute_s = 0.0  # wall time spent evaluating (not reading chunks back)
@@ -167,18 +169,17 @@ class ChunkRunner:
                 futures[f] = (a, b)
                 flow.add(f)
             for future in flow:
-                check_interrupted()
+                self.check()
                 a, b = futures.pop(future)
                 columns = future.result()
                 future.release()
                 table = self._table(design, a, b, columns)
                 with atomic_member(self.folder.chunk_path(design.first + a)) as tmp:
                     pq.write_table(table, tmp)
-                pause_for_tests("chunk")
                 self._keep(kept, a, table)
                 self.computed += 1
                 self.evaluations += b - a
-                self._advance(b - a)
+                self._advance(b - a, stage="chunk")
                 nxt = next(queue, None)
                 if nxt is not None:
                     f = self._submit(design, *nxt)
@@ -194,9 +195,9 @@ class ChunkRunner:
     def _submit(self, design: Design, a: int, b: int):
         return self.client.submit(self.task, self.payload, design.rows(a, b), pure=False)
 
-    def _advance(self, n: int) -> None:
+    def _advance(self, n: int, stage: str | None = None) -> None:
         self.done += n
-        self.progress(self.done, self.total)
+        self.progress(self.done, self.total, stage=stage)
 
     def _table(self, design: Design, a: int, b: int, columns: dict) -> pa.Table:
         """A chunk's rows: ``sample``, the parameters (keys), the outputs (with their units), ``error``."""
