@@ -12,7 +12,8 @@ from conftest import default_kinematics, model
 
 from chewbot.compiled.kernels import c_compiler, evaluate, native
 from chewbot.dynamics.core6rss import torque_kernel
-from chewbot.model.vector import BLOCKS, N_P, SymbolicModel, block_slice, parameter_index, parameter_names
+from chewbot.model.vector import BLOCKS, N_P, block_slice, parameter_index, parameter_names
+from chewbot.model.symbolic import SymbolicModel
 from chewbot.model.params import BUILTIN_MODELS, builtin_model_path, load_model
 
 
@@ -67,7 +68,7 @@ def test_names_and_indices():
 def test_symbolic_view_mirrors_the_model(name):
     """SymbolicModel.of(model): every attribute a graph builder reads equals the model's (T_R as the mirror of
     T_L, the planes' normal, the working branches of the NumPy inverse kinematics)."""
-    from chewbot.kinematics.ik import branches
+    from chewbot.model.chains import working_branches as branches
 
     m = model(name)
     s = SymbolicModel.of(m)

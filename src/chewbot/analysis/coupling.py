@@ -32,7 +32,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
 
 _OFF = ~np.eye(6, dtype=bool)
 

@@ -442,7 +442,8 @@ def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk
     evaluations of the whole study."""
     from chewbot.sweep.evaluate import evaluate_chunk
     from chewbot.sweep.record import SweepFolder
-    from chewbot.outputs.sweep import output_units, prepare
+    from chewbot.outputs.sweep import prepare
+    from chewbot.sweep.evaluate import output_units
     from chewbot.sweep.runner import ChunkRunner, dask_client
     from chewbot.sweep.samplers import sobol_design
     from chewbot.sweep.spec import read_spec

@@ -82,7 +82,8 @@ def simulate(
     from chewbot.errors import ChewbotError
     from chewbot.files import check_output
     from chewbot.simulation.controllers import METHODS
-    from chewbot.simulation.run import SIMULATION_FOLDER, SimulateOptions, input_files
+    from chewbot.outputs.simulation import SIMULATION_FOLDER
+    from chewbot.simulation.run import SimulateOptions, input_files
 
     choices = {"--side": (side, (None, "left", "right")), "--method": (method, METHODS), "--friction": (friction, ("on", "off")),
                "--contact": (contact, ("bilateral", "unilateral")), "--goal": (goal, (None, "min-torque", "min-coupler-force", "min-hkp-force"))}
@@ -101,13 +102,15 @@ def simulate(
     with errors_reported():
         check_output(out, force, SIMULATION_FOLDER, inputs=input_files(options))  # before the work, not after it
         if compare:
-            from chewbot.simulation.run import compare as run_compare, write_comparison
+            from chewbot.outputs.simulation import write_comparison
+            from chewbot.simulation.run import compare as run_compare
 
             with progress(quiet, "simulate --compare", total=3 * SIMULATE_STEPS) as step:
                 results = run_compare(options, progress=step, check=check_interrupted)
                 write_comparison(results, out, force=force, progress=step)
         else:
-            from chewbot.simulation.run import compute, write
+            from chewbot.outputs.simulation import write
+            from chewbot.simulation.run import compute
 
             with progress(quiet, "simulate", total=SIMULATE_STEPS) as step:
                 results = {controller: compute(options, progress=step, check=check_interrupted)}

@@ -91,7 +91,7 @@ def _bar(quiet: bool):
 def _print_summary(stdout, result) -> None:
     from rich.markup import escape
 
-    from chewbot.outputs.sweep import REPORT_FILE
+    from chewbot.sweep.record import REPORT_FILE
 
     spec = result.spec
     rate = f", {result.computed / result.elapsed_s:.1f} evaluations/s" if result.computed and result.elapsed_s else ""

@@ -46,7 +46,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import c_name, graph_key, mechanism_of
+from chewbot.model.symbolic import c_name, graph_key, mechanism_of
 from chewbot.table import Table
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 

@@ -46,7 +46,7 @@ from chewbot.dynamics.energy import require_euler_angles
 from chewbot.kinematics.functions import lift_sx
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.symbolic import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
 

@@ -29,7 +29,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import Energy, energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
 
 
 @dataclass(frozen=True)

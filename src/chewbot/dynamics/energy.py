@@ -27,7 +27,7 @@ from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import Symbolic, symbolic
 from chewbot.model import Model
-from chewbot.model.vector import c_name, cached_graph, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, cached_graph, graph_key, mechanism_of, parameter_input
 
 ORIENTATION = "euler-angles"
 

@@ -29,7 +29,7 @@ from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
 
 LAGRANGE_OUTPUTS = ("D", "J_theta", "J_qEE", "Q_B")
 

@@ -43,7 +43,7 @@ from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, bui
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.model import Model
-from chewbot.model.vector import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.symbolic import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.table import Table
 
 # Regularisation of sgn(theta_dot) and v_T/|v_T| (known inputs per sample): below these speeds Coulomb

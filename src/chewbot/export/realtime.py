@@ -38,7 +38,7 @@ from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unkn
 from chewbot.export.c import Kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.vector import cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.symbolic import cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.simulation.forward import NEWTON_ITERATIONS, forward_kernel
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise

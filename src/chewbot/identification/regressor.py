@@ -27,7 +27,8 @@ import casadi as ca
 from chewbot.compiled.kernels import KernelSpec
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.identification.parameters import N_X, p_entries
-from chewbot.model.vector import N_P, SymbolicModel, c_name, graph_key
+from chewbot.model.vector import N_P
+from chewbot.model.symbolic import SymbolicModel, c_name, graph_key
 
 ORIENTATION = "euler-angles"
 

@@ -19,41 +19,12 @@ from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
+from chewbot.model.chains import closure_coefficients, working_branches
 
 # A chain closer than this to its singular configuration (sin of the transmission angle, :func:`transmission`: 1
 # when the coupler lies along the crank tip's motion, 0 at the dead point) is reported as singular: its
 # theta_dot would be more than 1e4 times the speed of the coupler end along the coupler divided by the crank length.
 SINGULAR_TOLERANCE = 1e-4
-
-
-def _coefficients(model: Model, p: np.ndarray, R: np.ndarray):
-    Mi = p[:, None, :] + np.einsum("nij,kj->nki", R, model.M)  # (N, 6, 3)
-    d = Mi - model.G[None]
-    u = model.R_C0[:, :, 0]
-    v = model.R_C0[:, :, 1]
-    Lc, Lr = model.crank_length, model.coupler_length
-    A = 2 * Lc * np.einsum("nki,ki->nk", d, u)
-    B = 2 * Lc * np.einsum("nki,ki->nk", d, v)
-    C = Lc**2 + np.einsum("nki,nki->nk", d, d) - Lr**2
-    return A, B, C
-
-
-def branches(model: Model) -> np.ndarray:
-    """The working branch of each chain: the sign (+1/-1) of dh_i/dtheta_i at the home pose."""
-
-    def build():
-        A, B, C = _coefficients(model, np.zeros((1, 3)), np.eye(3)[None])
-        r = np.hypot(A, B)
-        phi = np.arctan2(B, A)
-        acos = np.arccos(np.clip(C / r, -1, 1))
-        plus, minus = _wrap(phi + acos), _wrap(phi - acos)
-        return np.where(np.abs(plus) <= np.abs(minus), 1.0, -1.0)[0]
-
-    return model.cached("ik_branches", build)
-
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def transmission(model: Model, p: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -71,7 +42,7 @@ def transmission(model: Model, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     coupler at L_c theta_dot_i sin mu_i, so a motion of the mandible needs crank rates that grow as 1/sin mu_i
     (the input transmission index of motion/force transmissibility).
     """
-    A, B, C = _coefficients(model, p, R)
+    A, B, C = closure_coefficients(model, p, R)
     return np.sqrt(np.clip(A**2 + B**2 - C**2, 0, None)) / (2 * model.crank_length * model.coupler_length)
 
 
@@ -84,10 +55,10 @@ def inverse_kinematics(model: Model, p: np.ndarray, R: np.ndarray, times: np.nda
     """
     p = np.atleast_2d(p)
     R = np.asarray(R).reshape(-1, 3, 3)
-    A, B, C = _coefficients(model, p, R)
+    A, B, C = closure_coefficients(model, p, R)
     ratio = C / np.hypot(A, B)
     check_chains(np.abs(ratio), transmission(model, p, R), times)
-    return continuous(np.arctan2(B, A) + branches(model)[None, :] * np.arccos(ratio))
+    return continuous(np.arctan2(B, A) + working_branches(model)[None, :] * np.arccos(ratio))
 
 
 def check_chains(reach: np.ndarray, sin_transmission: np.ndarray, times: np.ndarray | None = None) -> None:

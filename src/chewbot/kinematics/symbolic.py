@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.model import Model
-from chewbot.model.vector import SymbolicModel, cached_graph, symbols
+from chewbot.model.symbolic import SymbolicModel, cached_graph, symbols
 from chewbot.rotation import E_sx, R_omega_sx, matrix_from_euler_angles_sx, matrix_from_euler_parameters_sx
 
 ORIENTATIONS = ("euler-angles", "euler-parameters")

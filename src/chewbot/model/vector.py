@@ -3,7 +3,7 @@
 The CasADi graphs are built once per mechanism with the model's numbers as a symbol ``p`` (n_p entries, SI
 units, laid out as :data:`BLOCKS` says), so one compiled kernel serves every model of a mechanism: a new
 parameter set costs an evaluation, not a graph build or a compilation. :meth:`chewbot.model.Model.vector`
-gives a model's ``p``; :class:`SymbolicModel` is its symbolic counterpart, whose attributes mirror
+gives a model's ``p``; :class:`~chewbot.model.symbolic.SymbolicModel` is its symbolic counterpart, whose attributes mirror
 :class:`~chewbot.model.Model` (``G[i]``, ``R_C0[i]``, ``crank_length[i]``, ``hkp.T_L``, ``friction.hkp_coulomb``
 ...) as slices of ``p``, so a graph builder reads like code written against a model.
 
@@ -20,11 +20,9 @@ import re
 from dataclasses import dataclass
 from functools import cache
 
-import casadi as ca
 import numpy as np
 
-from chewbot.compiled.kernels import GRAPH_LOCK
-from chewbot.model.model import MechanismMixin
+from chewbot.model.chains import working_branches
 
 MM, G_MM2 = 1e-3, 1e-9  # mm -> m, g mm^2 -> kg m^2
 
@@ -126,12 +124,10 @@ def parameter_index(key: str) -> int:
 
 def model_vector(model) -> np.ndarray:
     """p of ``model`` (read-only): every block of :data:`BLOCKS` in SI, in order."""
-    from chewbot.kinematics.ik import branches
-
     p = np.empty(N_P)
     for b in BLOCKS:
         if b.name == "branch":
-            value = branches(model)
+            value = working_branches(model)
         else:
             value = model
             for part in b.name.split("."):
@@ -144,102 +140,3 @@ def model_vector(model) -> np.ndarray:
 def vector_digest(model) -> str:
     """SHA-256 of a model's p (float64 bytes): identifies the numbers a run used."""
     return hashlib.sha256(np.ascontiguousarray(model.vector(), dtype="<f8").tobytes()).hexdigest()
-
-
-class _Group:
-    """Attributes of a sub-object (hkp, friction, limits, contact) of :class:`SymbolicModel`."""
-
-
-class SymbolicModel(MechanismMixin):
-    """The model's numbers as CasADi expressions: slices of ``p``, with the attributes and shapes of
-    :class:`~chewbot.model.Model` as a graph builder uses them.
-
-    Vectors are columns (``crank_length``: 6x1, ``hkp.T_L``: 3x1); ``G``, ``M`` are lists of six 3x1 columns and
-    ``R_C0`` a list of six 3x3 matrices (so ``R_C0[i][:, 2]`` is shaft i); ``hkp.T_R`` mirrors ``hkp.T_L`` in y
-    and ``hkp.normal`` is the planes' unit normal. ``p`` is a symbol (``SymbolicModel(mechanism)``: the graph
-    takes the parameters as an input) or constants (``SymbolicModel.of(model)``: the model's numbers folded in).
-    """
-
-    def __init__(self, mechanism: str, p: ca.SX | None = None):
-        if mechanism not in ("target", "6rss"):
-            raise ValueError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
-        self.mechanism = mechanism
-        self.p = ca.SX.sym("p", N_P) if p is None else p
-        if self.p.numel() != N_P:
-            raise ValueError(f"p has {self.p.numel()} entries, the layout {N_P}")
-        for b in BLOCKS:
-            owner = self
-            *groups, leaf = b.name.split(".")
-            for g in groups:
-                if not hasattr(owner, g):
-                    setattr(owner, g, _Group())
-                owner = getattr(owner, g)
-            setattr(owner, leaf, self._view(b))
-        T_L = self.hkp.T_L
-        self.hkp.T_R = ca.vertcat(T_L[0], -T_L[1], T_L[2])
-        self.hkp.normal = ca.vertcat(self.hkp.p1, 0, 1) / ca.sqrt(self.hkp.p1**2 + 1)
-
-    @classmethod
-    def of(cls, model) -> SymbolicModel:
-        """The numbers of ``model`` as constants: graphs built on it have them folded in (no input p)."""
-        return cls(model.mechanism, ca.SX(ca.DM(model.vector())))
-
-    def _view(self, b: Block):
-        x = self.p[block_slice(b.name)]
-        if b.shape in ((), (1,)):
-            return x[0]
-        if len(b.shape) == 1:
-            return x
-        if b.shape == (3, 3):
-            return ca.reshape(x, 3, 3).T  # row-major in p, column-major in CasADi
-        rows = b.shape[0]
-        width = b.size // rows
-        parts = [x[i * width:(i + 1) * width] for i in range(rows)]
-        return [ca.reshape(part, 3, 3).T for part in parts] if len(b.shape) == 3 else parts
-
-
-def symbols(model_or_mechanism) -> SymbolicModel:
-    """The parameters a graph is built on: a mechanism's name gives the symbol p (parametric graph), a
-    :class:`~chewbot.model.Model` its numbers as constants (folded graph)."""
-    if isinstance(model_or_mechanism, str):
-        return SymbolicModel(model_or_mechanism)
-    return SymbolicModel.of(model_or_mechanism)
-
-
-def c_name(mechanism: str) -> str:
-    """The mechanism's name in C identifiers: ``target``, ``sixrss``."""
-    return mechanism.replace("6rss", "sixrss")
-
-
-def mechanism_of(model_or_mechanism) -> str:
-    """``"target"`` or ``"6rss"`` of a model or a mechanism's name."""
-    return model_or_mechanism if isinstance(model_or_mechanism, str) else model_or_mechanism.mechanism
-
-
-_GRAPHS: dict[tuple, object] = {}
-
-
-def cached_graph(model_or_mechanism, key, build):
-    """``build()`` once per mechanism (a parametric graph, kept for the process) or once per model (a folded
-    graph, kept on the model)."""
-    with GRAPH_LOCK:
-        if not isinstance(model_or_mechanism, str):
-            return model_or_mechanism.cached(("graph", key), build)
-        k = (model_or_mechanism, key)
-        if k not in _GRAPHS:
-            _GRAPHS[k] = build()
-        return _GRAPHS[k]
-
-
-def graph_key(model_or_mechanism, *parts) -> tuple:
-    """The key of a kernel (:class:`chewbot.compiled.kernels.KernelSpec`): the mechanism and ``parts``, and for a
-    model (numbers folded in) the digest of its p."""
-    if isinstance(model_or_mechanism, str):
-        return (model_or_mechanism, *parts)
-    return (model_or_mechanism.mechanism, *parts, ("p", vector_digest(model_or_mechanism)))
-
-
-def parameter_input(params: SymbolicModel) -> tuple[list, list[str]]:
-    """The inputs a graph built on ``params`` adds last: ``([p], ["p"])`` for the symbol p, none for a model's
-    constants."""
-    return ([params.p], ["p"]) if params.p.is_symbolic() else ([], [])

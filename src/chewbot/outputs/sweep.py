@@ -20,17 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.table import environment_record
-from chewbot.sweep.evaluate import evaluate_chunk
 from chewbot.sweep.quantities import OUTPUTS
-from chewbot.sweep.record import SweepFolder
+from chewbot.sweep.evaluate import evaluate_chunk, output_descriptions, output_units
+from chewbot.sweep.record import CONVERGENCE_FILE, INDICES_FILE, OPTIMUM_FILE, REPORT_FILE, SAMPLES_FILE, SweepFolder
 from chewbot.sweep.runner import ChunkRunner, cluster_description, dask_client, merge_chunks
 from chewbot.sweep.spec import COUNTERPARTS, Spec, read_spec, spec_path
 
-SAMPLES_FILE = "samples.parquet"
-INDICES_FILE = "sobol_indices.csv"
-OPTIMUM_FILE = "optimum.csv"
-CONVERGENCE_FILE = "convergence.csv"
-REPORT_FILE = "report.html"
 
 
 @dataclass
@@ -59,23 +54,6 @@ def input_files(spec: Spec) -> dict[str, str]:
     if spec.task != "default":
         paths.append(Path(spec.task))
     return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}
-
-
-def output_units(spec: Spec) -> dict[str, str]:
-    """The unit of every output column of the sweep."""
-    if spec.over_poses:
-        from chewbot.sweep.maps import map_columns
-
-        return {name: unit for name, (unit, _) in map_columns(spec).items()}
-    return {name: OUTPUTS[name].unit for name in spec.computed_outputs}
-
-
-def output_descriptions(spec: Spec) -> dict[str, dict]:
-    if spec.over_poses:
-        from chewbot.sweep.maps import map_columns
-
-        return {name: {"unit": u, "description": d} for name, (u, d) in map_columns(spec).items()}
-    return {name: {"unit": OUTPUTS[name].unit, "description": OUTPUTS[name].description} for name in spec.computed_outputs}
 
 
 def prepare(spec: Spec) -> None:

@@ -10,24 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.report.figures import _save, subplots
+from chewbot.report.plotting import JOINTS, joint_columns, per_joint, save, subplots
 from chewbot.table import Table
-
-JOINTS = range(1, 7)
-
-
-def _per_joint(ax, t, values, label, unit):
-    """One line per actuator on ``ax``."""
-    for i in JOINTS:
-        ax.plot(t, values[:, i - 1], lw=0.9, label=f"{label}{i}")
-    ax.set_ylabel(f"{label} [{unit}]")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax.grid(alpha=0.3)
-
-
-def _columns(table: Table, prefix: str) -> np.ndarray:
-    return np.column_stack([table[f"{prefix}{i}"] for i in JOINTS])
-
 
 def torques(table: Table, path: Path, method: str = "", contact: str = "") -> Path:
     """Actuator torques over time with the bite force below them (seed 000, Fig. 6a), and the HKP normal forces
@@ -37,7 +21,7 @@ def torques(table: Table, path: Path, method: str = "", contact: str = "") -> Pa
                              height_ratios=(2, 1, 1) if hkp else (2, 1))
     ax, axf = axes[0], axes[1]
     t = table["t"]
-    _per_joint(ax, t, _columns(table, "tau"), "τ", "N·m")
+    per_joint(ax, t, joint_columns(table, "tau"), "τ", "N·m")
     ax.set_title(f"Actuator torques{f' ({method})' if method else ''}")
     _lines(axf, t, {name: table[name] for name in ("Fx", "Fy", "Fz")}, "bite force F_B [N]")
     if hkp:
@@ -45,7 +29,7 @@ def torques(table: Table, path: Path, method: str = "", contact: str = "") -> Pa
         axes[2].axhline(0.0, color="k", lw=0.6)
         axes[2].set_title(f"Normal force of each plane on its condyle (> 0: pushes){f'; {contact} contact' if contact else ''}")
     axes[-1].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def _lines(ax, t, series: dict, ylabel: str) -> None:
@@ -60,10 +44,10 @@ def _lines(ax, t, series: dict, ylabel: str) -> None:
 def coupling_indices(table: Table, path: Path) -> Path:
     """MCI_i of the six joints over time (seed 000, Fig. 7, one column)."""
     fig, ax = subplots(figsize=(11, 4))
-    _per_joint(ax, table["t"], _columns(table, "MCI"), "MCI", "-")
+    per_joint(ax, table["t"], joint_columns(table, "MCI"), "MCI", "-")
     ax.set_xlabel("time t [s]")
     ax.set_title("Inertia coupling index MCI_i (Eq. 60)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def torque_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
@@ -71,20 +55,20 @@ def torque_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) 
     (seed 000, Fig. 6)."""
     fig, axes = subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, squeeze=False)
     for ax, (title, tau) in zip(axes[:, 0], panels.items()):
-        _per_joint(ax, t, tau, "τ", "N·m")
+        per_joint(ax, t, tau, "τ", "N·m")
         ax.set_title(title)
     axes[-1, 0].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def mci_comparison(t: np.ndarray, panels: dict[str, np.ndarray], path: Path) -> Path:
     """MCI_i over time, one panel per mechanism (seed 000, Fig. 7)."""
     fig, axes = subplots(len(panels), 1, figsize=(11, 3.2 * len(panels)), sharex=True, sharey=True, squeeze=False)
     for ax, (title, values) in zip(axes[:, 0], panels.items()):
-        _per_joint(ax, t, values, "MCI", "-")
+        per_joint(ax, t, values, "MCI", "-")
         ax.set_title(title)
     axes[-1, 0].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def mci_means(means: dict[str, np.ndarray], path: Path) -> Path:
@@ -99,4 +83,4 @@ def mci_means(means: dict[str, np.ndarray], path: Path) -> Path:
     ax.set_title("Mean inertia coupling index per joint")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="y")
-    return _save(fig, path)
+    return save(fig, path)

@@ -11,8 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.report.dynamics_figures import JOINTS, _columns, _per_joint
-from chewbot.report.figures import _save, subplots
+from chewbot.report.plotting import JOINTS, joint_columns, per_joint, save, subplots
 from chewbot.table import Table
 
 
@@ -21,8 +20,8 @@ def torques_and_contacts(table: Table, path: Path) -> Path:
     hkp = "N_L" in table
     fig, axes = subplots(4 if hkp else 2, 1, figsize=(11, 11 if hkp else 6), sharex=True)
     t = table["t"]
-    _per_joint(axes[0], t, _columns(table, "tau"), "τ", "N·m")
-    _per_joint(axes[1], t, _columns(table, "tau_f"), "τ_f", "N·m")
+    per_joint(axes[0], t, joint_columns(table, "tau"), "τ", "N·m")
+    per_joint(axes[1], t, joint_columns(table, "tau_f"), "τ_f", "N·m")
     axes[0].set_title("Actuating torques and actuator friction torques (Newton–Euler)")
     if hkp:
         for side in ("L", "R"):
@@ -35,22 +34,22 @@ def torques_and_contacts(table: Table, path: Path) -> Path:
             ax.legend(loc="upper right", fontsize=8)
             ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def friction_share(table: Table, path: Path) -> Path:
     """Friction share of each actuator, percent of its torque, on a log axis (seed 001, Fig. 11, Eq. 75)."""
     fig, ax = subplots(figsize=(11, 4))
-    share = _columns(table, "friction_share")
+    share = joint_columns(table, "friction_share")
     share = np.where(np.isfinite(share) & (share > 0), share, np.nan)
-    _per_joint(ax, table["t"], share, "share", "%")
+    per_joint(ax, table["t"], share, "share", "%")
     if np.isfinite(share).any():  # without friction every share is 0: nothing to draw on a log axis
         ax.set_yscale("log")
         ax.set_ylim(bottom=1e-2)  # shares below 0.01 % are invisible anyway; keeps the peaks readable
     ax.axhline(100.0, color="k", lw=0.6, ls="--")
     ax.set_xlabel("time t [s]")
     ax.set_title("Friction torque over actuating torque (100 %: dashed)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def coupler_forces(table: Table, path: Path) -> Path:
@@ -75,7 +74,7 @@ def _per_chain(table, path, pattern, comps, label, unit, title) -> Path:
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     fig.suptitle(title)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # The Newton-Euler figures of a run: file name -> drawing function.

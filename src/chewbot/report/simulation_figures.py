@@ -6,8 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.report.dynamics_figures import _columns, _per_joint
-from chewbot.report.figures import _save, subplots
+from chewbot.report.plotting import joint_columns, per_joint, save, subplots
 from chewbot.table import Table
 
 # Display of a coordinate's error: lengths in mm, angles in deg.
@@ -31,22 +30,22 @@ def tracking_error(table: Table, path: Path, title: str = "") -> Path:
         ax.grid(alpha=0.3)
     axes[0, 0].set_title(f"Tracking error, reference minus simulated{f' ({title})' if title else ''}")
     axes[-1, 0].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def saturation(table: Table, path: Path, limit: float) -> Path:
     """The commanded torques with the actuators' limit; the applied ones are these clipped at it."""
     fig, ax = subplots(figsize=(11, 4.5))
     t = table["t"]
-    _per_joint(ax, t, _columns(table, "tau_cmd"), "τ_cmd", "N·m")
+    per_joint(ax, t, joint_columns(table, "tau_cmd"), "τ_cmd", "N·m")
     for sign in (-1, 1):
         ax.axhline(sign * limit, color="#b4461a", ls="--", lw=1.0)
-    saturated = np.any(_columns(table, "tau_cmd") != _columns(table, "tau"), axis=1)
+    saturated = np.any(joint_columns(table, "tau_cmd") != joint_columns(table, "tau"), axis=1)
     if saturated.any():
         ax.fill_between(t, 0, 1, where=saturated, transform=ax.get_xaxis_transform(), color="#b4461a", alpha=0.15, lw=0)
     ax.set_title(f"Commanded torques and the limit ±{limit:g} N·m (shaded: saturated, {saturated.mean() * 100:.3g} % of the rows)")
     ax.set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def comparison(tables: dict[str, Table], path: Path) -> Path:
@@ -60,7 +59,7 @@ def comparison(tables: dict[str, Table], path: Path) -> Path:
         ang = [n for n in names if table.units[n] == "rad"]
         axes[0].plot(t, np.linalg.norm(np.column_stack([table[n] for n in lin]), axis=1) * 1e3, lw=0.9, label=label)
         axes[1].plot(t, np.degrees(np.linalg.norm(np.column_stack([table[n] for n in ang]), axis=1)), lw=0.9, label=label)
-        axes[2].plot(t, np.max(np.abs(_columns(table, "tau")), axis=1), lw=0.9, label=label)
+        axes[2].plot(t, np.max(np.abs(joint_columns(table, "tau")), axis=1), lw=0.9, label=label)
     for ax, label in zip(axes, ("position error [mm]", "orientation error [deg]", "largest abs(τ_i) [N·m]")):
         ax.set_ylabel(label)
         ax.set_yscale("log") if ax is not axes[2] else None
@@ -68,4 +67,4 @@ def comparison(tables: dict[str, Table], path: Path) -> Path:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     axes[0].set_title("Controllers compared: tracking error (norms over the coordinates) and torques")
     axes[-1].set_xlabel("time t [s]")
-    return _save(fig, path)
+    return save(fig, path)

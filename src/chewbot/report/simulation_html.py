@@ -8,7 +8,6 @@ results.csv. The comparison's page puts the controllers' figures in one table an
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -39,14 +38,11 @@ def controller_label(result) -> str:
     return f"{o.controller}{model_based}, {rate}"
 
 
-def write_simulation_report(result, path: Path, files: list[str] | None = None) -> Path:
-    """Write ``report.html`` for a computed simulation; ``files`` names the other files of its folder."""
-    from chewbot.files import to_json
-    from chewbot.simulation.run import simulation_json
-
+def write_simulation_report(result, record: dict, path: Path, files: list[str] | None = None) -> Path:
+    """Write ``report.html`` for a computed simulation whose run.json holds ``record`` (as read back); ``files``
+    names the other files of its folder."""
     figures: dict[str, dict] = {}
     view = _view(result.table)
-    record = json.loads(to_json(simulation_json(result)))  # as run.json has it
     body = [_robots_section(result, view, figures), _checks_section(record), _tracking_section({result.options.controller: result}),
             _plots_section(view, figures), _run_section(result, files or [])]
     return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",

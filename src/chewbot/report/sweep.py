@@ -30,7 +30,8 @@ NAV = (("summary", "Summary"), ("results", "Results"), ("failures", "Failures"),
 
 def write_report(result, path: Path) -> Path:
     """Write the report of a finished sweep (``result``: :class:`chewbot.outputs.sweep.SweepResult`)."""
-    from chewbot.outputs.sweep import SAMPLES_FILE, output_descriptions
+    from chewbot.sweep.evaluate import output_descriptions
+    from chewbot.sweep.record import SAMPLES_FILE
 
     spec = result.spec
     samples = pq.ParquetFile(result.folder / SAMPLES_FILE)

@@ -39,7 +39,8 @@ from chewbot.dynamics.newton_euler import GOALS, check_goal, coefficients_kernel
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.model.vector import N_P, c_name, cached_graph, symbols
+from chewbot.model.vector import N_P
+from chewbot.model.symbolic import c_name, cached_graph, symbols
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation import CONTROLLERS
 from chewbot.simulation.reference import Reference

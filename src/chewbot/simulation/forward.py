@@ -37,7 +37,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.model.vector import c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.model.symbolic import c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 
 ORIENTATION = "euler-angles"
 # Newton steps of the forward kernel after the friction-free start. Measured at 100 random states and torques of

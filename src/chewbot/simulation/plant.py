@@ -23,7 +23,8 @@ from chewbot.dynamics.newton_euler import n_unknowns
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.model.vector import N_P, c_name, cached_graph, symbols
+from chewbot.model.vector import N_P
+from chewbot.model.symbolic import c_name, cached_graph, symbols
 from chewbot.simulation.forward import ORIENTATION, n_coordinates, residual_function, workspace_margin_sx
 from chewbot.simulation.integrator import C, STAGES, TOLERANCE, radau_step
 

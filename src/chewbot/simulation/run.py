@@ -24,7 +24,6 @@ from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import kinematics_kernel
 from chewbot.kinematics.motion import Kinematics, solve_kinematics
 from chewbot.model import Model
-from chewbot.files import Marker, atomic_folder, to_json
 from chewbot.model.params import load_model, split_overrides
 from chewbot.run.pipeline import input_files as run_inputs
 from chewbot.run.pipeline import load_task, singularity_columns
@@ -39,8 +38,6 @@ from chewbot.simulation.sensor import CrankSensor
 from chewbot.simulation.simulator import DEFAULT_RATE, Simulation, simulate
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
-SIMULATION_FORMAT = 1
-SIMULATION_FOLDER = Marker("simulation folder", "run.json", "chewbot_simulation")
 # Drift of the constraints in the simulated poses above this is reported as an error of the simulation (m): the plant
 # is integrated in independent coordinates, so what remains is rounding in the kinematics (about 1e-15 m).
 DRIFT_TOLERANCE_M = 1e-9
@@ -278,7 +275,9 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
-# --------------------------------------------------------------------------------------------- the folder
+def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
+    """The three controllers on the same task and plant (``options.controller`` is ignored)."""
+    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
 
 
 def input_files(options: SimulateOptions) -> list[Path]:
@@ -286,58 +285,6 @@ def input_files(options: SimulateOptions) -> list[Path]:
     files = run_inputs(RunOptions(model=options.model, task=options.task))
     files += [Path(p) for p in (options.plant, options.gains) if p is not None]
     return [p for p in files if p.suffix.lower() in (".toml", ".csv")]
-
-
-def simulation_json(result: SimulateResult) -> dict:
-    """run.json of a simulation: format, options, both models, task, versions, columns, checks, tracking, info."""
-    from chewbot.table import columns_record, environment_record, model_record, task_record
-
-    return {
-        "chewbot_simulation": SIMULATION_FORMAT,
-        "options": vars(result.options),
-        "model": model_record(result.model),
-        "plant": model_record(result.plant),
-        "task": task_record(result.task),
-        **environment_record(),
-        "columns": columns_record(result.table),
-        "checks": [c.as_dict() for c in result.checks],
-        **result.info,
-    }
-
-
-def write_into(result: SimulateResult, folder: Path, progress=None) -> None:
-    """Write the files of a simulation into an existing (temporary) folder."""
-    from chewbot.report import dynamics_figures, figures, simulation_figures
-    from chewbot.report.simulation_html import controller_label, write_simulation_report
-
-    step = progress or (lambda msg, stage=None: None)
-    step("writing results.csv")
-    result.table.to_csv(folder / "results.csv")
-    step("drawing figures", stage="writing")
-    result.figures = [
-        simulation_figures.tracking_error(result.table, folder / "tracking_error.png", controller_label(result)),
-        dynamics_figures.torques(result.table, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
-        simulation_figures.saturation(result.table, folder / "saturation.png", result.plant.limits.torque),
-        figures.task_space(result.table, folder / "task_space.png"),
-        figures.joint_space(result.table, folder / "joint_space.png"),
-    ]
-    (folder / "run.json").write_text(to_json(simulation_json(result)))
-    step("writing report.html")
-    write_simulation_report(result, folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
-
-
-def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
-    """Write the results folder ``out`` atomically (see :func:`chewbot.run.pipeline.write`)."""
-    out = Path(out)
-    with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(result.options)) as tmp:
-        write_into(result, tmp, progress)
-    result.figures = [out / p.name for p in result.figures]
-    return out
-
-
-def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
-    """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
 
 
 def comparison_table(results: dict[str, SimulateResult]) -> Table:
@@ -352,24 +299,3 @@ def comparison_table(results: dict[str, SimulateResult]) -> Table:
     table.add("stopped_at", np.array([np.nan if r.metrics["stopped"] is None else r.metrics["stopped"]["t"] for r in results.values()]),
               "s", "time the robot left the workspace (empty: it did not)")
     return table
-
-
-def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool = False, progress=None) -> Path:
-    """The comparison folder: one simulation folder per controller, comparison.csv, the figure, run.json and the report."""
-    from chewbot.report.simulation_figures import comparison
-    from chewbot.report.simulation_html import write_comparison_report
-
-    out = Path(out)
-    first = next(iter(results.values()))
-    with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(first.options)) as tmp:
-        for kind, result in results.items():
-            (tmp / kind).mkdir()
-            write_into(result, tmp / kind, progress)
-        comparison_table(results).to_csv(tmp / "comparison.csv")
-        comparison({k: r.table for k, r in results.items()}, tmp / "comparison.png")
-        record = {"chewbot_simulation": SIMULATION_FORMAT, "comparison": {k: r.metrics for k, r in results.items()},
-                  "options": {k: v for k, v in vars(first.options).items() if k != "controller"},
-                  "folders": {k: k for k in results}}
-        (tmp / "run.json").write_text(to_json(record))
-        write_comparison_report(results, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))
-    return out

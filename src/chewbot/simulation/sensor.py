@@ -26,7 +26,7 @@ import numpy as np
 from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
-from chewbot.model.vector import c_name, graph_key, symbols
+from chewbot.model.symbolic import c_name, graph_key, symbols
 from chewbot.simulation.controllers import State
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 

@@ -28,7 +28,8 @@ import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native, prepare_kernels
 from chewbot.errors import KinematicsError
-from chewbot.model.vector import N_P, cached_graph
+from chewbot.model.vector import N_P
+from chewbot.model.symbolic import cached_graph
 from chewbot.simulation.controllers import ModelBasedController, State
 from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C

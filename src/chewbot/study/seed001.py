@@ -25,7 +25,7 @@ from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.symbolic import ORIENTATIONS
 from chewbot.model.params import load_model
 from chewbot.report import newton_euler_figures
-from chewbot.report.figures import _save, subplots
+from chewbot.report.plotting import save, subplots
 from chewbot.table import kinematics_table
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.task.default import default_task
@@ -88,7 +88,7 @@ def _fig14(rows: list[dict], path: Path) -> Path:
     ax.set_title("Computation time: Euler parameters against Euler angles (seed 001, Fig. 14)")
     ax.legend()
     ax.grid(alpha=0.3, axis="y")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # A median share of the actuating torque above this counts as "a large share" of friction (item 7).

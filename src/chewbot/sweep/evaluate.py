@@ -201,3 +201,20 @@ def evaluate_chunk(spec: Spec, values: np.ndarray) -> dict:
         _EVALUATORS.clear()  # one SPEC at a time per worker
         _EVALUATORS[key] = evaluator
     return evaluator.evaluate(np.asarray(values, dtype=float))
+
+
+def output_units(spec: Spec) -> dict[str, str]:
+    """The unit of every output column of the sweep."""
+    if spec.over_poses:
+        from chewbot.sweep.maps import map_columns
+
+        return {name: unit for name, (unit, _) in map_columns(spec).items()}
+    return {name: OUTPUTS[name].unit for name in spec.computed_outputs}
+
+
+def output_descriptions(spec: Spec) -> dict[str, dict]:
+    if spec.over_poses:
+        from chewbot.sweep.maps import map_columns
+
+        return {name: {"unit": u, "description": d} for name, (u, d) in map_columns(spec).items()}
+    return {name: {"unit": OUTPUTS[name].unit, "description": OUTPUTS[name].description} for name in spec.computed_outputs}

@@ -24,6 +24,12 @@ from chewbot.files import Marker, OutputExistsError, atomic_folder, atomic_membe
 SWEEP_FORMAT = 1
 SWEEP_FOLDER = Marker("sweep folder", "run.json", "chewbot_sweep")
 CHUNKS = "chunks"
+# The files of a complete sweep folder besides run.json and spec.toml.
+SAMPLES_FILE = "samples.parquet"
+INDICES_FILE = "sobol_indices.csv"
+OPTIMUM_FILE = "optimum.csv"
+CONVERGENCE_FILE = "convergence.csv"
+REPORT_FILE = "report.html"
 
 
 class SweepFolder:
