@@ -78,7 +78,8 @@ def test_a_warm_run_builds_no_graph(tmp_path):
     """After the kernels of a run are in the cache, a fresh process computes the run with CasADi's graph
     building and code generation made to fail: the libraries are found by their key and loaded."""
     from chewbot.model.params import load_model
-    from chewbot.run.pipeline import RunOptions, run_kernels
+    from chewbot.run.pipeline import run_kernels
+    from chewbot.run.options import RunOptions
 
     options = RunOptions(method="hessian")
     casadi_tools.prepare(run_kernels(load_model("target"), options))
@@ -90,7 +91,8 @@ def test_a_warm_run_builds_no_graph(tmp_path):
         ca.SX.sym = ca.MX.sym = refuse
         ca.CodeGenerator = refuse
         casadi_tools.KernelSpec.graph = refuse
-        from chewbot.run.pipeline import RunOptions, compute
+        from chewbot.run.pipeline import compute
+        from chewbot.run.options import RunOptions
         result = compute(RunOptions(method="hessian"))
         assert np.isfinite(result.dynamics.tau).all() and np.abs(result.dynamics.tau).max() > 0.1
         print("ok")

@@ -23,11 +23,12 @@ from chewbot.analysis.checks import (
     run_checks,
     run_fails,
 )
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.kinematics.conditioning import jacobian_conditioning, reciprocal_condition
 from chewbot.kinematics.ik import transmission
 from chewbot.model import Limits
-from chewbot.run.pipeline import RunOptions, compute
+from chewbot.run.pipeline import compute
+from chewbot.run.options import RunOptions
 from chewbot.report.summary import crank_tips
 from chewbot.rotation import matrix_from_euler_angles
 

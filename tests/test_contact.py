@@ -16,9 +16,9 @@ import pytest
 from scipy.optimize import minimize
 
 from chewbot.analysis.checks import run_checks
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.dynamics.contact import normal_force_map, normal_forces, unilateral_minimum_norm
-from chewbot.dynamics.newton_euler import GOALS
+from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
 from chewbot.model.params import load_model
 from chewbot.bench.reference import _equations, slsqp_distribution
@@ -249,7 +249,8 @@ def test_unilateral_contact_that_the_actuators_cannot_hold_fails_the_run(task_cs
     """A preload of 300 N with newton-euler: no sample has torques within the limits that hold it; the run's checks
     fail (chewbot run then exits 4, after writing the folder: exit_after_checks, tests/test_outputs.py)."""
     from chewbot.analysis.checks import run_fails
-    from chewbot.run.pipeline import RunOptions, compute
+    from chewbot.run.pipeline import compute
+    from chewbot.run.options import RunOptions
 
     result = compute(RunOptions(task=str(task_csv), method="newton-euler", contact="unilateral",
                                 overrides={"contact.preload_N": 300.0}))

@@ -15,7 +15,7 @@ import pytest
 from conftest import default_kinematics, model
 
 from chewbot.compiled.kernels import evaluate
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.dynamics.dalembert import reduced_rhs, reduced_terms
 from chewbot.dynamics.energy import energies, energy, generalised_state
 from chewbot.dynamics.hessian import hessian_rates

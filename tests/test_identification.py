@@ -17,13 +17,13 @@ from typer.testing import CliRunner
 
 from chewbot import load_model
 from chewbot.cli import app
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.errors import ChewbotError, TaskError
 from chewbot.identification import identify, read_log
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_of, x_of, x_of_phi
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.run.pipeline import compute
-from chewbot.table import RunOptions
+from chewbot.run.options import RunOptions
 from chewbot.task.default import ChewingParameters, default_task
 
 runner = CliRunner()

@@ -12,7 +12,7 @@ from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import parasitic_function, points_function, pose_function, rates_function
 from chewbot.kinematics.ik import inverse_kinematics, transmission
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.kinematics.symbolic import ORIENTATIONS
+from chewbot.kinematics.options import ORIENTATIONS
 from chewbot.rotation import R_omega, euler_angles_to_parameters, matrix_from_euler_angles
 from chewbot.kinematics.task import TARGET_COORDS, Task
 from chewbot.task.default import ChewingParameters, default_task

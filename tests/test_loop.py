@@ -11,8 +11,9 @@ from conftest import default_kinematics, model
 
 from chewbot.analysis.coupling import coupling
 from chewbot.compiled.kernels import FLAGS, c_compiler
-from chewbot.dynamics import inverse_dynamics
-from chewbot.export.realtime import g1_distribution, loop_kernel
+from chewbot.dynamics.registry import inverse_dynamics
+from chewbot.dynamics.g1 import g1_distribution
+from chewbot.export.realtime import loop_kernel
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="the in-loop kernels need a C compiler")
 

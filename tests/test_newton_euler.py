@@ -13,8 +13,9 @@ import functools
 import numpy as np
 import pytest
 
-from chewbot.dynamics import inverse_dynamics
-from chewbot.dynamics.newton_euler import DELTA_N, EPS_V_T, GOALS, benchmark_cases
+from chewbot.dynamics.registry import inverse_dynamics
+from chewbot.dynamics.newton_euler import DELTA_N, EPS_V_T
+from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
 from chewbot.model import Limits
 from chewbot.rotation import matrix_from_euler_angles
@@ -288,12 +289,6 @@ def test_bad_goal_is_rejected():
         inverse_dynamics(model("target"), default_kinematics(), "newton-euler", goal="fast")
 
 
-def test_benchmark_cases_cover_both_parametrisations_and_goals():
-    cases = benchmark_cases()
-    assert len(cases) == 2 * 3 + 2
-    assert all(callable(f) for f in cases.values())
-
-
 def test_cli_runs_newton_euler_with_goal_and_friction(tmp_path):
     import json
 
@@ -311,7 +306,7 @@ def test_cli_runs_newton_euler_with_goal_and_friction(tmp_path):
     assert (out / "ne_friction_share.png").exists()
     # options that do not apply are refused, not recorded as if they had been used
     for args, reason in ((["--model", "6rss", "--method", "newton-euler", "--goal", "min-hkp-force"], "no redundant actuation"),
-                         (["--method", "liang", "--friction", "off"], "apply to --method newton-euler")):
+                         (["--method", "liang", "--friction", "off"], "--friction applies to the newton-euler method")):
         refused = CliRunner().invoke(app, ["run", *args, "--out", str(tmp_path / "no"), "--quiet"])
         assert refused.exit_code == 2 and reason in refused.output, refused.output
         assert not (tmp_path / "no").exists()

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.commands.common import EXIT_BAD_INPUT
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.errors import ParameterError, TaskError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model.vector import vector_digest

@@ -17,14 +17,15 @@ from typer.testing import CliRunner
 
 from chewbot.compiled.kernels import NativeFunction, c_compiler, evaluate
 from chewbot.cli import app
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.dynamics.core6rss import core_terms, dynamics_kernel, torque_kernel
 from chewbot.dynamics.dalembert import reduced_terms
 from chewbot.dynamics.energy import energies, generalised_state
 from chewbot.dynamics.hessian import hessian_rates
 from chewbot.export.c import export_c
 from chewbot.kinematics.functions import jacobians_function
-from chewbot.export.realtime import EXAMPLE_T, example_inputs, g1_distribution, kernels
+from chewbot.dynamics.g1 import g1_distribution
+from chewbot.export.realtime import EXAMPLE_T, example_inputs, kernels
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.bench.reference import frictionless_torques, slsqp_min_torque
 from chewbot.task.default import default_task

@@ -18,7 +18,8 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.files import OutputExistsError
-from chewbot.run.pipeline import RunOptions, compute, write
+from chewbot.run.pipeline import compute, write
+from chewbot.run.options import RunOptions
 from chewbot.report import html as report_html
 from chewbot.report import view as report_view
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices

@@ -148,7 +148,7 @@ def test_a_sample_equals_chewbot_run(local_sweep):
     failed has chewbot run's own error."""
     from chewbot.analysis.checks import run_fails
     from chewbot.run.pipeline import compute
-    from chewbot.table import RunOptions
+    from chewbot.run.options import RunOptions
 
     table = pq.read_table(local_sweep / "samples.parquet").to_pylist()
     assert [r["sample"] for r in table] == [0, 1, 2, 3]
@@ -185,7 +185,7 @@ def test_unilateral_contact_as_chewbot_run(method):
     """contact = "unilateral" changes the torques (the unilateral distribution) and makes contact-pull a failure,
     as chewbot run --contact unilateral does; the normal forces are the run's."""
     from chewbot.run.pipeline import compute
-    from chewbot.table import RunOptions
+    from chewbot.run.options import RunOptions
     from chewbot.sweep.evaluate import evaluate_chunk
 
     outputs = ["peak_tau_Nm", "min_N_L", "min_N_R", "contact_pull_share", "feasible"]

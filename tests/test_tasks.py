@@ -242,7 +242,8 @@ def test_track_incisor_command_recovers_a_motion_and_writes_a_runnable_task(tmp_
 def test_pose_errors_of_a_csv_task_name_the_file_and_line(tmp_path):
     """A condyle outside its socket at the 4th data row (after a comment line): the message names the file and
     the line as an editor shows it, and still the sample and its time."""
-    from chewbot.run.pipeline import RunOptions, compute
+    from chewbot.run.pipeline import compute
+    from chewbot.run.options import RunOptions
 
     rows = ["# comment", "t,X[mm],Y,alpha,beta"] + [f"{k * 0.001},{8.0 if k >= 3 else 0.0},0,0,0" for k in range(8)]
     path = tmp_path / "far.csv"

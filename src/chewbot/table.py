@@ -228,36 +228,6 @@ def kinematics_table(kin: Kinematics) -> Table:
 
 
 @dataclass
-class RunOptions:
-    """Everything that defines a run (recorded in run.json)."""
-
-    model: str = "target"
-    task: str = "default"
-    side: str | None = None  # None: left, or the side of the run whose results.csv is the task
-    orientation: str = "euler-angles"
-    method: str | None = None
-    goal: str | None = "min-torque"  # newton-euler on the target only
-    friction: str | None = "on"  # newton-euler only
-    contact: str = "bilateral"  # contact model of the HKPs: whether contact-pull fails a run (chewbot.analysis.checks)
-    overrides: dict[str, float] = field(default_factory=dict)  # --set KEY=VALUE: model keys and task.NAME
-
-
-@dataclass
-class RunResult:
-    """What a run computed, in memory (the folder holds the same)."""
-
-    options: RunOptions
-    model: Model
-    task: Task
-    kinematics: Kinematics
-    table: Table
-    figures: list[Path] = field(default_factory=list)
-    info: dict = field(default_factory=dict)
-    dynamics: object | None = None
-    checks: list[CheckResult] = field(default_factory=list)
-
-
-@dataclass
 class RunRecord:
     """A run as its folder holds it, without its rows: ``record`` (run.json's content), the model, the validity
     checks, ``view`` (the decimated columns and their statistics, :class:`chewbot.report.view.RunView`) and the
@@ -308,7 +278,7 @@ def columns_record(columns: Table) -> dict:
             for name in columns.columns}
 
 
-def run_record(options: RunOptions, model: Model, task: Task, columns: Table, checks: list[CheckResult], info: dict) -> dict:
+def run_record(options, model: Model, task: Task, columns: Table, checks: list[CheckResult], info: dict) -> dict:
     """The run record (run.json): format, options, model and task identity, versions, platform, the unit and
     description of every column of ``columns`` (any chunk of the results table), the validity checks, ``info``
     (timings, the formulation's info, the coupling means)."""

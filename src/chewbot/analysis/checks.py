@@ -30,7 +30,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from chewbot.dynamics.contact import CONTACT_MODELS, check_contact
+from chewbot.dynamics.options import CONTACT_MODELS, check_contact
 from chewbot.dynamics.distribution import LIMIT_RTOL
 from chewbot.model import Limits, Model
 

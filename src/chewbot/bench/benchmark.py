@@ -38,7 +38,6 @@ BOTH = ("target", "6rss")
 EA, EP = "euler-angles", "euler-parameters"
 RUN_CASES = {"run, hessian": ["run"], "run, newton-euler G1 with friction": ["run", "--method", "newton-euler"]}
 LONG_SAMPLES = (10_000, 100_000, 1_000_000)
-LONG_METHODS = ("hessian", "lagrange", "liang", "6rss-core", "newton-euler")
 
 
 # --- repeated, interleaved, paired --------------------------------------------------------------------------
@@ -152,7 +151,7 @@ def _slsqp(model, kin):
 
 
 def _g1_kernel(model, kin):
-    from chewbot.export.realtime import g1_distribution
+    from chewbot.dynamics.g1 import g1_distribution
 
     return g1_distribution(model, kin)
 
@@ -166,7 +165,7 @@ def _recording_fit(model, kin):
 
 
 def _dynamics(method: str, **options):
-    from chewbot.dynamics import inverse_dynamics
+    from chewbot.dynamics.registry import inverse_dynamics
 
     return partial(inverse_dynamics, method=method, **options)
 
@@ -377,9 +376,14 @@ def long_cycles(samples: int) -> int:
     return max(1, round((samples - 1001) / 800))
 
 
-def bench_long(sizes=LONG_SAMPLES, methods=LONG_METHODS, progress=None) -> list[LongRun]:
-    """Each method on default tasks of ``sizes`` samples (more chewing cycles), figures and report included."""
+def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]:
+    """Each method (default: every formulation) on default tasks of ``sizes`` samples (more chewing cycles), figures
+    and report included."""
     import json
+
+    from chewbot.dynamics.registry import METHODS
+
+    methods = METHODS if methods is None else methods
 
     step = progress or (lambda msg: None)
     out = []

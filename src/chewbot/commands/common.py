@@ -22,7 +22,6 @@ import os
 import signal
 import time
 from contextlib import contextmanager
-from enum import Enum
 
 # Exit codes (docs/cli.md), the same for every command. 1 is left to Python: a bug, printed with its traceback.
 EXIT_OK = 0
@@ -209,34 +208,18 @@ def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> No
         _console().print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
 
 
-class Side(str, Enum):
-    left = "left"
-    right = "right"
+@contextmanager
+def resolved():
+    """Report the run options that do not apply (:class:`chewbot.run.options.OptionError`) as the command line's
+    options (``--goal and --friction apply to ...``), exit 2; other errors as :func:`errors_reported`."""
+    from chewbot.errors import ChewbotError
+    from chewbot.run.options import OptionError
 
-
-class Orientation(str, Enum):
-    euler_angles = "euler-angles"
-    euler_parameters = "euler-parameters"
-
-
-class Goal(str, Enum):
-    """Optimal distribution of the target's redundant actuation (Newton-Euler, seed 001 Sect. 4.5)."""
-
-    min_torque = "min-torque"
-    min_coupler_force = "min-coupler-force"
-    min_hkp_force = "min-hkp-force"
-
-
-class Switch(str, Enum):
-    on = "on"
-    off = "off"
-
-
-class Contact(str, Enum):
-    """How the HKP planes hold the condyles (docs/contact.md)."""
-
-    bilateral = "bilateral"
-    unilateral = "unilateral"
+    with errors_reported():
+        try:
+            yield
+        except OptionError as exc:
+            fail(ChewbotError(exc.worded(lambda option: f"--{option}")), EXIT_BAD_INPUT)
 
 
 def set_overrides(arguments: list[str]) -> dict[str, float]:

@@ -7,19 +7,11 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from chewbot.commands.common import (EXIT_BAD_INPUT, FORCE_HELP, PROGRESS_DELAY_S, SET_HELP, Contact, Goal, Orientation, Side,
-                                     Switch, check_interrupted, errors_reported, exit_after_checks, fail, flag, progress, set_overrides, stdout)
-from chewbot.errors import ChewbotError
-
-
-def _check_method(name: str | None) -> str | None:
-    """Accept the name of a registered inverse-dynamics formulation (the registry is the list of choices)."""
-    from chewbot.dynamics import METHODS
-
-    if name is not None and name not in METHODS:
-        raise typer.BadParameter(f"{name!r} is not a formulation; choose one of {', '.join(sorted(METHODS))}")
-    return name
-
+from chewbot.commands.common import (FORCE_HELP, PROGRESS_DELAY_S, SET_HELP, check_interrupted, errors_reported,
+                                     exit_after_checks, flag, progress, resolved, set_overrides, stdout)
+from chewbot.dynamics.options import Contact, Goal
+from chewbot.kinematics.options import Orientation, Side
+from chewbot.run.options import Switch
 
 
 def run(
@@ -27,7 +19,7 @@ def run(
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     side: Side | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts, and side of the default task. Default: left, or the side of the run whose results.csv is the --task."),
     orientation: Orientation = typer.Option(Orientation.euler_angles, "--orientation", help="Parametrisation of the mandible's orientation."),
-    method: str | None = typer.Option(None, "--method", callback=_check_method, show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
+    method: str | None = typer.Option(None, "--method", show_default=False, help="Inverse-dynamics formulation: hessian, lagrange, liang, 6rss-core (Euler angles) or newton-euler (either orientation). Default: hessian with Euler angles, newton-euler with Euler parameters."),
     goal: Goal | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: what the redundant torques minimise (torques, forces at S_i, HKP normal forces). Default: min-torque."),
     friction: Switch | None = typer.Option(None, "--friction", show_default=False, help="newton-euler: friction at the HKPs and the actuators. Default: on."),
     contact: Contact = typer.Option(Contact.bilateral, "--contact", help="Target: how the planes hold the condyles. bilateral: a ball in a slot, the plane may push or pull (the papers' reading); unilateral: a ball pressed on a plane, N_L, N_R >= contact.preload_N, kept by the redundant actuation where the limits allow (docs/contact.md)."),
@@ -67,28 +59,14 @@ def run(
       chewbot run --task long_recording.csv --no-figures --no-report --out runs/batch
     """
     from chewbot.files import RESULTS_FOLDER, check_output
-    from chewbot.run.pipeline import RunOptions, input_files
+    from chewbot.run.options import resolve
+    from chewbot.run.pipeline import input_files
     from chewbot.run.pipeline import run as run_to_folder
 
     overrides = set_overrides(set_)
-    if method is None:
-        method = "hessian" if orientation is Orientation.euler_angles else "newton-euler"
-    if method != "newton-euler" and (goal is not None or friction is not None):
-        fail(ChewbotError(f"--goal and --friction apply to --method newton-euler, not {method} (frictionless, minimum-norm torques)"), EXIT_BAD_INPUT)
-    sixrss = False
-    if method == "newton-euler" or contact is Contact.unilateral:  # options that only the target takes
-        from chewbot.model.params import load_model
-
-        with errors_reported():
-            sixrss = not load_model(model).has_hkp
-    if sixrss and contact is Contact.unilateral:
-        fail(ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts"), EXIT_BAD_INPUT)
-    if method == "newton-euler":  # what newton-euler uses; the other formulations take neither
-        if sixrss and goal is not None:
-            fail(ChewbotError("--goal applies to the target robot: the 6RSS has no redundant actuation to distribute"), EXIT_BAD_INPUT)
-        goal, friction = None if sixrss else goal or Goal.min_torque, friction or Switch.on
-    options = RunOptions(model=model, task=task, side=side and side.value, orientation=orientation.value, method=method,
-                         goal=goal and goal.value, friction=friction and friction.value, contact=contact.value, overrides=overrides)
+    with resolved():
+        options = resolve(model=model, task=task, side=side, orientation=orientation, method=method, goal=goal,
+                          friction=friction, contact=contact, overrides=overrides)
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:

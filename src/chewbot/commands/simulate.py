@@ -78,25 +78,20 @@ def simulate(
 
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress, set_overrides, stdout
+    from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
+                                         resolved, set_overrides, stdout)
     from chewbot.errors import ChewbotError
     from chewbot.files import check_output
-    from chewbot.simulation.controllers import METHODS
     from chewbot.outputs.simulation import SIMULATION_FOLDER
     from chewbot.simulation.run import SimulateOptions, input_files
 
-    choices = {"--side": (side, (None, "left", "right")), "--method": (method, METHODS), "--friction": (friction, ("on", "off")),
-               "--contact": (contact, ("bilateral", "unilateral")), "--goal": (goal, (None, "min-torque", "min-coupler-force", "min-hkp-force"))}
-    for name, (value, allowed) in choices.items():
-        if value not in allowed:
-            fail(ChewbotError(f"{name} must be one of {', '.join(a for a in allowed if a)}, not {value!r}"), EXIT_BAD_INPUT)
-    if goal is not None and method != "newton-euler":
-        fail(ChewbotError(f"--goal applies to --method newton-euler, not {method}"), EXIT_BAD_INPUT)
     gain_overrides = set_overrides(gain)
     options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set),
                               bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides)
+    with resolved():
+        options = options.resolved()
     if noise > 0 and options.rate is None:
         fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
     with errors_reported():

@@ -7,7 +7,8 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from chewbot.commands.common import FORCE_HELP, Orientation, Side, errors_reported, flag, progress, stdout
+from chewbot.commands.common import FORCE_HELP, errors_reported, flag, progress, stdout
+from chewbot.kinematics.options import Orientation, Side
 
 
 def track_incisor(

@@ -1,6 +1,3 @@
-"""Inverse dynamics of both mechanisms; each formulation lives in a module of its own and registers itself."""
-
-from chewbot.dynamics.base import METHODS, Dynamics, formulation_kernels, inverse_dynamics, register
-from chewbot.dynamics import core6rss, hessian, lagrange, liang, newton_euler  # noqa: F401, E402  (each registers its formulation)
-
-__all__ = ["METHODS", "Dynamics", "formulation_kernels", "inverse_dynamics", "register"]
+"""Inverse dynamics of both mechanisms: one module per formulation, named in one table
+(:mod:`chewbot.dynamics.registry`), with what they share (the contact model, the distribution of the redundant
+torques, the energies and the Lagrange-d'Alembert reduction, the seed-001 indices)."""

@@ -1,8 +1,10 @@
-"""What every inverse-dynamics formulation returns, and the registry that names them.
+"""What every inverse-dynamics formulation returns (:class:`Dynamics`), and what their per-sample graphs share
+(:class:`Sample`: one sample's inputs and kinematics, as a controller's inverse dynamics takes them).
 
-A formulation is a function ``f(model, kin, **options) -> Dynamics``: the model, the kinematics of the
-whole task (:class:`~chewbot.kinematics.motion.Kinematics`), and options of its own (side, friction, goal, ...).
-Adding a formulation is adding one module that calls :func:`register`.
+A formulation is a function ``f(model, kin, *, side=None, contact="bilateral", ...) -> Dynamics``: the model, the
+kinematics of the whole task (:class:`~chewbot.kinematics.motion.Kinematics`), and the keyword options it takes (a
+misspelt one is a TypeError). The formulations are named in one table, :mod:`chewbot.dynamics.registry`: adding one
+is adding its module and a row there.
 
 A run may give a long task in chunks of consecutive samples (:mod:`chewbot.run.pipeline`), one call per chunk. A
 formulation whose samples depend on earlier ones (a solver warm-started from the previous sample's solution) takes
@@ -13,12 +15,13 @@ in ``carry`` what the next chunk needs: the chunks then give the results of the 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
 
+import casadi as ca
 import numpy as np
 
-from chewbot.kinematics.motion import Kinematics
-from chewbot.model import Model
+from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
+from chewbot.kinematics.options import Orientation
+from chewbot.model.symbolic import SymbolicModel, symbols
 from chewbot.table import Table
 
 
@@ -39,35 +42,36 @@ class Dynamics:
     carry: dict = field(default_factory=dict)
 
 
-Formulation = Callable[..., Dynamics]
-METHODS: dict[str, Formulation] = {}
-KERNELS: dict[str, Callable[..., list]] = {}
+
+@dataclass(frozen=True, eq=False)
+class Sample:
+    """One sample as a controller's inverse dynamics takes it: the symbols q, dq, ddq (the mechanism's independent
+    coordinates in Euler angles and their rates), B (the bite point in {M}), F_B (the bite force in {S}), the
+    model's numbers ``params`` (the symbol p), and the sample's kinematics (:data:`KINEMATICS_OUTPUTS` by name) as
+    expressions of them. :meth:`function` makes the formulation's torques of these symbols one CasADi function."""
+
+    params: SymbolicModel
+    q: ca.SX
+    dq: ca.SX
+    ddq: ca.SX
+    B: ca.SX
+    F: ca.SX
+    kinematics: dict
+
+    @classmethod
+    def of(cls, mechanism: str) -> Sample:
+        m = symbols(mechanism)
+        q, dq, ddq = (ca.SX.sym(name, m.dof) for name in ("q", "dq", "ddq"))
+        B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+        kin = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(mechanism, Orientation.euler_angles.value).graph()(q, dq, ddq, m.p)))
+        return cls(m, q, dq, ddq, B, F, kin)
+
+    def function(self, tau: ca.SX) -> ca.Function:
+        """(q, dq, ddq, B, F_B, p) -> tau (N m)."""
+        return ca.Function("inverse_dynamics", [self.q, self.dq, self.ddq, self.B, self.F, self.params.p], [tau],
+                           ["q", "dq", "ddq", "B", "F_B", "p"], ["tau"])
 
 
-def register(name: str, kernels: Callable[..., list] | None = None):
-    """Decorator: make a formulation available under ``name`` (``chewbot run --method NAME``). ``kernels``:
-    ``(mechanism, orientation, **options) -> [KernelSpec]``, the compiled kernels it uses (compiled side by side
-    before a run, see :func:`formulation_kernels`)."""
-
-    def wrap(fn: Formulation) -> Formulation:
-        METHODS[name] = fn
-        KERNELS[name] = kernels or (lambda mechanism, orientation, **options: [])
-        return fn
-
-    return wrap
-
-
-def formulation_kernels(mechanism: str, orientation: str, method: str, **options) -> list:
-    """The compiled kernels (:class:`~chewbot.compiled.kernels.KernelSpec`) that ``method`` uses on a mechanism."""
-    import chewbot.dynamics  # noqa: F401  (imports every formulation module, which registers itself)
-
-    return KERNELS[method](mechanism, orientation, **options)
-
-
-def inverse_dynamics(model: Model, kin: Kinematics, method: str = "hessian", **options) -> Dynamics:
-    """Run the formulation ``method`` on the kinematics ``kin`` of ``model``."""
-    import chewbot.dynamics  # noqa: F401  (imports every formulation module, which registers itself)
-
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; available: {', '.join(sorted(METHODS))}")
-    return METHODS[method](model, kin, **options)
+def minimum_norm_sx(J_theta1, rhs, redundant: bool):
+    """The least-norm tau with J_theta1' tau = rhs (Eq. 54; the unique solution where J_theta1 is square)."""
+    return ca.mtimes(J_theta1, ca.solve(ca.mtimes(J_theta1.T, J_theta1), rhs)) if redundant else ca.solve(J_theta1.T, rhs)

@@ -44,13 +44,14 @@ import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Dynamics
+from chewbot.dynamics.core import lifted_core
+from chewbot.dynamics.options import check_contact
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.model.symbolic import c_name, graph_key, mechanism_of
 from chewbot.table import Table
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
-CONTACT_MODELS = ("bilateral", "unilateral")
 CONTACT_OUTPUTS = ("N0", "K", "J_theta1")
 NORMAL_FORCE_DESCRIPTION = "normal force of the plane on the condyle along n = (p1, 0, 1)/abs(.) (> 0: the plane pushes)"
 # A candidate of the unilateral QP counts as feasible down to this much below a bound (N): the rounding of
@@ -61,12 +62,6 @@ BOUND_TOL_N = 1e-9
 SINGULAR_RTOL = 1e-12
 FALLBACK = ("unilateral fallback: the minimum-norm torques subject to N_L, N_R >= contact.preload_N "
             "(a QP in the two null-space torques, solved exactly by its active sets)")
-
-
-def check_contact(contact: str) -> None:
-    """Raise ValueError unless ``contact`` is one of :data:`CONTACT_MODELS`."""
-    if contact not in CONTACT_MODELS:
-        raise ValueError(f"contact model must be one of {', '.join(CONTACT_MODELS)}, not {contact!r}")
 
 
 def bound_names(preload: float) -> list[str]:
@@ -81,8 +76,6 @@ def contact_kernel(model_or_mechanism: Model | str) -> KernelSpec:
     name = f"contact_{c_name(mechanism_of(model_or_mechanism))}"
 
     def build():
-        from chewbot.dynamics.core6rss import lifted_core  # imported here: the 6rss-core formulation imports this module
-
         lc = lifted_core(model_or_mechanism)
         m, x, core = lc.params, lc.x, lc.core
         R, n = matrix_from_euler_angles_sx(x[3], x[4], x[5]), m.hkp.normal

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
+from chewbot.dynamics.base import Sample, minimum_norm_sx
 from chewbot.dynamics.energy import Energy, energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -113,3 +114,12 @@ def reduced_torques(model: Model, kin: Kinematics, name: str, derive: Derivation
     """Minimum-norm actuator torques (N, 6), N m, of Eq. (54) with the formulation's :class:`Rates`."""
     terms = reduced_terms(model, kin, name, derive, side)
     return minimum_norm(terms["J_theta1"], reduced_rhs(terms, kin))
+
+
+def reduced_sample_torques(mechanism: str, name: str, derive: Derivation) -> ca.Function:
+    """A controller's inverse dynamics of one sample by the formulation ``name`` (:class:`~chewbot.dynamics.base.Sample`):
+    the terms of Eq. (53) from :func:`reduced_kernel` (theta from the closed-form inverse kinematics) and the
+    minimum-norm torques of Eq. (54)."""
+    s = Sample.of(mechanism)
+    J1, M_f, C_f, G_f, Q_B = reduced_kernel(mechanism, name, derive).graph()(s.kinematics["theta"], s.q, s.dq, s.B, s.F, s.params.p)
+    return s.function(minimum_norm_sx(J1, ca.mtimes(M_f, s.ddq) + ca.mtimes(C_f, s.dq) + G_f - Q_B, s.params.has_hkp))

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.base import Dynamics
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
-from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
+from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -37,14 +37,22 @@ def hessian_rates(e: Energy) -> Rates:
     return Rates(J_theta_dot, J_qEE_dot, H12 - 0.5 * H12.T)
 
 
-@register("hessian", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "hessian", hessian_rates),
-                                                                   *contact_kernels(mechanism)])
-def hessian(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
+def hessian(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm actuator torques by the Hessian method (Eq. 54); the target's redundancy resolved by the
     pseudo-inverse, the 6RSS's torques unique; the target's normal forces N_L, N_R, and under the ``unilateral``
     ``contact`` model the unilateral fallback (:mod:`chewbot.dynamics.contact`). ``side`` overrides the bite side
-    of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored: the model is frictionless."""
+    of ``kin``. The model is frictionless (no ``goal``, no ``friction``: those are Newton-Euler's)."""
     require_euler_angles(kin, "hessian")
     tau = reduced_torques(model, kin, "hessian", hessian_rates, side)
     return frictionless_dynamics("hessian", model, kin, tau, side=side, contact=contact,
                                  info={"equations": "seed 000 Eqs. 20-23, 37-54", "friction": False})
+
+
+def kernels(mechanism: str, orientation: str) -> list:
+    """The compiled kernels of a run: the terms of Eq. (53), and the target's normal-force map."""
+    return [reduced_kernel(mechanism, "hessian", hessian_rates), *contact_kernels(mechanism)]
+
+
+def sample_torques(mechanism: str):
+    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.dalembert.reduced_sample_torques`)."""
+    return reduced_sample_torques(mechanism, "hessian", hessian_rates)

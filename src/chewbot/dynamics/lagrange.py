@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.base import Dynamics, Sample, minimum_norm_sx
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
@@ -83,12 +83,10 @@ def solve_multipliers(terms: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndar
     return z[:, :6], z[:, 6:12]
 
 
-@register("lagrange", lambda mechanism, orientation, **options: [lagrange_kernel(mechanism), *contact_kernels(mechanism)])
-def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
+def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm torques and the closure multipliers lambda1..6 (N/m: h_i is in m^2) by Lagrange's equations of
     the first kind, the target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`.
-    ``side`` overrides the bite side of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and
-    ignored."""
+    ``side`` overrides the bite side of ``kin``."""
     require_euler_angles(kin, "lagrange")
     terms = lagrange_terms(model, kin, side)
     tau, lam = solve_multipliers(terms)
@@ -98,3 +96,19 @@ def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, contact:
         lam = (terms["D"][:, :6] - dyn.tau) / terms["J_theta"]
     dyn.table.add_block([f"lambda{i + 1}" for i in range(6)], lam, "N/m", "Lagrange multipliers of the closure equations h_i (m^2)")
     return dyn
+
+
+def kernels(mechanism: str, orientation: str) -> list:
+    """The compiled kernels of a run: Lagrange's D, J_theta, J_qEE, Q_B, and the target's normal-force map."""
+    return [lagrange_kernel(mechanism), *contact_kernels(mechanism)]
+
+
+def sample_torques(mechanism: str) -> ca.Function:
+    """A controller's inverse dynamics of one sample (:class:`~chewbot.dynamics.base.Sample`): Lagrange's D, J_theta,
+    J_qEE at q = [theta; q_EE] and the minimum-norm torques of J_theta1' tau = J_theta1' D_theta + D_E - Q_B (the
+    multipliers of Eqs. 55-56 eliminated)."""
+    s = Sample.of(mechanism)
+    full = [ca.vertcat(s.kinematics[a], b) for a, b in (("theta", s.q), ("dtheta", s.dq), ("ddtheta", s.ddq))]
+    D, J_theta, J_qEE, Q_B = lagrange_kernel(mechanism).graph()(*full, s.B, s.F, s.params.p)
+    J1 = -J_qEE / ca.repmat(J_theta, 1, s.params.dof)
+    return s.function(minimum_norm_sx(J1, ca.mtimes(J1.T, D[:6]) + D[6:] - Q_B, s.params.has_hkp))

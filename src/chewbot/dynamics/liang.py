@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from chewbot.dynamics.base import Dynamics, register
+from chewbot.dynamics.base import Dynamics
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
-from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_torques
+from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -43,13 +43,21 @@ def liang_rates(e: Energy) -> Rates:
     return Rates(ca.diag(matrix_rate(s.J_theta(), e.q, e.dq)), matrix_rate(s.J_qEE(), e.q, e.dq), C)
 
 
-@register("liang", lambda mechanism, orientation, **options: [reduced_kernel(mechanism, "liang", liang_rates),
-                                                                   *contact_kernels(mechanism)])
-def liang(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral", **ignored) -> Dynamics:
+def liang(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm actuator torques (Eq. 54) with J_dot and C by Liang's method (Eq. 61), the target's normal
     forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`. ``side`` overrides the bite side
-    of ``kin``; ``goal`` and ``friction`` (Newton-Euler options) are accepted and ignored."""
+    of ``kin``."""
     require_euler_angles(kin, "liang")
     tau = reduced_torques(model, kin, "liang", liang_rates, side)
     return frictionless_dynamics("liang", model, kin, tau, side=side, contact=contact,
                                  info={"equations": "seed 000 Eqs. 37-54, 61", "friction": False})
+
+
+def kernels(mechanism: str, orientation: str) -> list:
+    """The compiled kernels of a run: the terms of Eq. (53), and the target's normal-force map."""
+    return [reduced_kernel(mechanism, "liang", liang_rates), *contact_kernels(mechanism)]
+
+
+def sample_torques(mechanism: str):
+    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.dalembert.reduced_sample_torques`)."""
+    return reduced_sample_torques(mechanism, "liang", liang_rates)

@@ -37,8 +37,9 @@ import numpy as np
 
 from chewbot.dynamics.indices import friction_share, performance_indices
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.dynamics.base import Dynamics, register
-from chewbot.dynamics.contact import add_normal_forces, bound_names, check_contact
+from chewbot.dynamics.base import Dynamics
+from chewbot.dynamics.contact import add_normal_forces, bound_names
+from chewbot.dynamics.options import check_contact, check_goal
 from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, build_problem, problem_kernels, solve
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
@@ -55,7 +56,6 @@ EPS_V_T = 1e-5  # m/s
 DELTA_N = 1e-3  # N
 DELTA_F_G = 1e-3  # N
 
-GOALS = ("min-torque", "min-coupler-force", "min-hkp-force")
 LIMIT_NAMES = ("torque", "power", "axial_load", "radial_load")
 
 
@@ -266,10 +266,9 @@ def _problem_graph(mechanism: str, goal: str):
     return lambda: cached_graph(mechanism, ("ne-problem", goal), build)
 
 
-def newton_euler_kernels(mechanism: str, orientation: str, goal: str | None = None, **ignored) -> list[KernelSpec]:
+def kernels(mechanism: str, orientation: str, goal: str = "min-torque") -> list[KernelSpec]:
     """The compiled kernels of a Newton–Euler run: the sample's coefficients, the forces and the distribution
-    problem of ``goal`` (default min-torque)."""
-    goal = goal or "min-torque"
+    problem of ``goal``."""
     return [coefficients_kernel(mechanism, orientation), forces_kernel(mechanism),
             *problem_kernels(_problem_name(mechanism, goal), _problem_graph(mechanism, goal), graph_key(mechanism, goal))]
 
@@ -315,16 +314,9 @@ def start_sx(params: SymbolicModel, goal: str, D) -> ca.SX:
     return best
 
 
-def check_goal(goal: str) -> None:
-    """Raise ValueError unless ``goal`` is one of :data:`GOALS`."""
-    if goal not in GOALS:
-        raise ValueError(f"goal must be one of {', '.join(GOALS)}, not {goal!r}")
-
-
-@register("newton-euler", newton_euler_kernels)
 def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal: str = "min-torque",
                  friction: bool = True, contact: str = "bilateral", strict: bool = False, carry: dict | None = None,
-                 check=None, **ignored) -> Dynamics:
+                 check=None) -> Dynamics:
     """Newton–Euler inverse dynamics with friction and optimal distribution (seed 001, Sect. 4).
 
     ``goal``: see :func:`problem` (the 6RSS has nothing to distribute: its torques are closed form);
@@ -379,34 +371,3 @@ def newton_euler(model: Model, kin: Kinematics, *, side: str | None = None, goal
                             "distribution": f"goal {goal} with N_L, N_R >= contact.preload_N as constraints"} if unilateral
                            else {"model": "bilateral", "normal_forces": "N_L, N_R are unknowns of the distribution"})
     return Dynamics("newton-euler", out["tau"], table, info, carry={"x": sol.x[-1].copy()} if kin.n else {})
-
-
-def benchmark_cases() -> dict:
-    """Name -> zero-argument callable: Newton–Euler on the whole default task (left side), kinematics excluded.
-
-    Target with Euler angles and Euler parameters under each goal, and the 6RSS with both (closed form).
-    The kinematics and the compiled kernels are built on the first call of each case.
-    """
-    from chewbot.kinematics.motion import solve_kinematics
-    from chewbot.model.params import load_model
-    from chewbot.task.default import default_task
-
-    models = {name: load_model(name) for name in ("target", "6rss")}
-
-    def case(name, orientation, goal):
-        m = models[name]
-
-        def run():
-            kin = m.cached(("benchmark-kinematics", orientation),
-                           lambda: solve_kinematics(m, default_task(m, "left"), orientation))
-            return newton_euler(m, kin, goal=goal)
-
-        return run
-
-    cases = {}
-    for name, goals in (("target", GOALS), ("6rss", ("min-torque",))):
-        for orientation in ("euler-parameters", "euler-angles"):
-            for goal in goals:
-                label = goal if name == "target" else "closed-form"
-                cases[f"newton-euler/{name}/{orientation}/{label}"] = case(name, orientation, goal)
-    return cases

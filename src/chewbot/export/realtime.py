@@ -12,13 +12,8 @@ kernel serves every model of its mechanism; :func:`kernels` gives them with one 
 as ``chewbot export-c`` writes them for a robot's controller.
 
 The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
-:func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction
-(:mod:`chewbot.dynamics.newton_euler`) with the G1 problem solved inside the kernel on its two unknowns: the
-best piecewise least-squares start, then a fixed number (:data:`G1_ITERATIONS`) of safeguarded Newton steps: a
-fixed cost, as a real-time loop needs. The kernel returns its last step and the gradient of |tau|^2 at its answer
-(both ~0 at the optimum: the step is the one Newton proposes there, so a stalled line search shows) and the
-actuator-limit values, so the caller can verify all three; it does not handle active limits (the Python solver
-falls back to SQP there).
+:func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction with the
+G1 problem solved inside the kernel at a fixed cost (:mod:`chewbot.dynamics.g1`).
 
 :func:`chewbot.compiled.kernels.native` wraps a kernel for calls from Python through ctypes (one sample in a few
 microseconds, or a whole trajectory in one C loop);
@@ -27,116 +22,18 @@ microseconds, or a whole trajectory in one C loop);
 
 from __future__ import annotations
 
-import casadi as ca
 import numpy as np
 
 from chewbot.analysis.coupling import coupling_kernel
-from chewbot.compiled.kernels import FLAGS, KernelSpec, evaluate, native
+from chewbot.compiled.kernels import FLAGS, KernelSpec, native
 from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
-from chewbot.dynamics.distribution import MEASURABLE
-from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns, start_sx
+from chewbot.dynamics.g1 import G1_ITERATIONS, G1_ORIENTATION, g1_kernel
 from chewbot.export.c import Kernel
-from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.simulation.forward import NEWTON_ITERATIONS, forward_kernel
 
-# Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
-# least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
-# default up to 1 (HKP) and 0.5 (actuators) on the default task; 12 leave a margin. The kernel reports the
-# Newton step at its answer, so a caller sees when this was not enough.
-G1_ITERATIONS = 12
-HALVINGS = 4
-ARMIJO = 1e-4
-G1_ORIENTATION = "euler-parameters"
 # The example sample of the exported README: the peak of the second bite-force burst of the default task.
 EXAMPLE_T = 2.44
-
-
-def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_ORIENTATION,
-              iterations: int = G1_ITERATIONS) -> KernelSpec:
-    """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B, p) ->
-    tau (N m), N (N_L, N_R in N), grad: gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), step: the size
-    of the Newton step proposed at the answer (N; tiny only at the optimum), limits (24: tau, power, axial,
-    radial load per actuator, in N m, W, N, N). q_EE in ``orientation``.
-
-    It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.newton_euler.start_sx`)
-    and takes ``iterations`` safeguarded Newton steps: the exact Hessian where it is positive definite, else
-    Gauss-Newton's, and the longest of the steps 1, 1/2, ..., 1/2^(HALVINGS-1) that satisfies Armijo's
-    condition (none: stay). Fixed cost, no branches in the C code. No p for a model (its numbers folded in).
-    """
-    if mechanism_of(model_or_mechanism) != "target":
-        raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
-    if iterations < 1:
-        raise ValueError(f"iterations must be at least 1, not {iterations}")
-
-    def build():
-        coeff = coefficients_kernel(model_or_mechanism, orientation).graph()
-        model = symbols(model_or_mechanism)
-        extra, extra_names = parameter_input(model)
-        theta, q, dq, ddq = (ca.SX.sym(name, coeff.size1_in(i)) for i, name in enumerate(("theta", "q", "dq", "ddq")))
-        F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
-        D = coeff(theta, q, dq, ddq, F, B, *extra)[0]
-        tau, Nk, grad, newton_step, limits = distribution_function(model_or_mechanism, orientation, "min-torque", 1.0, iterations)(D, *extra)
-        return ca.Function("g1_target", [theta, q, dq, ddq, F, B, *extra], [tau, Nk, grad, newton_step, limits],
-                           ["theta", "q", "dq", "ddq", "F_B", "B", *extra_names], ["tau", "N", "grad", "step", "limits"], {"cse": True})
-
-    return KernelSpec("g1_target", build, graph_key(model_or_mechanism, orientation, iterations))
-
-
-def distribution_function(model_or_mechanism: Model | str, orientation: str, goal: str, friction: float,
-                          iterations: int = G1_ITERATIONS) -> ca.Function:
-    """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
-    (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
-    ``orientation``), ``friction`` 0.0 or 1.0 (a constant of the graph). The best piecewise least-squares start
-    (:func:`chewbot.dynamics.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
-    |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values."""
-    from chewbot.dynamics.newton_euler import goal_residual
-
-    def build():
-        model = symbols(model_or_mechanism)
-        extra, _ = parameter_input(model)
-        Dsym = ca.SX.sym("D", coefficients_kernel(model_or_mechanism, orientation).graph().size1_out(0))
-        N = ca.SX.sym("N", n_unknowns(model))
-        out = forces_sx(model, Dsym, N, friction)
-        r = goal_residual(model, goal, Dsym, N, friction)
-        J = ca.sumsqr(r)
-        H, g = ca.hessian(J, N)
-        Jr = ca.jacobian(r, N)
-        H_gn = 2 * ca.mtimes(Jr.T, Jr) + 1e-12 * ca.SX.eye(2)
-        convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
-        p = -ca.solve(ca.if_else(convex, H, H_gn), g)
-        slope = ca.dot(g, p)
-        value = ca.Function("distribution_value", [Dsym, N, *extra], [J])
-        Np = N  # no acceptable step: stay
-        for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
-            alpha = 0.5**k
-            trial = N + alpha * p
-            Np = ca.if_else(value(Dsym, trial, *extra) <= J + ARMIJO * alpha * slope, trial, Np)
-        # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
-        # is taken (the quadratic-convergence region), as the distribution solver does
-        Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
-        step = ca.Function("distribution_step", [Dsym, N, *extra], [Np])
-        start = ca.Function("distribution_start", [Dsym, *extra], [start_sx(model, goal, Dsym)])
-        dth = Dsym[-6:]
-        lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
-        # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
-        final = ca.Function("distribution_final", [Dsym, N, *extra], [out["tau"], g, ca.norm_2(p), lim])
-        Nk = start(Dsym, *extra)
-        for _ in range(iterations):
-            Nk = step(Dsym, Nk, *extra)
-        tau, grad, newton_step, limits = final(Dsym, Nk, *extra)
-        return ca.Function("distribution", [Dsym, *extra], [tau, Nk, grad, newton_step, limits])
-
-    return cached_graph(model_or_mechanism, ("distribution", orientation, goal, friction, iterations), build)
-
-
-def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
-    """Friction-aware goal-G1 distribution along a whole task with the compiled :func:`g1_kernel` (one C loop):
-    tau (N, 6), N (N, 2), grad (N, 2), step (N, 1), limits (N, 24), in ``kin.orientation``."""
-    fn = native(g1_kernel(model.mechanism, kin.orientation))
-    out = evaluate(fn, kin.theta, kin.q, kin.dq, kin.ddq, kin.force, model.molar(side or kin.side), model.vector())
-    return dict(zip(("tau", "N", "grad", "step", "limits"), out))
 
 
 # --- one sample at a time, from a Python control loop ---------------------------------------------------------

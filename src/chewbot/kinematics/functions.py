@@ -12,7 +12,8 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.compiled.kernels import KernelSpec
-from chewbot.kinematics.symbolic import COORDINATES, Symbolic, Z_parasitic_sx, check_orientation, gamma_parasitic_sx, symbolic
+from chewbot.kinematics.options import check_orientation
+from chewbot.kinematics.symbolic import COORDINATES, Symbolic, Z_parasitic_sx, gamma_parasitic_sx, symbolic
 from chewbot.model import Model
 from chewbot.model.symbolic import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
 from chewbot.rotation import matrix_from_euler_angles_sx

@@ -17,7 +17,8 @@ from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
 from chewbot.kinematics.conditioning import reciprocal_condition
 from chewbot.kinematics.ik import check_chains, continuous
-from chewbot.kinematics.symbolic import COORDINATES, check_orientation
+from chewbot.kinematics.options import check_orientation
+from chewbot.kinematics.symbolic import COORDINATES
 from chewbot.model import Model
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 

@@ -24,11 +24,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from chewbot.kinematics.options import check_orientation
 from chewbot.model import Model
 from chewbot.model.symbolic import SymbolicModel, cached_graph, symbols
 from chewbot.rotation import E_sx, R_omega_sx, matrix_from_euler_angles_sx, matrix_from_euler_parameters_sx
-
-ORIENTATIONS = ("euler-angles", "euler-parameters")
 
 COORDINATES = {
     ("target", "euler-angles"): ("X", "Y", "alpha", "beta"),
@@ -37,11 +36,6 @@ COORDINATES = {
     ("6rss", "euler-parameters"): ("X", "Y", "Z", "e0", "e1", "e2", "e3"),
 }
 POSE = {"euler-angles": ("X", "Y", "Z", "alpha", "beta", "gamma"), "euler-parameters": ("X", "Y", "Z", "e0", "e1", "e2", "e3")}
-
-
-def check_orientation(orientation: str) -> None:
-    if orientation not in ORIENTATIONS:
-        raise ValueError(f"orientation must be one of {', '.join(ORIENTATIONS)}, not {orientation!r}")
 
 
 def gamma_parasitic_sx(params: SymbolicModel, alpha, beta):

@@ -61,14 +61,12 @@ def prepare(spec: Spec) -> None:
     from chewbot.compiled.kernels import prepare_kernels
     from chewbot.model.params import load_model
     from chewbot.run.pipeline import run_kernels
-    from chewbot.table import RunOptions
 
     names = [spec.model] + ([spec.counterpart or COUNTERPARTS[spec.model]] if any("ratio_MCI" in o for o in spec.computed_outputs) else [])
     kernels = []
     for name in names:
         model = load_model(name)
-        kernels += run_kernels(model, RunOptions(model=name, orientation=spec.orientation, method=spec.method,
-                                                 goal=spec.goal, friction=spec.friction))
+        kernels += run_kernels(model, spec.run_options(name))
     if spec.over_poses:
         from chewbot.sweep.maps import map_kernels
 

@@ -71,11 +71,12 @@ def bite_force(table: Table, path: Path) -> Path:
 
 
 def figure_names(columns, method: str | None) -> list[str]:
-    """The PNG files of a run with these columns and method: the motion and the bite force always, the torques and
-    the coupling where the run computed them, the Newton-Euler figures for that method."""
+    """The PNG files of a run with these columns: the motion and the bite force always, the torques and the coupling
+    where the run computed them, the Newton-Euler figures where it has their forces and friction (``method`` is
+    not needed: what was computed says it)."""
     names = ["task_space.png", "joint_space.png", "bite_force.png"]
     names += ["torques.png"] * ("tau1" in columns) + ["coupling.png"] * ("MCI1" in columns)
-    if method == "newton-euler":
+    if all(c in columns for c in ("tau_f1", "FS1_x", "MG1_x")):
         from chewbot.report.newton_euler_figures import FIGURES
 
         names += list(FIGURES)

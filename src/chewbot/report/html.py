@@ -450,7 +450,7 @@ def dynamics_label(record: dict, model: Model) -> str:
     o = record["options"]
     if not o.get("method"):
         return "inverse dynamics not run"
-    if o["method"] != "newton-euler":
+    if not o.get("friction"):  # recorded for the formulations with friction only
         fallback = (", N_L, N_R >= contact.preload_N: the unilateral fallback"
                     if o.get("contact") == "unilateral" and model.has_hkp else "")
         return f"inverse dynamics: {o['method']} (minimum-norm torques{fallback}, no friction)"

@@ -22,19 +22,40 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.model import Model
-from chewbot.table import RunOptions, RunRecord, RunResult, Table, kinematics_table, run_record
+from chewbot.table import RunRecord, Table, kinematics_table, run_record
+from chewbot.run.options import RunOptions, complete
 from chewbot.kinematics.task import Task
+
+if TYPE_CHECKING:
+    from chewbot.analysis.checks import CheckResult
+    from chewbot.kinematics.motion import Kinematics
 
 __all__ = ["CHUNK_SAMPLES", "INFO_RULES", "RunOptions", "RunResult", "compute", "input_files", "load_task", "run",
            "run_json", "run_kernels", "write"]
+
+@dataclass
+class RunResult:
+    """What a run computed, in memory (the folder holds the same)."""
+
+    options: RunOptions
+    model: Model
+    task: Task
+    kinematics: Kinematics
+    table: Table
+    figures: list[Path] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+    dynamics: object | None = None
+    checks: list[CheckResult] = field(default_factory=list)
+
+
 
 # Samples per chunk. Large enough that the per-chunk overhead (a Python pass over the stages, the checks) is
 # noise beside the compiled kernels' work; small enough that a chunk's arrays (the Newton-Euler data, about
@@ -67,22 +88,24 @@ def input_files(options: RunOptions) -> list[Path]:
 def run_kernels(model: Model, options: RunOptions) -> list:
     """The compiled kernels a run uses: the kinematics, the formulation's, and the inertia coupling's."""
     from chewbot.analysis.coupling import coupling_kernel
-    from chewbot.dynamics import formulation_kernels
+    from chewbot.dynamics.registry import formulation_kernels
     from chewbot.kinematics.functions import kinematics_kernel
 
     kernels = [kinematics_kernel(model.mechanism, options.orientation)]
     if options.method:
-        kernels += formulation_kernels(model.mechanism, options.orientation, options.method, goal=options.goal)
+        kernels += formulation_kernels(model.mechanism, options.orientation, options.method, **options.formulation_options())
         kernels.append(coupling_kernel(model.mechanism))
     return kernels
 
 
 def _inputs(options: RunOptions) -> tuple[RunOptions, Model, Task]:
-    """The model and the task of a run, and its options with the side in effect (as run.json records it)."""
+    """The model and the task of a run, and its options complete (:func:`chewbot.run.options.complete`) with the side
+    in effect (as run.json records them)."""
     from chewbot.model.params import load_model, split_overrides
 
     model_overrides, task_overrides = split_overrides(options.overrides)
     model = load_model(options.model, model_overrides)
+    options = complete(options, model.has_hkp)
     task = load_task(options.task, model, options.side, task_overrides)
     return replace(options, side=task.side), model, task
 
@@ -155,7 +178,7 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
         raise ValueError(f"chunk size must be at least 1 sample, not {size}")
     prepare_kernels(run_kernels(model, options))
     o = options
-    used = {**({"goal": o.goal} if o.goal else {}), **({"friction": o.friction == "on"} if o.friction else {}), "contact": o.contact}
+    used = o.formulation_options()
     theta_end, carry = None, None
     for start in range(0, max(task.n, 1), size):
         timings: dict[str, float] = {}
@@ -169,7 +192,7 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
         dyn = means = None
         if o.method:
             from chewbot.analysis.coupling import coupling
-            from chewbot.dynamics import inverse_dynamics
+            from chewbot.dynamics.registry import inverse_dynamics
 
             step(f"inverse dynamics ({o.method})", done=start, stage="dynamics" if start == 0 else None)
             t0 = time.perf_counter()

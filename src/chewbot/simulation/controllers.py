@@ -30,22 +30,18 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, native
-from chewbot.dynamics.core6rss import torque_kernel
-from chewbot.dynamics.dalembert import reduced_kernel
-from chewbot.dynamics.hessian import hessian_rates
-from chewbot.dynamics.lagrange import lagrange_kernel
-from chewbot.dynamics.liang import liang_rates
-from chewbot.dynamics.newton_euler import GOALS, check_goal, coefficients_kernel, forces_sx
+from chewbot.dynamics.registry import formulation
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.model.vector import N_P
-from chewbot.model.symbolic import c_name, cached_graph, symbols
+from chewbot.kinematics.options import Orientation
+from chewbot.model.symbolic import c_name, cached_graph
+from chewbot.run.options import Switch, resolve_dynamics
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation import CONTROLLERS
 from chewbot.simulation.reference import Reference
 
-METHODS = ("hessian", "lagrange", "liang", "6rss-core", "newton-euler")
 CONTROL_INPUTS = ("q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains", "B", "p")
 
 
@@ -60,57 +56,18 @@ class State:
 # ------------------------------------------------------------------------------------------- inverse dynamics
 
 
-def minimum_norm_sx(J_theta1, rhs, redundant: bool):
-    """The least-norm tau with J_theta1' tau = rhs (Eq. 54; the unique solution where J_theta1 is square)."""
-    return ca.mtimes(J_theta1, ca.solve(ca.mtimes(J_theta1.T, J_theta1), rhs)) if redundant else ca.solve(J_theta1.T, rhs)
-
-
 def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = None, friction: bool = False) -> ca.Function:
     """The controller's inverse dynamics of one sample: (q, dq, ddq, B, F_B, p) -> tau (N m), q in Euler angles.
 
-    Each formulation's own per-sample graph: the terms of Eq. (53) by the Hessian method or Liang's (their kernels take
-    theta from the closed-form inverse kinematics), Lagrange's D, J_theta, J_qEE (J_theta1' tau = J_theta1' D_theta +
-    D_E - Q_B, from eliminating the multipliers of Eqs. 55-56) and the minimum-norm torques; the 6RSS core's torques;
-    Newton-Euler's data with the distribution of ``goal`` (target; the 6RSS's torques in closed form), with the
-    model's friction when ``friction``. Built once per (mechanism, method, goal, friction).
+    Each formulation's own per-sample graph (:attr:`chewbot.dynamics.registry.Formulation.sample_torques`): the terms
+    of Eq. (53) by the Hessian method or Liang's, Lagrange's D, J_theta, J_qEE and the minimum-norm torques, the 6RSS
+    core's torques, Newton-Euler's data with the distribution of ``goal`` at a fixed cost (with the model's friction
+    when ``friction``). Built once per (mechanism, method, goal, friction).
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, not {method!r}")
-    if method == "newton-euler":
-        goal = goal or "min-torque"
-        check_goal(goal)
-    return cached_graph(mechanism, ("controller-inverse", method, goal, bool(friction)),
-                        lambda: _inverse(mechanism, method, goal, bool(friction)))
-
-
-def _inverse(mechanism: str, method: str, goal: str | None, friction: bool) -> ca.Function:
-    m = symbols(mechanism)
-    n = n_coordinates(mechanism)
-    q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
-    B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
-    kin = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(mechanism, ORIENTATION).graph()(q, dq, ddq, m.p)))
-    redundant = m.has_hkp
-    if method in ("hessian", "liang"):
-        derive = hessian_rates if method == "hessian" else liang_rates
-        J1, M_f, C_f, G_f, Q_B = reduced_kernel(mechanism, method, derive).graph()(kin["theta"], q, dq, B, F, m.p)
-        tau = minimum_norm_sx(J1, ca.mtimes(M_f, ddq) + ca.mtimes(C_f, dq) + G_f - Q_B, redundant)
-    elif method == "lagrange":
-        full = [ca.vertcat(kin[a], b) for a, b in (("theta", q), ("dtheta", dq), ("ddtheta", ddq))]
-        D, J_theta, J_qEE, Q_B = lagrange_kernel(mechanism).graph()(*full, B, F, m.p)
-        J1 = -J_qEE / ca.repmat(J_theta, 1, n)
-        tau = minimum_norm_sx(J1, ca.mtimes(J1.T, D[:6]) + D[6:] - Q_B, redundant)
-    elif method == "6rss-core":
-        tau = torque_kernel(mechanism).graph()(q, dq, ddq, B, F, m.p)[0]
-    else:
-        D = coefficients_kernel(mechanism, ORIENTATION).graph()(kin["theta"], q, dq, ddq, F, B, m.p)[0]
-        fl = 1.0 if friction else 0.0
-        if redundant:
-            from chewbot.export.realtime import distribution_function
-
-            tau = distribution_function(mechanism, ORIENTATION, goal, fl)(D, m.p)[0]
-        else:
-            tau = forces_sx(m, D, ca.SX(0, 1), fl)["tau"]
-    return ca.Function("inverse_dynamics", [q, dq, ddq, B, F, m.p], [tau], ["q", "dq", "ddq", "B", "F_B", "p"], ["tau"])
+    f = formulation(method)
+    options = {k: v for k, v in (("goal", goal), ("friction", bool(friction))) if k in f.sample_options and v is not None}
+    key = ("controller-inverse", method, *(options.get(k, dict(f.defaults).get(k)) for k in ("goal", "friction")))
+    return cached_graph(mechanism, key, lambda: f.sample_torques(mechanism, **options))
 
 
 # ------------------------------------------------------------------------------------------- control laws
@@ -155,12 +112,16 @@ def _control(kind: str, mechanism: str, method: str, goal: str | None, friction:
 
 
 def control_name(kind: str, mechanism: str, method: str, goal: str | None, friction: bool) -> str:
-    """A C name for a control law's kernels: the kind, and for the model-based ones the inverse dynamics."""
+    """A C name for a control law's kernels: the kind, and for the model-based ones the inverse dynamics with the
+    options its per-sample graph takes."""
     parts = [kind]
     if kind != "pd":
         parts.append(method)
-        if method == "newton-euler":
-            parts += [goal or "min-torque", "friction" if friction else "frictionless"]
+        f = formulation(method)
+        if "goal" in f.sample_options:
+            parts.append(goal or dict(f.defaults)["goal"])
+        if "friction" in f.sample_options:
+            parts.append("friction" if friction else "frictionless")
     return "_".join(p.replace("-", "_").replace("6rss", "sixrss") for p in parts) + f"_{c_name(mechanism)}"
 
 
@@ -315,15 +276,10 @@ class ModelBasedController:
     def __post_init__(self):
         if self.kind not in CONTROLLERS:
             raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, not {self.kind!r}")
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {', '.join(METHODS)}, not {self.method!r}")
-        if self.method == "newton-euler" and self.model.has_hkp:
-            self.goal = self.goal or "min-torque"
-        else:
-            self.goal = None
-        if self.goal is not None and self.goal not in GOALS:
-            raise ValueError(f"goal must be one of {', '.join(GOALS)}, not {self.goal!r}")
-        self.friction = bool(self.friction) and self.method == "newton-euler"
+        takes_friction = "friction" in formulation(self.method).options
+        d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, bool(self.friction) if takes_friction else None,
+                             has_hkp=self.model.has_hkp)
+        self.goal, self.friction = d.goal, d.friction == Switch.on
 
     @property
     def mechanism(self) -> str:

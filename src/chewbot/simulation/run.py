@@ -28,7 +28,9 @@ from chewbot.model.params import load_model, split_overrides
 from chewbot.run.pipeline import input_files as run_inputs
 from chewbot.run.pipeline import load_task, singularity_columns
 from chewbot.report.summary import crank_tips
-from chewbot.table import POSE_UNITS, RunOptions, Table, kinematics_table
+from chewbot.table import POSE_UNITS, Table, kinematics_table
+from chewbot.kinematics.options import Orientation, Side
+from chewbot.run.options import OptionError, RunOptions, Switch, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
 from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
@@ -70,8 +72,24 @@ class SimulateOptions:
 
     @property
     def controller_friction(self) -> bool:
-        """Friction in the controller's model: only Newton-Euler has it, and only where the plant has it on."""
-        return self.method == "newton-euler" and self.friction == "on"
+        """Friction in the controller's model: where its formulation has friction (newton-euler), and only where the
+        plant has it on."""
+        from chewbot.dynamics.registry import formulation
+
+        return "friction" in formulation(self.method).options and self.friction == Switch.on
+
+    def resolved(self, has_hkp: bool | None = None) -> SimulateOptions:
+        """These options checked and completed by the rules of a run (:func:`chewbot.run.options.resolve_dynamics`):
+        the controller's method, its goal where it distributes the target's torques; the plant's friction switch,
+        the side, the contact model; :class:`~chewbot.run.options.OptionError` names an option that does not apply.
+        The controller computes in Euler angles. ``has_hkp``: the controller's model is the target (None: read from
+        its file where a rule needs it)."""
+        for option, value, kind in (("side", self.side, Side), ("friction", self.friction, Switch)):
+            if value is not None and value not in tuple(kind):
+                raise OptionError(option, f"must be one of {', '.join(kind)}, not {value!r}")
+        d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, None, self.contact, has_hkp=has_hkp,
+                             model=self.model)
+        return replace(self, method=d.method, goal=d.goal, contact=d.contact)
 
 
 @dataclass
@@ -107,8 +125,6 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
         raise ChewbotError(f"--plant-set {', '.join(f'task.{k}' for k in plant_task)}: the task is the controller's and the "
                            "plant's; change it with --set")
     plant = load_model(options.plant or options.model, {**plant_base, **plant_overrides})
-    if options.contact == "unilateral" and not model.has_hkp:
-        raise ChewbotError("--contact unilateral applies to the target robot: the 6RSS has no HKP contacts")
     if plant.mechanism != model.mechanism:
         raise ChewbotError(f"--plant {options.plant}: a {plant.mechanism} model, but the controller's model {options.model} "
                            f"is a {model.mechanism}; the plant must be the same kind of robot")
@@ -116,17 +132,20 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
 
 
 def build(options: SimulateOptions):
-    """The parts of a simulation: controller's model, plant model, task, reference, gains, the controller, the plant
-    and the sensor (None without noise)."""
+    """The options resolved (:meth:`SimulateOptions.resolved`, with the side in effect) and the parts of a simulation:
+    controller's model, plant model, task, reference, gains, the controller, the plant and the sensor (None without
+    noise)."""
     model, plant_model, task_overrides = load_models(options)
+    options = options.resolved(model.has_hkp)
     task = load_task(options.task, model, options.side, task_overrides)
+    options = replace(options, side=task.side)
     reference = Reference.from_task(model, task)
     gains = Gains.load(options.gains, model.mechanism, options.gain_overrides)
     controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
                                       options.controller_friction, not options.bite_unknown)
     plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
     sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
-    return model, plant_model, task, reference, gains, controller, plant, sensor
+    return options, model, plant_model, task, reference, gains, controller, plant, sensor
 
 
 def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResult:
@@ -134,8 +153,7 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     ``simulation``); ``check()`` is called in the loop and raises to stop it."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
-    model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
-    options = replace(options, side=task.side, goal=controller.goal)
+    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
     step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
          stage="simulation")
     t0 = time.perf_counter()

@@ -15,7 +15,7 @@ import numpy as np
 from chewbot.analysis.coupling import coupling
 from chewbot.bench.benchmark import TASK_CASES, Comparison, bench_task, ratios
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
-from chewbot.dynamics import inverse_dynamics
+from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model.params import load_model
 from chewbot.report import dynamics_figures

@@ -20,9 +20,10 @@ import numpy as np
 from chewbot.analysis.checks import PULL_TOLERANCE_N
 from chewbot.dynamics.indices import INDEX_UNITS
 from chewbot.bench.benchmark import compare, interleaved
-from chewbot.dynamics.newton_euler import GOALS, newton_euler
+from chewbot.dynamics.newton_euler import newton_euler
+from chewbot.dynamics.options import GOALS
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.kinematics.symbolic import ORIENTATIONS
+from chewbot.kinematics.options import ORIENTATIONS
 from chewbot.model.params import load_model
 from chewbot.report import newton_euler_figures
 from chewbot.report.plotting import save, subplots

@@ -124,12 +124,9 @@ class Evaluation:
 
     @cached_property
     def dynamics(self):
-        from chewbot.dynamics import inverse_dynamics
+        from chewbot.dynamics.registry import inverse_dynamics
 
-        s = self.spec
-        options = {**({"goal": s.goal} if s.goal else {}), **({"friction": s.friction == "on"} if s.friction else {}),
-                   "contact": s.contact}
-        return inverse_dynamics(self.model, self.kinematics, s.method, **options)
+        return inverse_dynamics(self.model, self.kinematics, self.spec.method, **self.spec.run_options().formulation_options())
 
     @cached_property
     def mu(self) -> np.ndarray:

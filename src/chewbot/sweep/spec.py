@@ -22,12 +22,12 @@ from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from chewbot.dynamics.options import CONTACT_MODELS, GOALS
 from chewbot.errors import ChewbotError
+from chewbot.kinematics.options import ORIENTATIONS
 
 KINDS = ("monte-carlo", "sobol", "grid", "optimize")
 DISTRIBUTIONS = ("uniform", "normal", "lognormal")
-ORIENTATIONS = ("euler-angles", "euler-parameters")
-GOALS = ("min-torque", "min-coupler-force", "min-hkp-force")
 MAPS = ("workspace", "singularity", "force")
 POSE_KEYS = {"X_mm": 1e-3, "Y_mm": 1e-3, "Z_mm": 1e-3, "alpha_deg": math.pi / 180, "beta_deg": math.pi / 180,
              "gamma_deg": math.pi / 180}  # factor to SI
@@ -115,6 +115,14 @@ class Spec:
     @property
     def over_poses(self) -> bool:
         return self.kind == "grid" and bool(self.poses)
+
+    def run_options(self, model: str | None = None):
+        """The options of ``chewbot run`` that this SPEC's evaluations compute with (:class:`~chewbot.run.options.RunOptions`);
+        ``model``: another model's name (the counterpart of the ratio outputs)."""
+        from chewbot.run.options import RunOptions
+
+        return RunOptions(model=model or self.model, task=self.task, side=self.side, orientation=self.orientation,
+                          method=self.method, goal=self.goal, friction=self.friction, contact=self.contact)
 
     def as_dict(self) -> dict:
         """Everything the SPEC says (for run.json), parameters as tables."""
@@ -351,26 +359,23 @@ def _mechanism(top: _Reader, model: str) -> str:
 
 
 def _dynamics_options(top: _Reader, method: str | None, orientation: str, mechanism: str) -> dict:
-    """method, goal, friction, contact as ``chewbot run`` takes them, with its defaults and rules (newton-euler
-    distributes the target's redundant torques by a goal, min-torque unless given; the 6RSS has none)."""
-    from chewbot.analysis.checks import CONTACT_MODELS
-    from chewbot.dynamics import METHODS
+    """method, goal, friction, contact as ``chewbot run`` takes them, with its defaults and rules
+    (:func:`chewbot.run.options.resolve_dynamics`)."""
+    from chewbot.dynamics.registry import METHODS
+    from chewbot.run.options import OptionError, Switch, resolve_dynamics
 
-    method = method or ("hessian" if orientation == "euler-angles" else "newton-euler")
-    if method not in METHODS:
+    if method is not None and method not in METHODS:
         close = difflib.get_close_matches(method, list(METHODS), n=1)
-        raise top.error("method", f"{method!r} is not a formulation; choose one of {', '.join(sorted(METHODS))}"
+        raise top.error("method", f"{method!r} is not a formulation; choose one of {', '.join(METHODS)}"
                         + (f" (did you mean {close[0]!r}?)" if close else ""))
     goal = top.choice("goal", GOALS)
-    friction = top.choice("friction", ("on", "off"))
-    if method != "newton-euler" and (goal or friction):
-        raise top.error("goal" if goal else "friction", f"applies to method = \"newton-euler\", not {method!r}")
-    if method == "newton-euler":
-        if mechanism != "target" and goal:
-            raise top.error("goal", "the 6RSS has no redundant actuation to distribute")
-        goal, friction = None if mechanism != "target" else goal or "min-torque", friction or "on"
+    friction = top.choice("friction", tuple(Switch))
     contact = top.choice("contact", CONTACT_MODELS, "bilateral")
-    return {"method": method, "goal": goal, "friction": friction, "contact": contact}
+    try:
+        d = resolve_dynamics(method, orientation, goal, friction, contact, has_hkp=mechanism == "target")
+    except OptionError as exc:
+        raise top.error(exc.options[0], exc.reason if len(exc.options) == 1 else exc.worded(lambda option: f"'{option}'")) from None
+    return {"method": d.method, "goal": d.goal, "friction": d.friction, "contact": d.contact}
 
 
 def _fixed(top: _Reader) -> dict:

@@ -30,7 +30,8 @@ import numpy as np
 
 from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError, TaskError
-from chewbot.kinematics.symbolic import COORDINATES, check_orientation, symbolic
+from chewbot.kinematics.options import check_orientation
+from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
 from chewbot.rotation import euler_parameters_to_angles
 from chewbot.table import Table

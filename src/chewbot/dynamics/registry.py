@@ -1,0 +1,98 @@
+"""The inverse-dynamics formulations, in one table: what each is called, what it takes and what it needs.
+
+Every formulation is a row of :data:`FORMULATIONS` (:class:`Formulation`): the function that solves a whole task,
+the compiled kernels a run of it uses (compiled side by side before the run), the per-sample graph of its torques
+that a controller evaluates (:mod:`chewbot.simulation.controllers`), the orientation parametrisations it is written
+for, the keyword options it takes, and whether a task given in chunks must carry its state from one chunk to the
+next. Everything that depends on the formulation reads this table (the run's options, the sweep's SPEC, the
+controllers, the benchmark): adding a formulation is adding its module and a row here.
+
+Options (docs/dynamics.md, docs/newton_euler.md): ``side`` (the bite side, overriding the task's) and ``contact``
+(``bilateral``, ``unilateral``) for every formulation; ``goal`` (what the distribution of the target's redundant
+torques minimises), ``friction`` and ``strict`` for newton-euler. A formulation given an option it does not take
+raises TypeError.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from chewbot.dynamics import core6rss, g1, hessian, lagrange, liang, newton_euler
+from chewbot.dynamics.base import Dynamics
+from chewbot.kinematics.motion import Kinematics
+from chewbot.kinematics.options import Orientation
+from chewbot.model import Model
+
+EA, EP = Orientation.euler_angles.value, Orientation.euler_parameters.value
+
+
+@dataclass(frozen=True)
+class Formulation:
+    """One inverse-dynamics formulation.
+
+    ``solve(model, kin, **options) -> Dynamics``: the whole task (or a chunk of it); ``kernels(mechanism, orientation,
+    **kernel options)``: the compiled kernels it uses; ``sample_torques(mechanism, **sample options)``: a CasADi
+    function (q, dq, ddq, B, F_B, p) -> tau of one sample in Euler angles (a controller's inverse dynamics);
+    ``orientations``: the parametrisations of q_EE it is written for; ``options``: the keyword options ``solve``
+    takes (besides ``carry`` and ``check``); ``kernel_options``: those that choose its kernels and its per-sample
+    graph; ``carries``: a sample depends on the one before (a warm start), so a task given in chunks passes the
+    previous chunk's ``Dynamics.carry`` on; ``checks``: its loops call a library that may swallow a signal, so it
+    takes the command line's ``check``; ``defaults``: the values of its options where a run does not give them."""
+
+    name: str
+    solve: Callable[..., Dynamics]
+    kernels: Callable[..., list]
+    sample_torques: Callable[..., object]
+    description: str
+    orientations: tuple[str, ...] = (EA,)
+    options: tuple[str, ...] = ("side", "contact")
+    kernel_options: tuple[str, ...] = ()
+    sample_options: tuple[str, ...] = ()
+    carries: bool = False
+    checks: bool = False
+    defaults: tuple[tuple[str, object], ...] = ()
+
+
+FORMULATIONS: dict[str, Formulation] = {f.name: f for f in (
+    Formulation("hessian", hessian.hessian, hessian.kernels, hessian.sample_torques,
+                "Lagrange-d'Alembert with the rates from Hessians (seed 000, Sect. 5.1), minimum-norm torques"),
+    Formulation("lagrange", lagrange.lagrange, lagrange.kernels, lagrange.sample_torques,
+                "Lagrange's equations of the first kind with the closure multipliers (seed 000, Sect. 5.2)"),
+    Formulation("liang", liang.liang, liang.kernels, liang.sample_torques,
+                "Lagrange-d'Alembert with the rates by Liang's derivative method (seed 000, Eq. 61)"),
+    Formulation("6rss-core", core6rss.core6rss, core6rss.kernels, core6rss.sample_torques,
+                "the 6RSS core in X_EE with the HKPs projected out (Eq. 53), one compiled kernel per sample"),
+    Formulation("newton-euler", newton_euler.newton_euler, newton_euler.kernels, g1.sample_torques,
+                "Newton-Euler with friction and the optimal distribution of the redundant torques (seed 001, Sect. 4)",
+                orientations=(EA, EP), options=("side", "contact", "goal", "friction", "strict"),
+                kernel_options=("goal",), sample_options=("goal", "friction"), carries=True, checks=True,
+                defaults=(("goal", "min-torque"), ("friction", True))),
+)}
+METHODS = tuple(FORMULATIONS)
+# The formulation a run uses where it names none, per orientation parametrisation.
+DEFAULT_METHOD = {EA: "hessian", EP: "newton-euler"}
+
+
+def formulation(method: str) -> Formulation:
+    """The row of ``method``; ValueError names the formulations there are."""
+    if method not in FORMULATIONS:
+        raise ValueError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    return FORMULATIONS[method]
+
+
+def inverse_dynamics(model: Model, kin: Kinematics, method: str = "hessian", *, carry: dict | None = None,
+                     check: Callable[[], None] | None = None, **options) -> Dynamics:
+    """Run the formulation ``method`` on the kinematics ``kin`` of ``model`` with its keyword ``options`` (a
+    misspelt one is a TypeError). ``carry``: the previous chunk's ``Dynamics.carry`` (passed on where the formulation
+    carries state); ``check()``: raises to stop the loops that may swallow a signal (where the formulation has such)."""
+    f = formulation(method)
+    extra = {**({"carry": carry} if f.carries else {}), **({"check": check} if f.checks else {})}
+    return f.solve(model, kin, **options, **extra)
+
+
+def formulation_kernels(mechanism: str, orientation: str, method: str, **options) -> list:
+    """The compiled kernels (:class:`~chewbot.compiled.kernels.KernelSpec`) that ``method`` uses on a mechanism in
+    ``orientation``; ``options``: those of its :attr:`Formulation.kernel_options` that are given."""
+    f = formulation(method)
+    return f.kernels(mechanism, orientation, **{k: v for k, v in options.items() if k in f.kernel_options and v is not None})
