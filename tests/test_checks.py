@@ -29,7 +29,7 @@ from chewbot.kinematics.ik import transmission
 from chewbot.model import Limits
 from chewbot.run.pipeline import compute
 from chewbot.run.options import RunOptions
-from chewbot.report.summary import crank_tips
+from chewbot.model.chains import crank_tips
 from chewbot.rotation import matrix_from_euler_angles
 
 from conftest import default_kinematics, model

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from chewbot.kinematics.ik import continuous
-from chewbot.run.pipeline import compute, run, write
+from chewbot.outputs.writer import write, write_run as run
+from chewbot.run.pipeline import compute
 from chewbot.run.options import RunOptions
 from chewbot.report.summary import column_stats, near_singular
 from chewbot.report.view import ViewBuilder

@@ -230,7 +230,7 @@ def _cli(*args):
 
 
 def test_run_with_the_unilateral_contact_records_it_and_names_the_fallback(task_csv, tmp_path):
-    from chewbot.table import read_results
+    from chewbot.outputs.record import read_results
 
     out = tmp_path / "pressed"
     result = _cli("run", "--task", str(task_csv), "--contact", "unilateral", "--set", "contact.preload_N=1", "--out", str(out), "-q")

@@ -32,7 +32,8 @@ from chewbot.files import (
     remove_stale,
 )
 from chewbot.model.params import builtin_model_path
-from chewbot.table import Table, read_results
+from chewbot.table import Table
+from chewbot.outputs.record import read_results
 from chewbot.task.csvio import read_task_csv
 
 runner = CliRunner()
@@ -334,7 +335,7 @@ def test_check_model_prints_units_and_warns_near_a_singular_home_pose(monkeypatc
 def test_the_report_names_the_dynamics_in_effect_and_every_figure_has_a_title(finished_run, tmp_path):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from chewbot.report.figures import _save, subplots
+    from chewbot.report.plotting import save, subplots
 
     page = (finished_run / "report.html").read_text()
     assert "None" not in re.sub(r"<script.*?</script>", "", page, flags=re.S)
@@ -342,7 +343,7 @@ def test_the_report_names_the_dynamics_in_effect_and_every_figure_has_a_title(fi
     assert "Validity checks" in page
     fig, ax = subplots()
     with pytest.raises(ValueError, match="without a title"):
-        _save(fig, tmp_path / "untitled.png")
+        save(fig, tmp_path / "untitled.png")
     assert isinstance(fig.canvas, FigureCanvasAgg)  # drawn without a display
 
 

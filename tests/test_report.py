@@ -18,12 +18,14 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.files import OutputExistsError
-from chewbot.run.pipeline import compute, write
+from chewbot.outputs.writer import write
+from chewbot.run.pipeline import compute
 from chewbot.run.options import RunOptions
 from chewbot.report import html as report_html
 from chewbot.report import view as report_view
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
-from chewbot.table import Table, kinematics_table
+from chewbot.table import Table
+from chewbot.run.columns import kinematics_table
 from conftest import default_kinematics, model
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"

@@ -10,7 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from chewbot.cli import app
-from chewbot.run.pipeline import compute, write
+from chewbot.outputs.writer import write
+from chewbot.run.pipeline import compute
 from chewbot.run.options import RunOptions
 from chewbot.table import Table
 

@@ -1,51 +1,21 @@
-"""What a run produces: the results table (named columns with units, written so that every number reads back
-exactly), the run's options and result in memory, and reading a results folder back.
+"""Tables of named columns with units, samples first (:class:`Table`), written to CSV so that every number reads
+back exactly (:class:`CsvWriter`, one chunk of rows after another) and read back in chunks (:func:`read_csv_chunks`).
 
-This module sits below both the pipeline that computes a run and the report that shows it.
+The header holds each column's unit, ``name [unit]`` (:mod:`chewbot.units`); results, tasks and the tables beside
+them are written this way.
 """
 
 from __future__ import annotations
 
 import csv
-import hashlib
 import itertools
-import json
-import platform
-import re
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from chewbot.errors import ChewbotError
-
-if TYPE_CHECKING:
-    from chewbot.analysis.checks import CheckResult
-    from chewbot.kinematics.motion import Kinematics
-    from chewbot.model import Model
-    from chewbot.report.view import RunView
-    from chewbot.kinematics.task import Task
-
-# Version of the results folder's format, the value of run.json's "chewbot_run" (CHANGELOG.md): 2 puts each
-# column's unit in the header of results.csv (`tau1 [N*m]`) and adds the transmission angles, kappa_J and the
-# validity checks. Version 1 (names alone, units in run.json) is still read.
-RESULTS_FORMAT = 2
-READABLE_FORMATS = (1, 2)
-# A header cell: NAME or NAME [unit].
-HEADER_CELL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
-
-POSE_NAMES = ("X", "Y", "Z", "alpha", "beta", "gamma")
-POSE_UNITS = ("m", "m", "m", "rad", "rad", "rad")
-
-
-_LEVEL = ("", "rate of the ", "second rate of the ")
-
-
-def _rate_unit(unit: str, order: int) -> str:
-    return unit if order == 0 else f"{unit}/s" if order == 1 else f"{unit}/s^2"
-
+from chewbot.units import HEADER_CELL, column_header
 
 @dataclass
 class Table:
@@ -131,7 +101,7 @@ class CsvWriter:
         names = list(table.columns)
         if self._names is None:
             self._names = names
-            self._file.write(",".join(f"{n} [{table.units[n]}]" if table.units[n] else n for n in names) + "\n")
+            self._file.write(",".join(column_header(n, table.units[n]) for n in names) + "\n")
         elif names != self._names:
             raise ValueError(f"{self.path}: a chunk with columns {names} after {self._names}")
         if not table.n:
@@ -207,109 +177,3 @@ def _numbers(path: Path, block: list[tuple[int, str]], width: int) -> np.ndarray
             except ValueError:
                 raise ChewbotError(f"{path}: line {line}: {cell.strip()!r} is not a number") from None
     raise ChewbotError(f"{path}: the rows from line {block[0][0]} cannot be read")
-
-
-def kinematics_table(kin: Kinematics) -> Table:
-    """The kinematic columns of ``results.csv`` (names fixed: later stages and scripts rely on them)."""
-    table = Table()
-    table.add("t", kin.t, "s", "time")
-    for order, (arr, prefix) in enumerate(((kin.X, ""), (kin.dX, "d"), (kin.ddX, "dd"))):
-        for j, name in enumerate(POSE_NAMES):
-            table.add(prefix + name, arr[:, j], _rate_unit(POSE_UNITS[j], order),
-                      _LEVEL[order] + "pose of the mandible: O_M in {S}, XYZ Euler angles")
-    for order, (arr, prefix) in enumerate(((kin.theta, ""), (kin.dtheta, "d"), (kin.ddtheta, "dd"))):
-        table.add_block([f"{prefix}theta{i + 1}" for i in range(6)], arr, _rate_unit("rad", order), _LEVEL[order] + "actuator angle")
-    if kin.orientation == "euler-parameters":
-        for order, (arr, prefix) in enumerate(((kin.e, ""), (kin.de, "d"), (kin.dde, "dd"))):
-            table.add_block([f"{prefix}e{i}" for i in range(4)], arr, "1" if order == 0 else _rate_unit("1", order),
-                            _LEVEL[order] + "Euler parameters of the mandible (e0 scalar)")
-    table.add_block(["Fx", "Fy", "Fz"], kin.force, "N", "bite force on the mandible at the molar, in {S}")
-    return table
-
-
-@dataclass
-class RunRecord:
-    """A run as its folder holds it, without its rows: ``record`` (run.json's content), the model, the validity
-    checks, ``view`` (the decimated columns and their statistics, :class:`chewbot.report.view.RunView`) and the
-    files written. What ``chewbot run`` returns for a task written chunk by chunk."""
-
-    record: dict
-    model: Model
-    checks: list[CheckResult]
-    view: RunView
-    files: list[Path] = field(default_factory=list)
-
-
-def versions(*extra: str) -> dict[str, str]:
-    """The versions of Python, chewbot and the libraries its results depend on, and of the packages ``extra``."""
-    out = {"python": platform.python_version()}
-    for pkg in ("chewbot", "numpy", "scipy", "casadi", "pydantic", "matplotlib", "plotly", *extra):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
-
-
-def model_record(model: Model) -> dict:
-    """A model's identity in run.json: name, mechanism, file and its hash, assumed keys, the parameters' hash."""
-    from chewbot.model.vector import vector_digest
-
-    return {"name": model.name, "mechanism": model.mechanism, "file": model.source, "sha256": model.sha256,
-            "assumed": list(model.assumed), "parameters_sha256": vector_digest(model)}
-
-
-def task_record(task: Task) -> dict:
-    """A task's identity in run.json: name, source (and its hash), samples, side, what the generator recorded."""
-    source = Path(task.source)
-    return {"name": task.name, "source": task.source,
-            **({"sha256": hashlib.sha256(source.read_bytes()).hexdigest()} if source.is_file() else {}),
-            "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})}
-
-
-def environment_record(*extra: str) -> dict:
-    """The versions of chewbot and its libraries (and of the packages ``extra``), and the platform."""
-    return {"versions": versions(*extra), "platform": platform.platform()}
-
-
-def columns_record(columns: Table) -> dict:
-    """Each column's unit and description (``columns``: any chunk of the results table)."""
-    return {name: {"unit": columns.units[name], **({"description": d} if (d := columns.descriptions.get(name)) else {})}
-            for name in columns.columns}
-
-
-def run_record(options, model: Model, task: Task, columns: Table, checks: list[CheckResult], info: dict) -> dict:
-    """The run record (run.json): format, options, model and task identity, versions, platform, the unit and
-    description of every column of ``columns`` (any chunk of the results table), the validity checks, ``info``
-    (timings, the formulation's info, the coupling means)."""
-    return {
-        "chewbot_run": RESULTS_FORMAT,
-        "options": vars(options),
-        "model": model_record(model),
-        "overrides": dict(options.overrides),
-        "task": task_record(task),
-        **environment_record(),
-        "columns": columns_record(columns),
-        "checks": [c.as_dict() for c in checks],
-        **info,
-    }
-
-
-def read_results(folder: Path) -> tuple[dict, Table]:
-    """A results folder read back: run.json (as a dict) and results.csv as a :class:`Table` with its units.
-
-    Reads the formats listed in :data:`READABLE_FORMATS`; anything else is a :class:`ChewbotError` naming the file.
-    """
-    folder = Path(folder)
-    path = folder / "run.json"
-    try:
-        run = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ChewbotError(f"{folder}: not a results folder (no run.json)") from None
-    except (OSError, ValueError) as exc:
-        raise ChewbotError(f"{path}: cannot read it ({exc})") from None
-    version = run.get("chewbot_run") if isinstance(run, dict) else None
-    if version not in READABLE_FORMATS:
-        raise ChewbotError(f"{path}: results format {version!r}; this chewbot reads {', '.join(map(str, READABLE_FORMATS))}")
-    units = {name: c.get("unit", "") for name, c in run.get("columns", {}).items()}
-    return run, Table.read_csv(folder / "results.csv", units)

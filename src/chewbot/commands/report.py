@@ -31,7 +31,7 @@ def report_command(
 
       chewbot report runs/default --force
     """
-    from chewbot.run.pipeline import redraw
+    from chewbot.outputs.writer import redraw
 
     if no_figures and no_report:
         fail(ChewbotError("--no-figures and --no-report together leave nothing to write"), EXIT_BAD_INPUT)

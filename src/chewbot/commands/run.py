@@ -61,7 +61,7 @@ def run(
     from chewbot.files import RESULTS_FOLDER, check_output
     from chewbot.run.options import resolve
     from chewbot.run.pipeline import input_files
-    from chewbot.run.pipeline import run as run_to_folder
+    from chewbot.outputs.writer import write_run
 
     overrides = set_overrides(set_)
     with resolved():
@@ -70,7 +70,7 @@ def run(
     with errors_reported():
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:
-            done = run_to_folder(options, out, force=force, progress=step, figures=not no_figures, report=not no_report,
+            done = write_run(options, out, force=force, progress=step, figures=not no_figures, report=not no_report,
                                  check=check_interrupted)
     if not quiet:
         _print_run_summary(done, out)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.errors import TaskError
-from chewbot.task.csvio import FORCES, _read_signals
+from chewbot.task.csvio import FORCES, read_signals
 
 ANGLES = tuple(f"theta{i}" for i in range(1, 7))
 TORQUES = tuple(f"tau{i}" for i in range(1, 7))
@@ -63,7 +63,7 @@ def read_log(path: str | Path) -> RobotLog:
     """Read a robot log (see the module docstring)."""
     path = Path(path)
     what = "a robot log (t, theta1..6, tau1..6)"
-    names, _, lines, col = _read_signals(path, COLUMNS, ("t", *ANGLES, *TORQUES), what)
+    names, _, lines, col = read_signals(path, COLUMNS, ("t", *ANGLES, *TORQUES), what)
 
     def block(prefix: str):
         given = [prefix + c in col for c in ANGLES]

@@ -4,7 +4,8 @@ With d = O_M + R M_i - G_i and u, v the first two columns of R_C0,i, the closure
 of chain i reads A cos(theta) + B sin(theta) = C with A = 2 L_c u.d, B = 2 L_c v.d, C = L_c^2 + abs(d)^2 - L_r^2
 (docs/conventions.md). Its two solutions are theta = atan2(B, A) +/- acos(C / r), r = sqrt(A^2 + B^2); the working
 branch is the one through theta = 0 at the home pose, a property of the model's geometry: its sign per chain is an
-entry of the parameter vector (:mod:`chewbot.model.vector`), and :mod:`chewbot.kinematics.ik` solves it.
+entry of the parameter vector (:mod:`chewbot.model.vector`), and :mod:`chewbot.kinematics.ik` solves it. Given the
+crank angles, :func:`crank_tips` places the crank tips S_i.
 """
 
 from __future__ import annotations
@@ -37,3 +38,10 @@ def working_branches(model) -> np.ndarray:
 
 def _wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def crank_tips(model, theta: np.ndarray) -> np.ndarray:
+    """S_i = G_i + R_C0,i Rz(theta_i) [L_c,i, 0, 0] in {S}, (N, 6, 3) m, from theta (N, 6) rad."""
+    u, v = model.R_C0[:, :, 0], model.R_C0[:, :, 1]
+    arm = np.cos(theta)[..., None] * u + np.sin(theta)[..., None] * v
+    return model.G + model.crank_length[:, None] * arm

@@ -217,7 +217,8 @@ def read_parameter_file(path: Path) -> dict:
     return raw
 
 
-def _format_validation_error(source: str, exc: ValidationError) -> str:
+def format_validation_error(source: str, exc: ValidationError) -> str:
+    """pydantic's errors as chewbot words them: one line per problem, ``SOURCE: key 'a.b[2]': reason``."""
     lines = []
     for err in exc.errors():
         key = ""
@@ -259,7 +260,7 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
     try:
         f = ParameterFile.model_validate(raw)
     except ValidationError as exc:
-        raise ParameterError(_format_validation_error(label, exc)) from None
+        raise ParameterError(format_validation_error(label, exc)) from None
 
     def fail(key: str, reason: str) -> None:
         raise ParameterError(f"{label}: key '{key}': {reason}")

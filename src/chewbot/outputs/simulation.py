@@ -6,11 +6,11 @@ run.json, table and report.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 
 from chewbot.files import Marker, atomic_folder, to_json
+from chewbot.outputs.writer import RECORD_FILE, RESULTS_FILE, write_table
 from chewbot.simulation.run import SimulateResult, comparison_table, input_files
 
 SIMULATION_FORMAT = 1
@@ -19,7 +19,7 @@ SIMULATION_FOLDER = Marker("simulation folder", "run.json", "chewbot_simulation"
 
 def simulation_json(result: SimulateResult) -> dict:
     """run.json of a simulation: format, options, both models, task, versions, columns, checks, tracking, info."""
-    from chewbot.table import columns_record, environment_record, model_record, task_record
+    from chewbot.outputs.record import columns_record, environment_record, model_record, task_record
 
     return {
         "chewbot_simulation": SIMULATION_FORMAT,
@@ -34,35 +34,34 @@ def simulation_json(result: SimulateResult) -> dict:
     }
 
 
-def write_into(result: SimulateResult, folder: Path, progress=None) -> None:
-    """Write the files of a simulation into an existing (temporary) folder."""
+def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path]:
+    """Write the files of a simulation into an existing (temporary) folder: results.csv and run.json by the writer
+    of every results folder (:class:`chewbot.outputs.writer.ResultsWriter`), then the figures and report.html drawn
+    from what it wrote; the files written."""
     from chewbot.report import dynamics_figures, figures, simulation_figures
     from chewbot.report.simulation_html import controller_label, write_simulation_report
 
     step = progress or (lambda msg, stage=None: None)
-    step("writing results.csv")
-    result.table.to_csv(folder / "results.csv")
-    step("writing run.json", stage="writing")
-    text = to_json(simulation_json(result))
-    (folder / "run.json").write_text(text)
+    record, view = write_table(folder, result.table, simulation_json(result), progress=step)
+    series = view.series
     step("drawing figures")
-    result.figures = [
-        simulation_figures.tracking_error(result.table, folder / "tracking_error.png", controller_label(result)),
-        dynamics_figures.torques(result.table, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
-        simulation_figures.saturation(result.table, folder / "saturation.png", result.plant.limits.torque),
-        figures.task_space(result.table, folder / "task_space.png"),
-        figures.joint_space(result.table, folder / "joint_space.png"),
+    drawn = [
+        simulation_figures.tracking_error(series, folder / "tracking_error.png", controller_label(result)),
+        dynamics_figures.torques(series, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
+        simulation_figures.saturation(series, folder / "saturation.png", result.plant.limits.torque),
+        figures.task_space(series, folder / "task_space.png"),
+        figures.joint_space(series, folder / "joint_space.png"),
     ]
     step("writing report.html")
-    write_simulation_report(result, json.loads(text), folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
+    report = write_simulation_report(result, record, view, folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
+    return [folder / RESULTS_FILE, folder / RECORD_FILE, *drawn, report]
 
 
 def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
-    """Write the results folder ``out`` atomically (see :func:`chewbot.run.pipeline.write`)."""
+    """Write the results folder ``out`` atomically (see :func:`chewbot.outputs.writer.write`)."""
     out = Path(out)
     with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(result.options)) as tmp:
         write_into(result, tmp, progress)
-    result.figures = [out / p.name for p in result.figures]
     return out
 
 

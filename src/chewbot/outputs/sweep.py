@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.table import environment_record
+from chewbot.outputs.record import environment_record
 from chewbot.sweep.quantities import OUTPUTS
 from chewbot.sweep.evaluate import evaluate_chunk, output_descriptions, output_units
 from chewbot.sweep.record import CONVERGENCE_FILE, INDICES_FILE, OPTIMUM_FILE, REPORT_FILE, SAMPLES_FILE, SweepFolder

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.errors import RecordingError
-from chewbot.task.csvio import _HEADER, UNITS, _unit_factor
+from chewbot.units import HEADER_CELL, UNITS, unit_factor
 
 FORCES = ("Fx", "Fy", "Fz")
 AXES = ("x", "y", "z")
@@ -97,7 +97,7 @@ def read_recording(path: str | Path, units: str) -> Recording:
 def length_factor(unit: str, where: str) -> float:
     """Metres per ``unit`` (a length unit of task files); RecordingError naming ``where`` otherwise."""
     try:
-        return _unit_factor(unit, "length", 0)
+        return unit_factor(unit, "length", 0)
     except ValueError as exc:
         raise RecordingError(f"{where}: {exc}") from None
 
@@ -116,7 +116,7 @@ def read_table(path: Path, kind_of, what: str):
     (header_line, header), body = rows[0], rows[1:]
     names, factors = [], []
     for j, cell in enumerate(header):
-        m = _HEADER.match(cell)
+        m = HEADER_CELL.match(cell)
         known = kind_of(m.group(1)) if m else None
         if known is None:
             raise RecordingError(f"{path}: line {header_line}, column {j + 1}: {cell.strip()!r} is not a column of a {what}")
@@ -127,7 +127,7 @@ def read_table(path: Path, kind_of, what: str):
             factors.append(default)
         else:
             try:
-                factors.append(_unit_factor(m.group(2), kind, 0))
+                factors.append(unit_factor(m.group(2), kind, 0))
             except ValueError as exc:
                 raise RecordingError(f"{path}: line {header_line}, column {cell.strip()!r}: {exc}") from None
         names.append(m.group(1))

@@ -31,7 +31,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from chewbot.errors import RecordingError
-from chewbot.model.params import ROTATION_TOLERANCE, _format_validation_error
+from chewbot.model.params import ROTATION_TOLERANCE, format_validation_error
 from chewbot.recordings.formats import known_length_units, length_factor
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -112,7 +112,7 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     try:
         f = RegistrationFile.model_validate(raw)
     except ValidationError as exc:
-        raise RecordingError(_format_validation_error(source, exc)) from None
+        raise RecordingError(format_validation_error(source, exc)) from None
 
     def fail(key: str, reason: str):
         raise RecordingError(f"{source}: key '{key}': {reason}")

@@ -33,18 +33,10 @@ import numpy as np
 
 from chewbot.dynamics.indices import INDEX_UNITS
 from chewbot.model import Model
-from chewbot.report.summary import (
-    INDEX_NAMES,
-    NEAR_SINGULAR_DEG,
-    contact_note,
-    infeasible_samples,
-    normal_force_stats,
-    numbered_columns,
-    performance_indices,
-    solver_notes,
-)
+from chewbot.report.summary import INDEX_NAMES, NEAR_SINGULAR_DEG, contact_note, infeasible_samples, normal_force_stats, numbered_columns, performance_indices, solver_notes
 from chewbot.report.view import FRAME_STEP_S, MAX_FRAMES, RunView
-from chewbot.table import POSE_NAMES, Table
+from chewbot.table import Table
+from chewbot.run.columns import POSE_NAMES
 from chewbot.rotation import matrix_from_euler_angles
 
 FORCE_SCALE_MM_PER_N = 0.25  # bite-force arrow: 80 N is drawn 20 mm long
@@ -63,9 +55,9 @@ def write_report(record: dict, model: Model, view: RunView, path: Path, files: l
     o = record["options"]
     body = [
         _robot_section(model, view, o["side"], figures),
-        _checks_section(record),
+        checks_section(record),
         _summary_section(record, model, view),
-        _plots_section(view, figures),
+        plots_section(view, figures),
         _run_section(record, model, view, files or []),
     ]
     page = render_page(
@@ -124,7 +116,7 @@ def _json_value(value):
     raise TypeError(f"{type(value).__name__} is not JSON")
 
 
-def _f4(values) -> np.ndarray:
+def float32(values) -> np.ndarray:
     """A series as 32-bit floats: plenty for a plot, half the bytes."""
     return np.asarray(values, dtype=np.float32)
 
@@ -143,7 +135,7 @@ def robot_positions(model: Model, rows: Table) -> dict[str, np.ndarray]:
     """Positions in {S} (m) at the samples of ``rows`` (columns X..gamma, theta1..6): ``S`` (n, 6, 3) crank tips
     from theta, ``body`` (n, 11, 3) the mandible points of :func:`mandible_body_points` from the pose (O_M and XYZ
     Euler angles)."""
-    from chewbot.report.summary import crank_tips
+    from chewbot.model.chains import crank_tips
 
     X = np.column_stack([rows[name] for name in POSE_NAMES])
     theta = np.column_stack([rows[name] for name in THETA_NAMES])
@@ -312,7 +304,7 @@ def _series(t: np.ndarray, table: Table, names, panel: int = 1, labels=None, gro
         factor, label = display_unit(table.units[name])
         shown = (labels or names)[j]
         legend = {"legendgroup": groups[j], "name": groups[j], "showlegend": first_row} if groups else {"name": shown}
-        traces.append({"type": "scatter", "x": t, "y": _f4(table[name] * factor), "mode": "lines", **legend,
+        traces.append({"type": "scatter", "x": t, "y": float32(table[name] * factor), "mode": "lines", **legend,
                        "line": {"width": 1.6, "color": COLORS[(color0 + j) % len(COLORS)]},
                        "hovertemplate": f"{shown} = %{{y:.4g}} {label}<extra></extra>",
                        **({} if panel == 1 else {"xaxis": f"x{panel}", "yaxis": f"y{panel}"})})
@@ -390,7 +382,7 @@ def group_figure(table: Table, names: list[str]) -> dict:
 
 def transmission_figure(table: Table) -> dict:
     """Transmission angle of each chain (deg, from the columns mu1..mu6) with the near-singular threshold."""
-    data = [{"type": "scatter", "x": table["t"], "y": _f4(np.degrees(table[f"mu{k + 1}"])), "mode": "lines", "name": f"chain {k + 1}",
+    data = [{"type": "scatter", "x": table["t"], "y": float32(np.degrees(table[f"mu{k + 1}"])), "mode": "lines", "name": f"chain {k + 1}",
              "line": {"width": 1.6, "color": COLORS[k]}, "hovertemplate": f"chain {k + 1}: %{{y:.2f}} deg<extra></extra>"} for k in range(6)]
     layout = {"xaxis": {"title": {"text": "time t [s]"}}, "yaxis": {"title": {"text": "transmission angle [deg]"}, "range": [0, 90]},
               "shapes": [{"type": "line", "xref": "x domain", "x0": 0, "x1": 1, "yref": "y", "y0": NEAR_SINGULAR_DEG, "y1": NEAR_SINGULAR_DEG,
@@ -417,13 +409,15 @@ def time_figures(table: Table) -> list[tuple[str, dict]]:
 # --- HTML sections --------------------------------------------------------------------------------------
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
+def html_table(header: list[str], rows: list[list[str]]) -> str:
+    """An HTML table of ``header`` and ``rows`` (cells are HTML already: escape text with :func:`escape`)."""
     head = "".join(f"<th>{h}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def _e(x) -> str:
+def escape(x) -> str:
+    """``x`` as text safe in HTML."""
     return html.escape(str(x))
 
 
@@ -431,18 +425,18 @@ def _run_section(record: dict, m: Model, view: RunView, files: list[str]) -> str
     task, o = record["task"], record["options"]
     t = view.stats["t"]
     rows = [
-        ["model", f"{_e(m.name)} ({_e(m.mechanism)}, {m.dof} DOF): {_e(m.description)}"],
-        ["parameter file", f"<code>{_e(m.source)}</code> (sha256 {_e(m.sha256[:12])}…)"],
-        ["task", f"{_e(task['name'])} from <code>{_e(task['source'])}</code>: {view.n} samples, "
-                 f"{t.max - t.min:.3f} s, {(view.n - 1) / (t.max - t.min):.4g} Hz" if view.n > 1 else _e(task["name"])],
-        ["options", f"bite side {_e(o['side'])}, orientation {_e(o['orientation'])}, {_e(dynamics_label(record, m))}, "
-                    f"contact model {_e(o.get('contact', 'bilateral'))}"],
-        ["timings", ", ".join(f"{_e(k)} {v:.3g} s" for k, v in record.get("timings", {}).items()) or "-"],
-        ["assumed values", ", ".join(f"<code>{_e(k)}</code>" for k in m.assumed) + " (not in the papers; <code>chewbot check-model</code> lists their values)"],
+        ["model", f"{escape(m.name)} ({escape(m.mechanism)}, {m.dof} DOF): {escape(m.description)}"],
+        ["parameter file", f"<code>{escape(m.source)}</code> (sha256 {escape(m.sha256[:12])}…)"],
+        ["task", f"{escape(task['name'])} from <code>{escape(task['source'])}</code>: {view.n} samples, "
+                 f"{t.max - t.min:.3f} s, {(view.n - 1) / (t.max - t.min):.4g} Hz" if view.n > 1 else escape(task["name"])],
+        ["options", f"bite side {escape(o['side'])}, orientation {escape(o['orientation'])}, {escape(dynamics_label(record, m))}, "
+                    f"contact model {escape(o.get('contact', 'bilateral'))}"],
+        ["timings", ", ".join(f"{escape(k)} {v:.3g} s" for k, v in record.get("timings", {}).items()) or "-"],
+        ["assumed values", ", ".join(f"<code>{escape(k)}</code>" for k in m.assumed) + " (not in the papers; <code>chewbot check-model</code> lists their values)"],
     ]
     if files:
-        rows.append(["files", ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)])
-    return f'<section id="run"><h2>Run</h2>{_table(["", ""], [[r[0], r[1]] for r in rows]).replace("<td>", "<td class=text>")}</section>'
+        rows.append(["files", ", ".join(f'<a href="{escape(f)}">{escape(f)}</a>' for f in files)])
+    return f'<section id="run"><h2>Run</h2>{html_table(["", ""], [[r[0], r[1]] for r in rows]).replace("<td>", "<td class=text>")}</section>'
 
 
 def dynamics_label(record: dict, model: Model) -> str:
@@ -458,7 +452,7 @@ def dynamics_label(record: dict, model: Model) -> str:
     return f"inverse dynamics: newton-euler (goal {goal}, friction {o.get('friction') or 'on'})"
 
 
-def _checks_section(record: dict) -> str:
+def checks_section(record: dict) -> str:
     """The validity checks of the run (chewbot.analysis.checks, as run.json has them), failed ones marked."""
     checks = record.get("checks", [])
     if not checks:
@@ -470,14 +464,14 @@ def _checks_section(record: dict) -> str:
             failing.append(c["name"])
         verdict = ("not evaluated" if c["samples"] is None else "passed" if c["passed"]
                    else f'<span class="warn">{"FAILED" if fails_run else "warning"}</span>')
-        worst = "" if c["worst"] is None else f"{_fmt(c['worst']['value'])} {_e(c['worst']['unit'])}"
+        worst = "" if c["worst"] is None else f"{number(c['worst']['value'])} {escape(c['worst']['unit'])}"
         first = "" if c["first_sample"] is None else f"{c['first_sample']['t']:.3f}"
-        rows.append([_e(c["name"]), verdict, _e(c["severity"]), "" if c["samples"] is None else str(c["samples"]), first, worst, _e(c["message"])])
-    verdict = (f'<p class="warn">Failed: {_e(", ".join(failing))} (the run exits with code 4).</p>' if failing
+        rows.append([escape(c["name"]), verdict, escape(c["severity"]), "" if c["samples"] is None else str(c["samples"]), first, worst, escape(c["message"])])
+    verdict = (f'<p class="warn">Failed: {escape(", ".join(failing))} (the run exits with code 4).</p>' if failing
                else '<p class="ok">No check that counts as a failure failed.</p>')
     return ('<section id="checks"><h2>Validity checks</h2>' + verdict
-            + _table(["check", "verdict", "counts as", "samples", "first at t [s]", "worst", "message"], rows).replace("<td>", "<td class=text>")
-            + f'<p class="note">Contact model: {_e(record["options"].get("contact", "bilateral"))}. Every sample is checked; docs/cli.md '
+            + html_table(["check", "verdict", "counts as", "samples", "first at t [s]", "worst", "message"], rows).replace("<td>", "<td class=text>")
+            + f'<p class="note">Contact model: {escape(record["options"].get("contact", "bilateral"))}. Every sample is checked; docs/cli.md '
             "lists the checks and their bounds. A failure makes the run exit with code 4 (unless --allow-violations); a warning is "
             "reported only.</p></section>")
 
@@ -494,7 +488,8 @@ def _robot_section(model: Model, view: RunView, side: str, figures: dict) -> str
             '<div id="robot" class="plot"></div></section>')
 
 
-def _fmt(x: float, digits: int = 4) -> str:
+def number(x: float, digits: int = 4) -> str:
+    """``x`` with ``digits`` significant digits, as the report prints numbers."""
     # Rounding noise (1e-12 mm) reads as 0; + 0.0 turns -0.0 into 0.0.
     return f"{round(float(x), 9) + 0.0:.{digits}g}"
 
@@ -504,32 +499,32 @@ def _range_rows(view: RunView, names) -> list[list[str]]:
     for name in names:
         s = view.stats[name]
         factor, unit = display_unit(s.unit)
-        rows.append([name, _fmt(s.min * factor), _fmt(s.max * factor), unit])
+        rows.append([name, number(s.min * factor), number(s.max * factor), unit])
     return rows
 
 
 def _summary_section(record: dict, model: Model, view: RunView) -> str:
     stats = view.stats
     parts = ['<section id="summary"><h2>Summary</h2><div class="grid">']
-    parts.append("<div><h3>Range of motion</h3>" + _table(["", "min", "max", "unit"], _range_rows(view, POSE_NAMES + THETA_NAMES)) + "</div>")
+    parts.append("<div><h3>Range of motion</h3>" + html_table(["", "min", "max", "unit"], _range_rows(view, POSE_NAMES + THETA_NAMES)) + "</div>")
 
     rows = []
     for a in "xyz":
         s, start = stats[f"incisor_{a}"], view.first[f"incisor_{a}"]
-        rows.append([f"incisor {a}, from its start", _fmt((s.min - start) * 1e3), _fmt((s.max - start) * 1e3), "mm"])
+        rows.append([f"incisor {a}, from its start", number((s.min - start) * 1e3), number((s.max - start) * 1e3), "mm"])
     force = stats["bite_force"]
-    incisor_block = ("<div><h3>Incisor and bite force</h3>" + _table(["", "min", "max", "unit"], rows)
+    incisor_block = ("<div><h3>Incisor and bite force</h3>" + html_table(["", "min", "max", "unit"], rows)
                      + f'<p class="note">Largest bite force |F<sub>B</sub>| = {force.max:.4g} N at t = {force.t_max:.3f} s.</p></div>')
 
-    rows = [[f"chain {c}", _fmt(np.degrees(stats[f"mu{c}"].min)), f"{stats[f'mu{c}'].t_min:.3f}"] for c in range(1, 7)]
+    rows = [[f"chain {c}", number(np.degrees(stats[f"mu{c}"].min)), f"{stats[f'mu{c}'].t_min:.3f}"] for c in range(1, 7)]
     intervals = view.near_singular
     if intervals:
-        verdict = f'<p class="warn">Near-singular (transmission angle below {NEAR_SINGULAR_DEG:g} deg):</p>' + _table(
+        verdict = f'<p class="warn">Near-singular (transmission angle below {NEAR_SINGULAR_DEG:g} deg):</p>' + html_table(
             ["chain", "from t [s]", "to t [s]", "samples", "smallest [deg]", "at t [s]"],
-            [[str(i.chain), f"{i.t_first:.3f}", f"{i.t_last:.3f}", str(i.last - i.first + 1), _fmt(i.min_deg), f"{i.t_min:.3f}"] for i in intervals])
+            [[str(i.chain), f"{i.t_first:.3f}", f"{i.t_last:.3f}", str(i.last - i.first + 1), number(i.min_deg), f"{i.t_min:.3f}"] for i in intervals])
     else:
         verdict = f'<p class="ok">No near-singular sample: every transmission angle stays above {NEAR_SINGULAR_DEG:g} deg.</p>'
-    parts.append("<div><h3>Transmission angles</h3>" + _table(["", "smallest [deg]", "at t [s]"], rows) + verdict + "</div>")
+    parts.append("<div><h3>Transmission angles</h3>" + html_table(["", "smallest [deg]", "at t [s]"], rows) + verdict + "</div>")
     parts.append(incisor_block + "</div>")
 
     parts.append(_dynamics_summary(record, model, view))
@@ -545,9 +540,9 @@ def _dynamics_summary(record: dict, model: Model, view: RunView) -> str:
         rows = []
         for s in (stats[name] for name in taus):
             over = abs(s.peak) > model.limits.torque
-            cell = f'<span class="warn">{_fmt(s.peak)}</span>' if over else _fmt(s.peak)
-            rows.append([s.name, cell, f"{s.t_peak:.3f}", _fmt(s.rms)])
-        out.append("<h3>Actuator torques</h3>" + _table(["", "peak [N·m]", "at t [s]", "RMS [N·m]"], rows)
+            cell = f'<span class="warn">{number(s.peak)}</span>' if over else number(s.peak)
+            rows.append([s.name, cell, f"{s.t_peak:.3f}", number(s.rms)])
+        out.append("<h3>Actuator torques</h3>" + html_table(["", "peak [N·m]", "at t [s]", "RMS [N·m]"], rows)
                    + f'<p class="note">Peak: the largest |τ| with its sign; values beyond the actuator limit of '
                    f"{model.limits.torque:g} N·m are marked.</p>")
     else:
@@ -556,32 +551,32 @@ def _dynamics_summary(record: dict, model: Model, view: RunView) -> str:
     preload = model.contact.preload if contact == "unilateral" else 0.0
     forces = normal_force_stats(stats)
     if forces:
-        rows = [[f.name, _fmt(f.low), f"{f.t_low:.3f}", _fmt(f.high), f"{f.t_high:.3f}", _fmt(f.below, 3)] for f in forces]
-        out.append("<h3>HKP normal forces</h3>" + _table(["", "min [N]", "at t [s]", "max [N]", "at t [s]", f"below {preload:g} N [%]"], rows)
+        rows = [[f.name, number(f.low), f"{f.t_low:.3f}", number(f.high), f"{f.t_high:.3f}", number(f.below, 3)] for f in forces]
+        out.append("<h3>HKP normal forces</h3>" + html_table(["", "min [N]", "at t [s]", "max [N]", "at t [s]", f"below {preload:g} N [%]"], rows)
                    + f'<p class="note">N &gt; 0: the plane pushes the condyle, along n = (p<sub>1</sub>, 0, 1)/|n|. '
-                   f"Contact model: {_e(contact_note(contact, preload, info))}.</p>")
+                   f"Contact model: {escape(contact_note(contact, preload, info))}.</p>")
     mcis = numbered_columns(view.plot, "MCI")
     if mcis:
-        rows = [[name, _fmt(stats[name].mean), _fmt(stats[name].min), _fmt(stats[name].max)] for name in mcis]
-        out.append("<h3>Inertia coupling (MCI)</h3>" + _table(["", "mean", "min", "max"], rows))
+        rows = [[name, number(stats[name].mean), number(stats[name].min), number(stats[name].max)] for name in mcis]
+        out.append("<h3>Inertia coupling (MCI)</h3>" + html_table(["", "mean", "min", "max"], rows))
     indices = performance_indices(info)
     if indices:
-        rows = [[k, _e(INDEX_NAMES[k]), "n/a" if math.isnan(v) else _fmt(v), display_unit(INDEX_UNITS[k])[1]]
+        rows = [[k, escape(INDEX_NAMES[k]), "n/a" if math.isnan(v) else number(v), display_unit(INDEX_UNITS[k])[1]]
                 for k, v in indices.items()]
-        out.append("<h3>Performance indices</h3>" + _table(["", "mean norm of", "value", "unit"], rows)
+        out.append("<h3>Performance indices</h3>" + html_table(["", "mean norm of", "value", "unit"], rows)
                    + '<p class="note">Seed 001, Sect. 5.3: the mean over the samples of the Euclidean norm of the stacked vector.</p>')
     bad = infeasible_samples(info, view.rows["t"], view.row_samples)
     if bad:
-        shown = ", ".join(f"{b['sample']} (t = {b['t']:.3f} s{': ' if b['limits'] else ''}{_e(', '.join(b['limits']))})" for b in bad[:20])
+        shown = ", ".join(f"{b['sample']} (t = {b['t']:.3f} s{': ' if b['limits'] else ''}{escape(', '.join(b['limits']))})" for b in bad[:20])
         out.append(f'<h3>Infeasible samples</h3><p class="warn">{len(bad)} sample(s) without an admissible torque distribution: '
                    f"{shown}{' …' if len(bad) > 20 else ''}</p>")
     notes = solver_notes(info)
     if notes:
-        out.append("<h3>Formulation</h3>" + _table(["", ""], [[_e(k), _e(v)] for k, v in notes.items()]).replace("<td>", "<td class=text>"))
+        out.append("<h3>Formulation</h3>" + html_table(["", ""], [[escape(k), escape(v)] for k, v in notes.items()]).replace("<td>", "<td class=text>"))
     return '<div class="grid"><div>' + "</div><div>".join(out) + "</div></div>"
 
 
-def _plots_section(view: RunView, figures: dict) -> str:
+def plots_section(view: RunView, figures: dict) -> str:
     how = ("every sample" if view.plot_bin == 1 else
            f"the smallest and the largest value of every {view.plot_bin} consecutive samples, so that no peak is lost")
     parts = ['<section id="plots"><h2>Plots</h2>',
@@ -589,5 +584,5 @@ def _plots_section(view: RunView, figures: dict) -> str:
              "their units, drag to zoom (double-click to reset), click a legend entry to hide the series.</p>"]
     for j, (title, fig) in enumerate(time_figures(view.plot)):
         figures[f"plot{j}"] = fig
-        parts.append(f'<h3>{_e(title)}</h3><div id="plot{j}" class="plot"></div>')
+        parts.append(f'<h3>{escape(title)}</h3><div id="plot{j}" class="plot"></div>')
     return "\n".join(parts) + "</section>"

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.report.html import RUN_NAV, _checks_section, _e, _f4, _fmt, _plots_section, _table, render_page, robot_figure
+from chewbot.report.html import RUN_NAV, checks_section, escape, float32, number, plots_section, html_table, render_page, robot_figure
 from chewbot.report.view import PLOT_POINTS, RunView, ViewBuilder, every_kth
-from chewbot.table import Table, kinematics_table
+from chewbot.table import Table
+from chewbot.run.columns import kinematics_table
 
 
 def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path, nav=RUN_NAV) -> Path:
@@ -38,13 +39,12 @@ def controller_label(result) -> str:
     return f"{o.controller}{model_based}, {rate}"
 
 
-def write_simulation_report(result, record: dict, path: Path, files: list[str] | None = None) -> Path:
-    """Write ``report.html`` for a computed simulation whose run.json holds ``record`` (as read back); ``files``
-    names the other files of its folder."""
+def write_simulation_report(result, record: dict, view: RunView, path: Path, files: list[str] | None = None) -> Path:
+    """Write ``report.html`` for a computed simulation from what its folder holds: run.json's ``record`` (as read
+    back) and ``view``, the view of its results.csv; ``files`` names the other files of its folder."""
     figures: dict[str, dict] = {}
-    view = _view(result.table)
-    body = [_robots_section(result, view, figures), _checks_section(record), _tracking_section({result.options.controller: result}),
-            _plots_section(view, figures), _run_section(result, files or [])]
+    body = [_robots_section(result, view, figures), checks_section(record), _tracking_section({result.options.controller: result}),
+            plots_section(view, figures), _run_section(result, files or [])]
     return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",
                  f"{controller_label(result)} · {result.table.n} rows · plant friction {result.options.friction}", body, figures, path)
 
@@ -54,7 +54,7 @@ def _robots_section(result, view: RunView, figures: dict) -> str:
     figures["robot"] = robot_figure(result.plant, view, side)
     figures["robot_reference"] = robot_figure(result.plant, _view(kinematics_table(result.reference_kinematics)), side)
     stopped = result.simulation.stopped
-    note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({_e(stopped["reason"])}): the motion ends '
+    note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({escape(stopped["reason"])}): the motion ends '
             "at the last pose inside.</span>" if stopped else "")
     return ('<section id="robot-section"><h2>The simulated robot beside the reference</h2>'
             '<p class="note">{S} coordinates in mm, both on the plant\'s model; left the simulated motion, right the reference '
@@ -70,8 +70,8 @@ def metrics_rows(results: dict) -> list[list[str]]:
     for label, r in results.items():
         m = r.metrics
         stopped = m["stopped"]
-        rows.append([label, _fmt(m["rms_position_mm"]), _fmt(m["peak_position_mm"]), _fmt(m["rms_orientation_deg"]),
-                     _fmt(m["peak_orientation_deg"]), _fmt(m["peak_torque_Nm"]), _fmt(m["saturated_s"]),
+        rows.append([label, number(m["rms_position_mm"]), number(m["peak_position_mm"]), number(m["rms_orientation_deg"]),
+                     number(m["peak_orientation_deg"]), number(m["peak_torque_Nm"]), number(m["saturated_s"]),
                      "" if stopped is None else f"at t = {stopped['t']:.4g} s: {stopped['reason']}"])
     return rows
 
@@ -81,33 +81,33 @@ METRICS_HEADER = ["controller", "RMS position [mm]", "peak position [mm]", "RMS 
 
 
 def _tracking_section(results: dict) -> str:
-    rows = [[_e(c) for c in row] for row in metrics_rows(results)]
+    rows = [[escape(c) for c in row] for row in metrics_rows(results)]
     per = []
     for label, r in results.items():
         for name, v in r.metrics["per_coordinate"].items():
-            per.append([_e(label), _e(name), _fmt(v["rms"]), _fmt(v["peak"]), v["unit"]])
-    return ('<section id="summary"><h2>Tracking</h2>' + _table(METRICS_HEADER, rows)
+            per.append([escape(label), escape(name), number(v["rms"]), number(v["peak"]), v["unit"]])
+    return ('<section id="summary"><h2>Tracking</h2>' + html_table(METRICS_HEADER, rows)
             + '<p class="note">Position: the norm of the translational errors (reference minus simulated), orientation: the norm '
             "of the errors of the Euler angles, over the rows; peak torque: the largest applied abs(τ<sub>i</sub>); saturated: "
             "how long a commanded torque was beyond the limit.</p><h3>Per coordinate</h3>"
-            + _table(["controller", "coordinate", "RMS", "peak", "unit"], per) + "</section>")
+            + html_table(["controller", "coordinate", "RMS", "peak", "unit"], per) + "</section>")
 
 
 def _run_section(result, files: list[str]) -> str:
     o, sim = result.options, result.simulation
     info = result.info["simulation"]
-    rows = [["controller", _e(controller_label(result)) + f" on the model {_e(result.model.name)} (<code>{_e(result.model.source)}</code>)"],
-            ["plant", f"{_e(result.plant.name)} (<code>{_e(result.plant.source)}</code>), friction {_e(o.friction)}"
-             + (f", --plant-set {_e(', '.join(f'{k}={v:g}' for k, v in o.plant_overrides.items()))}" if o.plant_overrides else "")],
+    rows = [["controller", escape(controller_label(result)) + f" on the model {escape(result.model.name)} (<code>{escape(result.model.source)}</code>)"],
+            ["plant", f"{escape(result.plant.name)} (<code>{escape(result.plant.source)}</code>), friction {escape(o.friction)}"
+             + (f", --plant-set {escape(', '.join(f'{k}={v:g}' for k, v in o.plant_overrides.items()))}" if o.plant_overrides else "")],
             ["bite force", "hidden from the controller (--bite-unknown)" if o.bite_unknown else "known to the controller"],
             ["sensor", f"crank encoders with noise of {o.noise_rad:g} rad (seed {o.seed})" if o.noise_rad else "the plant's state"],
-            ["integrator", f"{_e(info['integrator']['method'])}; steps of at most {info['integrator']['max_step_s'] * 1e3:g} ms, "
-                           f"{info['integrator']['split_steps']} split; largest residual {_fmt(info['integrator']['largest_residual_Nm'], 3)} N·m"],
-            ["task", f"{_e(result.task.name)} from <code>{_e(result.task.source)}</code>, {sim.n} rows over {sim.t[-1] - sim.t[0]:.4g} s"],
-            ["timings", ", ".join(f"{_e(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items())]]
+            ["integrator", f"{escape(info['integrator']['method'])}; steps of at most {info['integrator']['max_step_s'] * 1e3:g} ms, "
+                           f"{info['integrator']['split_steps']} split; largest residual {number(info['integrator']['largest_residual_Nm'], 3)} N·m"],
+            ["task", f"{escape(result.task.name)} from <code>{escape(result.task.source)}</code>, {sim.n} rows over {sim.t[-1] - sim.t[0]:.4g} s"],
+            ["timings", ", ".join(f"{escape(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items())]]
     if files:
-        rows.append(["files", ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)])
-    return f'<section id="run"><h2>Run</h2>{_table(["", ""], rows).replace("<td>", "<td class=text>")}</section>'
+        rows.append(["files", ", ".join(f'<a href="{escape(f)}">{escape(f)}</a>' for f in files)])
+    return f'<section id="run"><h2>Run</h2>{html_table(["", ""], rows).replace("<td>", "<td class=text>")}</section>'
 
 
 def write_comparison_report(results: dict, path: Path, files: list[str] | None = None) -> Path:
@@ -115,13 +115,13 @@ def write_comparison_report(results: dict, path: Path, files: list[str] | None =
     plotted together; each controller's own report is in its folder."""
     figures = {"errors": _comparison_figure(results)}
     first = next(iter(results.values()))
-    links = ", ".join(f'<a href="{_e(c)}/report.html">{_e(c)}</a>' for c in results)
+    links = ", ".join(f'<a href="{escape(c)}/report.html">{escape(c)}</a>' for c in results)
     body = [_tracking_section(results),
             '<section id="plots"><h2>Tracking error of the controllers</h2><p class="note">The norm of the translational errors '
             f"(mm) against time, each controller until it was stopped. Each controller's report: {links}.</p>"
             '<div id="errors" class="plot" style="height: 420px"></div></section>']
     if files:
-        listed = ", ".join(f'<a href="{_e(f)}">{_e(f)}</a>' for f in files)
+        listed = ", ".join(f'<a href="{escape(f)}">{escape(f)}</a>' for f in files)
         body.append(f'<section id="run"><h2>Files</h2><p>{listed}</p></section>')
     return _page(f"chewbot simulation: controllers compared on {first.plant.name}, {first.task.name}",
                  f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path,
@@ -134,7 +134,7 @@ def _comparison_figure(results: dict) -> dict:
         idx = every_kth(r.table.n, PLOT_POINTS)
         names = [n for n in r.table.columns if n.startswith("e_") and r.table.units[n] == "m"]
         err = np.linalg.norm(np.column_stack([r.table[n] for n in names]), axis=1)[idx] * 1e3
-        data.append({"type": "scatter", "x": _f4(r.table["t"][idx]), "y": _f4(err), "mode": "lines", "name": label,
+        data.append({"type": "scatter", "x": float32(r.table["t"][idx]), "y": float32(err), "mode": "lines", "name": label,
                      "hovertemplate": f"{label}: %{{y:.3g}} mm<extra></extra>"})
     return {"data": data, "layout": {"xaxis": {"title": {"text": "time t [s]"}}, "yaxis": {"title": {"text": "position error [mm]"}, "type": "log"},
                                      "margin": {"l": 60, "r": 20, "t": 10, "b": 40}}}

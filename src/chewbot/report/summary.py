@@ -36,13 +36,6 @@ INDEX_NAMES = {
 }
 
 
-def crank_tips(model: Model, theta: np.ndarray) -> np.ndarray:
-    """S_i = G_i + R_C0,i Rz(theta_i) [L_c,i, 0, 0] in {S}, (N, 6, 3) m, from theta (N, 6) rad."""
-    u, v = model.R_C0[:, :, 0], model.R_C0[:, :, 1]
-    arm = np.cos(theta)[..., None] * u + np.sin(theta)[..., None] * v
-    return model.G + model.crank_length[:, None] * arm
-
-
 def home_pose(model: Model) -> dict[str, np.ndarray]:
     """The home (occlusal) pose, {M} = {S}: theta (6,) rad, the sin of each transmission angle (6,), the
     transmission angles mu (6,) in deg and kappa of the chains' Jacobian (chewbot.kinematics.conditioning).

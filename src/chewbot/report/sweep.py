@@ -19,7 +19,7 @@ import numpy as np
 import plotly.graph_objects as go
 import pyarrow.parquet as pq
 
-from chewbot.report.html import _e, _table, figure_layout, render_page
+from chewbot.report.html import escape, html_table, figure_layout, render_page
 from chewbot.sweep.quantities import OUTPUTS
 
 BINS = 40
@@ -64,9 +64,9 @@ def _label(name: str, columns: dict) -> str:
 
 def _summary(result) -> str:
     spec = result.spec
-    rows = [["kind", _e(spec.kind)], ["model", f"<code>{_e(spec.model)}</code>"], ["task", f"<code>{_e(spec.task)}</code>"]]
+    rows = [["kind", escape(spec.kind)], ["model", f"<code>{escape(spec.model)}</code>"], ["task", f"<code>{escape(spec.task)}</code>"]]
     if not spec.over_poses:
-        rows.append(["run", _e(f"side {spec.side or 'left'}, {spec.orientation}, method {spec.method}"
+        rows.append(["run", escape(f"side {spec.side or 'left'}, {spec.orientation}, method {spec.method}"
                                + (f", goal {spec.goal}, friction {spec.friction}" if spec.goal or spec.friction else "")
                                + f", contact {spec.contact}")])
     rows.append(["evaluations", f"{result.evaluations} ({result.failed} failed: NaN outputs, the reason in <code>error</code>)"])
@@ -74,12 +74,12 @@ def _summary(result) -> str:
         rows.append(["evaluated", f"{result.computed} in {result.computed_chunks} chunk(s)"
                      + (f"; {result.reused_chunks} chunk(s) read back from the interrupted sweep" if result.reused_chunks else "")])
     if spec.fixed:
-        rows.append(["set", ", ".join(f"<code>{_e(k)} = {v:g}</code>" for k, v in spec.fixed.items())])
+        rows.append(["set", ", ".join(f"<code>{escape(k)} = {v:g}</code>" for k, v in spec.fixed.items())])
     params = spec.poses or spec.parameters
-    table = _table(["varied", "how", "values"], [[f"<code>{_e(p.key)}</code>", _e(p.kind),
-                                                  _e(", ".join(f"{v:g}" for v in p.args[:8]) + (" ..." if len(p.args) > 8 else ""))]
+    table = html_table(["varied", "how", "values"], [[f"<code>{escape(p.key)}</code>", escape(p.kind),
+                                                  escape(", ".join(f"{v:g}" for v in p.args[:8]) + (" ..." if len(p.args) > 8 else ""))]
                                                  for p in params])
-    return ('<section id="summary"><h2>Summary</h2>' + _table(["", ""], rows).replace("<td>", "<td class=text>") + table
+    return ('<section id="summary"><h2>Summary</h2>' + html_table(["", ""], rows).replace("<td>", "<td class=text>") + table
             + "</section>")
 
 
@@ -116,13 +116,13 @@ def _search(result, figures: dict) -> str:
     fig.update_xaxes(title_text="generation")
     fig.update_yaxes(title_text=f"best {spec.minimize} [{unit}]")
     figures["convergence"] = fig
-    rows = [[f"<code>{_e(k)}</code>", f"{v:.6g}"] for k, v in o["parameters"].items()]
-    rows += [[_e(k), f"{v:.6g} {_e(OUTPUTS[k].unit)}"] for k, v in o["outputs"].items()]
+    rows = [[f"<code>{escape(k)}</code>", f"{v:.6g}"] for k, v in o["parameters"].items()]
+    rows += [[escape(k), f"{v:.6g} {escape(OUTPUTS[k].unit)}"] for k, v in o["outputs"].items()]
     rows += [["sample", str(o["sample"])], ["constraints met", "yes" if o["constraints_met"] else "no"],
-             ["generations, evaluations", f"{o['generations']}, {o['evaluations']}"], ["SciPy", _e(o["message"])]]
-    return ("<h3>Search</h3>" + f'<p class="note">Differential evolution minimising {_e(spec.minimize)}; the best feasible '
+             ["generations, evaluations", f"{o['generations']}, {o['evaluations']}"], ["SciPy", escape(o["message"])]]
+    return ("<h3>Search</h3>" + f'<p class="note">Differential evolution minimising {escape(spec.minimize)}; the best feasible '
             "member of each generation (optimum.csv, convergence.csv).</p>" + '<div id="convergence" class="plot"></div>'
-            + "<h3>Optimum</h3>" + _table(["", ""], rows))
+            + "<h3>Optimum</h3>" + html_table(["", ""], rows))
 
 
 def _numeric(samples: pq.ParquetFile, columns: dict) -> list[str]:
@@ -235,11 +235,11 @@ def _failures(samples: pq.ParquetFile) -> str:
                 first.setdefault(kind, (s, e))
     if not reasons:
         return '<section id="failures"><h2>Failures</h2><p>Every evaluation succeeded.</p></section>'
-    rows = [[str(c), str(first[r][0]), _e(first[r][1])] for r, c in reasons.most_common(20)]
+    rows = [[str(c), str(first[r][0]), escape(first[r][1])] for r, c in reasons.most_common(20)]
     more = f"<p class=note>... and {len(reasons) - 20} other reasons (samples.parquet, column error).</p>" if len(reasons) > 20 else ""
     return ('<section id="failures"><h2>Failures</h2><p class="note">Evaluations with NaN outputs, grouped by the reason '
             "in their <code>error</code> column (its numbers aside): how many, and the first of each.</p>"
-            + _table(["evaluations", "first sample", "its reason"], rows)
+            + html_table(["evaluations", "first sample", "its reason"], rows)
             .replace("<td>", "<td class=text>") + more + "</section>")
 
 
@@ -247,8 +247,8 @@ def _details(result) -> str:
     import json
 
     record = json.loads((result.folder / "run.json").read_text())
-    rows = [["SPEC", f"<code>{_e(result.spec.source)}</code> (a copy: spec.toml)"],
-            ["cluster", _e(", ".join(f"{k} {v}" for k, v in record.get("cluster", {}).items()))],
-            ["time", f"{result.elapsed_s:.1f} s"], ["started", _e(record.get("started", ""))],
-            ["versions", _e(", ".join(f"{k} {v}" for k, v in record.get("versions", {}).items()))]]
-    return '<section id="details"><h2>Details</h2>' + _table(["", ""], rows).replace("<td>", "<td class=text>") + "</section>"
+    rows = [["SPEC", f"<code>{escape(result.spec.source)}</code> (a copy: spec.toml)"],
+            ["cluster", escape(", ".join(f"{k} {v}" for k, v in record.get("cluster", {}).items()))],
+            ["time", f"{result.elapsed_s:.1f} s"], ["started", escape(record.get("started", ""))],
+            ["versions", escape(", ".join(f"{k} {v}" for k, v in record.get("versions", {}).items()))]]
+    return '<section id="details"><h2>Details</h2>' + html_table(["", ""], rows).replace("<td>", "<td class=text>") + "</section>"

@@ -22,13 +22,14 @@ import numpy as np
 from chewbot.compiled.kernels import evaluate, native, prepare_kernels
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import kinematics_kernel
-from chewbot.kinematics.motion import Kinematics, solve_kinematics
+from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model, split_overrides
 from chewbot.run.pipeline import input_files as run_inputs
-from chewbot.run.pipeline import load_task, singularity_columns
-from chewbot.report.summary import crank_tips
-from chewbot.table import POSE_UNITS, Table, kinematics_table
+from chewbot.run.pipeline import Chunk, load_task
+from chewbot.model.chains import crank_tips
+from chewbot.table import Table
+from chewbot.run.columns import POSE_UNITS
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.run.options import OptionError, RunOptions, Switch, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
@@ -111,7 +112,6 @@ class SimulateResult:
     gains: Gains
     checks: list = field(default_factory=list)
     info: dict = field(default_factory=dict)
-    figures: list[Path] = field(default_factory=list)
 
 
 def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float]]:
@@ -161,10 +161,13 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
-    kin = solve_kinematics(plant_model, motion_task(plant_model, task, sim.t, sim.q, sim.dq, sim.ddq, sim.force))
-    ref_kin = solve_kinematics(plant_model, motion_task(plant_model, task, sim.t, sim.q_ref, sim.dq_ref, sim.ddq_ref, sim.force,
-                                                        "reference"))
-    table = simulation_table(plant, sim, kin)
+    # the run's kinematics (no inverse dynamics) of the simulated motion and of the reference, on the plant's model
+    kinematic = RunOptions(model=options.plant or options.model, orientation=ORIENTATION, method=None, contact=options.contact)
+    motion = Chunk(plant_model, motion_task(plant_model, task, sim.t, sim.q, sim.dq, sim.ddq, sim.force), kinematic)
+    ref_kin = Chunk(plant_model, motion_task(plant_model, task, sim.t, sim.q_ref, sim.dq_ref, sim.ddq_ref, sim.force, "reference"),
+                    kinematic).kinematics
+    kin = motion.kinematics
+    table = simulation_table(plant, sim, kin, motion.kinematic_columns)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
     result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
@@ -190,13 +193,13 @@ def coordinate_units(names) -> list[str]:
     return [POSE_UNITS[("X", "Y", "Z", "alpha", "beta", "gamma").index(n)] for n in names]
 
 
-def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics) -> Table:
-    """results.csv of a simulation: the kinematics columns of a run (the plant's motion), the applied and the
-    commanded torques, the reference and the tracking error in the independent coordinates, the plant's normal
-    forces, bearing loads, the residual of its equations of motion and the drift of its constraints."""
+def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_columns: Table) -> Table:
+    """results.csv of a simulation: ``kinematic_columns``, the columns of a run's kinematics of the plant's motion
+    ``kin`` (:attr:`chewbot.run.pipeline.Chunk.kinematic_columns`), then the applied and the commanded torques, the
+    reference and the tracking error in the independent coordinates, the plant's normal forces, bearing loads, the
+    residual of its equations of motion and the drift of its constraints."""
     model = plant.model
-    table = kinematics_table(kin)
-    singularity_columns(table, kin)
+    table = kinematic_columns
     table.add_block([f"tau{i + 1}" for i in range(6)], sim.tau, "N*m", "actuator torques applied to the plant (saturated at limits.torque_Nm)")
     table.add_block([f"tau_cmd{i + 1}" for i in range(6)], sim.tau_cmd, "N*m", "actuator torques the controller commanded")
     names = coordinate_names(model)

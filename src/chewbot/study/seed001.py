@@ -27,7 +27,7 @@ from chewbot.kinematics.options import ORIENTATIONS
 from chewbot.model.params import load_model
 from chewbot.report import newton_euler_figures
 from chewbot.report.plotting import save, subplots
-from chewbot.table import kinematics_table
+from chewbot.run.columns import kinematics_table
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.task.default import default_task
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chewbot.errors import ChewbotError, KinematicsError
+from chewbot.errors import ChewbotError
 from chewbot.sweep.quantities import OUTPUTS
 from chewbot.sweep.spec import COUNTERPARTS, Spec
 
@@ -37,6 +37,7 @@ class Evaluator:
                 raw = read_parameter_file(path)
                 self._raw[name] = (path, raw.pop("__sha256__"), raw)
         self._tasks: dict = {}
+        self.options = spec.run_options()
 
     def model(self, overrides: dict[str, float], name: str | None = None):
         """The model (``name``: the SPEC's by default) with ``overrides``, as ``load_model(name, overrides)`` gives it."""
@@ -107,37 +108,34 @@ class Evaluation:
     def model(self):
         return self.evaluator.model(self.model_overrides)
 
-    def _kinematics(self, model):
-        from chewbot.kinematics.motion import solve_kinematics
-
-        task = self.evaluator.task(model.mechanism, self.task_overrides)
-        try:
-            return solve_kinematics(model, task, self.spec.orientation)
-        except KinematicsError as exc:  # name the task file's line, as chewbot run does
-            if task.lines is None or exc.sample is None:
-                raise
-            raise exc.located(f"{task.source}: line {task.lines[exc.sample]}") from None
-
     @cached_property
+    def run(self):
+        """This parameter set's run (:class:`chewbot.run.pipeline.Chunk`: the whole task as one chunk), each stage
+        computed when an output first asks for it."""
+        return self._run(self.model)
+
+    def _run(self, model):
+        from chewbot.run.pipeline import Chunk
+
+        return Chunk(model, self.evaluator.task(model.mechanism, self.task_overrides), self.evaluator.options)
+
+    @property
     def kinematics(self):
-        return self._kinematics(self.model)
+        return self.run.kinematics
 
-    @cached_property
+    @property
     def dynamics(self):
-        from chewbot.dynamics.registry import inverse_dynamics
-
-        return inverse_dynamics(self.model, self.kinematics, self.spec.method, **self.spec.run_options().formulation_options())
+        return self.run.dynamics
 
     @cached_property
     def mu(self) -> np.ndarray:
         """Transmission angles (N, 6), rad: results.csv's mu1..mu6."""
-        return np.arcsin(np.clip(self.kinematics.transmission, 0.0, 1.0))
+        columns = self.run.kinematic_columns
+        return np.column_stack([columns[f"mu{i}"] for i in range(1, 7)])
 
-    @cached_property
+    @property
     def mci(self) -> np.ndarray:
-        from chewbot.analysis.coupling import joint_space_inertia, mci
-
-        return mci(joint_space_inertia(self.model, self.kinematics))
+        return self.run.coupling.MCI
 
     @cached_property
     def mean_mci(self) -> np.ndarray:
@@ -146,26 +144,15 @@ class Evaluation:
     @cached_property
     def counterpart_mean_mci(self) -> np.ndarray:
         """Mean MCI_i of the counterpart mechanism with the same values, on the same motion."""
-        from chewbot.analysis.coupling import joint_space_inertia, mci
-
         name = self.spec.counterpart or COUNTERPARTS[self.spec.model]
-        model = self.evaluator.model(self.model_overrides, name)
-        return mci(joint_space_inertia(model, self._kinematics(model))).mean(axis=0)
+        return self._run(self.evaluator.model(self.model_overrides, name)).coupling.MCI.mean(axis=0)
 
     @cached_property
     def checks(self) -> list:
         """The validity checks of the run, on the columns its results.csv has."""
         from chewbot.analysis.checks import run_checks
-        from chewbot.table import kinematics_table
 
-        kin, dyn = self.kinematics, self.dynamics
-        table = kinematics_table(kin)
-        table.add_block([f"mu{i + 1}" for i in range(6)], self.mu, "rad")
-        table.add("kappa_J", kin.kappa, "1")
-        table.add_block([f"tau{i + 1}" for i in range(6)], dyn.tau, "N*m")
-        for name, values in dyn.table.columns.items():
-            table.add(name, values, dyn.table.units[name])
-        return run_checks(self.model, table, dyn.info or None, self.spec.contact)
+        return run_checks(self.model, self.run.columns, self.dynamics.info or None, self.spec.contact)
 
     def check(self, name: str):
         """The result of the validity check ``name``."""

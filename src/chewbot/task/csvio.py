@@ -10,7 +10,7 @@ One header row of column names, then one row per sample, comma-separated. Column
 * optional bite force ``Fx, Fy, Fz`` on the mandible in {S} (each one absent is zero).
 
 Values are SI (s, m, rad, N and their rates) unless the name carries a unit in brackets: ``X[mm]``,
-``alpha [deg]``, ``dX[mm/s]``, ``ddbeta[deg/s^2]``, ``t[ms]``, ``Fz[kN]`` (see :data:`UNITS`). Blank lines and
+``alpha [deg]``, ``dX[mm/s]``, ``ddbeta[deg/s^2]``, ``t[ms]``, ``Fz[kN]`` (see :data:`chewbot.units.UNITS`). Blank lines and
 lines starting with ``#`` are skipped. Every error is a :class:`~chewbot.errors.TaskError` naming the file and
 the line (1-based, as an editor shows it) or the column.
 
@@ -23,30 +23,20 @@ from __future__ import annotations
 import csv
 import itertools
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
 from chewbot.errors import TaskError
+from chewbot.units import HEADER_CELL, unit_factor
 from chewbot.task import smoothing
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
-# Units by kind, as factors to SI.
-UNITS = {
-    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6},
-    "angle": {"rad": 1.0, "mrad": 1e-3, "deg": np.pi / 180},
-    "time": {"s": 1.0, "ms": 1e-3},
-    "force": {"N": 1.0, "kN": 1e3},
-    "torque": {"N*m": 1.0, "Nm": 1.0, "N*mm": 1e-3, "mN*m": 1e-3},  # robot logs (chewbot identify)
-}
 KIND = {"X": "length", "Y": "length", "Z": "length", "alpha": "angle", "beta": "angle", "gamma": "angle"}
 FORCES = ("Fx", "Fy", "Fz")
 # Fewest samples a task file may have: enough for the derivative estimate's local polynomial.
 MIN_ROWS = smoothing.POLYORDER + 2
 
-_HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
-_RATE_UNIT = re.compile(r"^(.+?)\s*/\s*(\w+)\s*(\^\s*2|2|²)?$")
 
 
 def _columns(kinds: dict[str, str]) -> dict[str, tuple[str, int]]:
@@ -64,33 +54,13 @@ INCISOR = ("Ix", "Iy", "Iz")  # the incisor point I in {S}
 INCISOR_COLUMNS = _columns({**{c: "length" for c in INCISOR}, **{c: KIND[c] for c in TARGET_COORDS}})
 
 
-def _unit_factor(unit: str, kind: str, order: int) -> float:
-    """Factor to SI of ``unit`` for a column of ``kind`` differentiated ``order`` times; ValueError says why not."""
-    if order:
-        m = _RATE_UNIT.match(unit)
-        if m is None:
-            raise ValueError(f"a rate of order {order} needs a unit like '{next(iter(UNITS[kind]))}/s{'^2' if order == 2 else ''}'")
-        base, per, squared = m.group(1), m.group(2), m.group(3)
-        if (2 if squared else 1) != order:
-            raise ValueError(f"the unit is per time{'^2' if squared else ''}, the column is a derivative of order {order}")
-        if per not in UNITS["time"]:
-            raise ValueError(f"unknown time unit {per!r} (known: {', '.join(UNITS['time'])})")
-        return _unit_factor(base, kind, 0) / UNITS["time"][per] ** order
-    if unit in UNITS[kind]:
-        return UNITS[kind][unit]
-    for other, table in UNITS.items():
-        if unit in table:
-            raise ValueError(f"{unit!r} is a unit of {other}, the column is a {kind}")
-    raise ValueError(f"unknown unit {unit!r} (known {kind} units: {', '.join(UNITS[kind])})")
-
-
 def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUMNS,
                   outputs: frozenset[str] = frozenset()) -> tuple[list[str], np.ndarray, list[int]]:
     """Names, factors to SI and the indices of the cells that are read; cells named in ``outputs`` (the output
     columns of the run that wrote the file) and not in ``columns`` are skipped."""
     names, factors, kept = [], [], []
     for j, cell in enumerate(cells):
-        m = _HEADER.match(cell)
+        m = HEADER_CELL.match(cell)
         if m is None:
             raise TaskError(f"{path}: line {line}, column {j + 1}: cannot read the column name {cell!r} (expected NAME or NAME[unit])")
         name, unit = m.group(1), m.group(2)
@@ -103,7 +73,7 @@ def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUM
             raise TaskError(f"{path}: line {line}: column {name!r} appears twice")
         kind, order = columns[name]
         try:
-            factors.append(1.0 if unit is None else _unit_factor(unit, kind, order))
+            factors.append(1.0 if unit is None else unit_factor(unit, kind, order))
         except ValueError as exc:
             raise TaskError(f"{path}: line {line}: column {cell.strip()!r}: {exc}") from None
         names.append(name)
@@ -144,7 +114,7 @@ def _to_float(path: Path, names: list[str], lines: list[int], cells: list[list[s
         raise
 
 
-def _read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str, outputs: frozenset[str] = frozenset()):
+def read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str, outputs: frozenset[str] = frozenset()):
     """Parse, check and convert to SI a file of signals over time: (names, header, lines, col) with col the
     columns by name (SI, (N,) each), header the cells of the columns read. Columns in ``outputs`` that are not in
     ``columns`` are skipped. Every defect is a TaskError naming the file and the line or column. The file is read
@@ -227,7 +197,7 @@ def read_incisor_csv(path: str | Path) -> dict:
     optionally with rates), units in brackets as for tasks. Returns t (N,), p, v, a, force (N, 3) and
     ``pinned``: {coordinate: (values, rates, accelerations)}, SI."""
     path = Path(path)
-    names, header, lines, col = _read_signals(path, INCISOR_COLUMNS, ("t",) + INCISOR, "an incisor path")
+    names, header, lines, col = read_signals(path, INCISOR_COLUMNS, ("t",) + INCISOR, "an incisor path")
     p, v, a, _ = _with_rates(path, lines, col, INCISOR)
     force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
     pinned = {}
@@ -261,7 +231,7 @@ def read_task_csv(path: str | Path, side: str | None = None, mechanism: str = "t
     if side is None:
         side = (run or {}).get("task", {}).get("side") or "left"
     required = ("t",) + (TARGET_COORDS if mechanism == "target" else FULL_COORDS)
-    names, header, lines, col = _read_signals(path, COLUMNS, required, f"a {mechanism} task", outputs)
+    names, header, lines, col = read_signals(path, COLUMNS, required, f"a {mechanism} task", outputs)
     has_full = "Z" in names or "gamma" in names
     if has_full and not ("Z" in names and "gamma" in names):
         raise TaskError(f"{path}: columns Z and gamma come together (the target computes both from its sockets when neither is given)")

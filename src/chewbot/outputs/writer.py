@@ -1,0 +1,211 @@
+"""The one writer of a results folder's data, and the folders written with it.
+
+:class:`ResultsWriter` writes results.csv chunk after chunk and then run.json, and builds, from the rows as it writes
+them, the view that the figures and report.html are drawn from (:mod:`chewbot.report.folder`): the data are complete
+before anything is drawn, and a folder drawn later (``chewbot report DIR``, :func:`redraw`) is drawn from the same
+inputs read back. It is the one place where the data of a run or a simulation are written: a new format of the rows
+goes here.
+
+:func:`write_run` computes a run chunk by chunk (:func:`chewbot.run.pipeline.chunks`) and writes its folder as it
+goes (what ``chewbot run`` does), in constant memory; :func:`write` writes a run computed in memory. Either folder
+is written in a temporary sibling and moved into place at the end (:func:`chewbot.files.atomic_folder`): a failed or
+interrupted run leaves nothing behind, and an existing folder is replaced only when ``force`` is given and chewbot
+wrote it. The folder is written whatever the checks say; the command decides the exit code.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from chewbot.errors import ChewbotError
+from chewbot.files import RESULTS_FOLDER, OutputError, atomic_folder, atomic_members, to_json
+from chewbot.model import Model
+from chewbot.outputs.record import RunRecord, read_record, run_record
+from chewbot.report.folder import draw, drawing_names
+from chewbot.report.view import RunView, ViewBuilder, report_columns
+from chewbot.run.options import RunOptions
+from chewbot.run.pipeline import CHUNK_SAMPLES, RunResult, Totals, chunks, input_files, inputs
+from chewbot.table import CsvWriter, Table, read_csv_chunks
+
+RESULTS_FILE = "results.csv"
+RECORD_FILE = "run.json"
+
+
+class ResultsWriter:
+    """Writes the data of a results folder into ``folder``: :meth:`rows` for each chunk of rows in order
+    (results.csv), then :meth:`record` (run.json), and keeps the view of the rows written (:meth:`view`).
+
+    ``t``: the times of every row to come (the view chooses its animation's frames from them); ``derived``: further
+    columns of a block of rows whose statistics the view keeps (:func:`chewbot.report.view.report_columns`).
+    ``seconds``: the time spent writing rows."""
+
+    def __init__(self, folder: Path, t: np.ndarray, derived: Callable | None = None):
+        self.folder = Path(folder)
+        self._csv = CsvWriter(self.folder / RESULTS_FILE)
+        self._view = ViewBuilder(t, derived=derived)
+        self.seconds = 0.0
+
+    def rows(self, table: Table) -> None:
+        """Append the rows of ``table`` (every chunk with the same columns)."""
+        t0 = time.perf_counter()
+        self._csv.write(table)
+        self.seconds += time.perf_counter() - t0
+        self._view.update(table)
+
+    def record(self, record: dict) -> dict:
+        """Close results.csv and write run.json holding ``record``; the record as it reads back (NaN as null), what
+        the report is drawn from."""
+        self._csv.close()
+        text = to_json(record)
+        (self.folder / RECORD_FILE).write_text(text)
+        return json.loads(text)
+
+    def view(self) -> RunView:
+        """The view of the rows written (their decimated series and statistics, the animation's frames)."""
+        return self._view.result()
+
+    def close(self) -> None:
+        self._csv.close()
+
+
+def run_view_columns(model: Model, contact: str) -> Callable:
+    """The derived columns of a run's view (the incisor, the bite force's magnitude, the normal forces below what the
+    contact model admits)."""
+    return lambda columns: report_columns(model, columns, contact)
+
+
+def write_run(options: RunOptions, out: Path, force: bool = False, progress=None, figures: bool = True, report: bool = True,
+              chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None) -> RunRecord:
+    """Compute a run chunk by chunk and write its folder ``out`` as it goes (what ``chewbot run`` does): each chunk's
+    rows go to results.csv as they are computed, then run.json, then the figures and report.html are drawn from what
+    was written. ``progress(message, done=samples, total=samples, stage=None)`` is told each stage (run.json's
+    writing as the stage ``writing``); ``check()``: see :func:`chewbot.run.pipeline.chunks`."""
+    step = _stepper(progress)
+    step("task")
+    options, model, task = inputs(options)
+    step("kinematics", done=0, total=task.n)
+    out = Path(out)
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp:
+        totals = Totals(model, options)
+        writer = ResultsWriter(tmp, task.t, run_view_columns(model, options.contact))
+        try:
+            columns = None
+            for part in chunks(model, task, options, chunk, step, check):
+                totals.add(part)
+                step("writing results.csv", done=part.offset)
+                writer.rows(part.table)
+                columns = part.table.rows(0, 0)
+            totals.timings["results_csv_s"] = writer.seconds
+            checks = totals.checks.results()
+            step("writing run.json", done=task.n, stage="writing")
+            record = writer.record(run_record(options, model, task, columns, checks, totals.info()))
+        finally:
+            writer.close()
+        view = writer.view()
+        step("figures and report", done=task.n)
+        written = draw(tmp, record, model, view, figures, report, step)
+    return RunRecord(record, model, checks, view, [out / RESULTS_FILE, out / RECORD_FILE, *(out / p.name for p in written)])
+
+
+def write_table(folder: Path, table: Table, record: dict, derived: Callable | None = None, progress=None) -> tuple[dict, RunView]:
+    """results.csv of a table computed whole and run.json of its ``record``, by :class:`ResultsWriter`; the record as
+    it reads back and the view of the rows written, what the figures and report are drawn from."""
+    step = _stepper(progress)
+    writer = ResultsWriter(folder, table["t"], derived)
+    try:
+        step("writing results.csv")
+        writer.rows(table)
+        step("writing run.json", stage="writing")
+        written = writer.record(record)
+    finally:
+        writer.close()
+    return written, writer.view()
+
+
+def write(result: RunResult, out: Path, force: bool = False, progress=None, figures: bool = True, report: bool = True) -> Path:
+    """Write the results folder ``out`` (results.csv, run.json, figures, report.html) of a run computed in memory
+    (:func:`chewbot.run.pipeline.compute`), atomically as :func:`write_run`."""
+    step = _stepper(progress)
+    out = Path(out)
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp:
+        record, view = write_table(tmp, result.table, run_json(result), run_view_columns(result.model, result.options.contact), step)
+        draw(tmp, record, result.model, view, figures, report, step)
+    return out
+
+
+def run_json(result: RunResult) -> dict:
+    """The run record (run.json) of a run computed in memory (:func:`chewbot.outputs.record.run_record`)."""
+    return run_record(result.options, result.model, result.task, result.table, result.checks, result.info)
+
+
+# --- figures and report of a results folder ----------------------------------------------------------------
+
+
+def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool = True, progress=None,
+           chunk: int = CHUNK_SAMPLES) -> list[Path]:
+    """Draw the figures and write report.html of the results folder ``folder`` from its run.json and results.csv
+    (read ``chunk`` rows at a time: constant memory), as the run did (``chewbot report DIR``).
+
+    Only the figures and report.html are written (:func:`chewbot.files.atomic_members`: all or none, each under
+    a temporary name until all are complete); results.csv and run.json are read, never written. An existing figure
+    or report is replaced only with ``force``. The model is loaded from the parameter file run.json names, with
+    the run's overrides, and must have the run's parameters (their SHA-256 in run.json)."""
+    from chewbot.model.params import BUILTIN_MODELS, load_model, split_overrides
+    from chewbot.model.vector import vector_digest
+
+    step = _stepper(progress)
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ChewbotError(f"{folder}: no such results folder")
+    if not RESULTS_FOLDER.present(folder):
+        raise OutputError(f"{folder}: not a results folder written by chewbot (no {RESULTS_FOLDER.file} of chewbot's); "
+                          "chewbot draws figures and reports into its own results folders only")
+    path = folder / RECORD_FILE
+    record = read_record(folder)
+    model_overrides, _ = split_overrides(record.get("overrides", {}))
+    spec = record["model"]["file"]
+    if not Path(spec).is_file() and record["model"]["name"] in BUILTIN_MODELS:
+        spec = record["model"]["name"]  # a built-in model, from another installation
+    model = load_model(spec, model_overrides)
+    if record["model"].get("parameters_sha256") not in (None, vector_digest(model)):
+        raise ChewbotError(f"{path}: the model {spec} (with the run's overrides) no longer has the run's parameters "
+                           "(their SHA-256 differs): the figures and report would not show the run's robot")
+    columns = record.get("columns", {})
+    csv_path = folder / RESULTS_FILE
+    step("reading results.csv")
+    t = np.array([float(line.partition(",")[0]) for line in _data_lines(csv_path)])
+    if t.size != record["task"]["samples"]:
+        raise ChewbotError(f"{csv_path}: {t.size} rows, run.json says {record['task']['samples']} samples")
+    view = ViewBuilder(t, derived=run_view_columns(model, record["options"].get("contact", "bilateral")))
+    units = {name: c.get("unit", "") for name, c in columns.items()}
+    done = 0
+    for part in read_csv_chunks(csv_path, units, chunk):
+        step("reading results.csv", done=done, total=t.size)
+        part.descriptions = {name: c["description"] for name, c in columns.items() if c.get("description") and name in part.columns}
+        view.update(part)
+        done += part.n
+    view = view.result()
+    names = drawing_names(record, view, figures, report)
+    with atomic_members(folder, names, force) as tmp:
+        draw(tmp, record, model, view, figures, report, step, beside=folder)
+    return [folder / name for name in names]
+
+
+def _data_lines(path: Path):
+    """The lines of a CSV file after its header (comment and blank lines skipped)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = (line for line in f if line.strip() and not line.lstrip().startswith("#"))
+            next(lines, None)
+            yield from lines
+    except OSError as exc:
+        raise ChewbotError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+
+
+def _stepper(progress):
+    return progress or (lambda msg, done=None, total=None, stage=None: None)
