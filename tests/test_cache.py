@@ -16,21 +16,33 @@ import pytest
 from typer.testing import CliRunner
 
 import chewbot
-from chewbot.compiled import kernels as casadi_tools
 from chewbot.cli import app
-from chewbot.compiled.kernels import KernelSpec, c_compiler, cache_dir, cache_root, compile_library, source_digest
+from chewbot.compiled import kernels as casadi_tools
+from chewbot.compiled.cache import KERNELS, c_compiler
+from chewbot.compiled.kernels import KernelSpec, compile_library
 
 needs_compiler = pytest.mark.skipif(c_compiler() is None, reason="no C compiler: kernels run in CasADi's virtual machine")
 
 
-def _tiny(tag: str) -> KernelSpec:
-    """A small kernel of its own (one per tag): compiles in a fraction of a second."""
+TINY = """
+import casadi as ca
+from chewbot.compiled.kernels import KernelSpec
 
-    def build():
+
+def tiny(tag):
+    def build(params):
         x, p = ca.SX.sym("x", 2), ca.SX.sym("p", 1)
         return ca.Function(f"cache_test_{tag}", [x, p], [ca.sin(x) * p], ["x", "p"], ["y"])
 
     return KernelSpec(f"cache_test_{tag}", build, ("cache test", tag))
+"""
+_space: dict = {}
+exec(TINY, _space)
+
+
+def _tiny(tag: str) -> KernelSpec:
+    """A small kernel of its own (one per tag): compiles in a fraction of a second."""
+    return _space["tiny"](tag)
 
 
 def _leftovers(folder: Path) -> list[str]:
@@ -41,25 +53,35 @@ def test_location(monkeypatch, tmp_path):
     monkeypatch.delenv("CHEWBOT_CACHE", raising=False)
     monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
-    assert cache_root() == tmp_path / "home" / ".cache" / "chewbot"
+    assert KERNELS.root() == tmp_path / "home" / ".cache" / "chewbot"
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    assert cache_root() == tmp_path / "xdg" / "chewbot"
+    assert KERNELS.root() == tmp_path / "xdg" / "chewbot"
     monkeypatch.setenv("CHEWBOT_CACHE", str(tmp_path / "own"))
-    assert cache_root() == tmp_path / "own"
-    assert cache_dir() == tmp_path / "own" / f"chewbot-{chewbot.__version__}-casadi-{ca.__version__}"
+    assert KERNELS.root() == tmp_path / "own"
+    assert KERNELS.folder() == tmp_path / "own" / f"chewbot-{chewbot.__version__}-casadi-{ca.__version__}"
 
 
-def test_key_follows_the_source(tmp_path):
-    """An edit of a module that builds graphs changes the key (an editable install never reuses a stale kernel);
-    an edit of the report does not."""
+def test_key_follows_the_source_the_kernel_is_built_from(tmp_path):
+    """A kernel's key holds the source of the modules its graph is built by, found from the imports: an edit of one
+    of them changes the key (an editable install never reuses a stale kernel), an edit of the report does not; a
+    function handed to a shared builder (a formulation's derivation) counts with its module."""
+    from chewbot.compiled.cache import KernelCache
+    from chewbot.dynamics.dalembert import reduced_kernel
+    from chewbot.dynamics.hessian import hessian_rates
+    from chewbot.kinematics.functions import kinematics_kernel
+
     package = Path(casadi_tools.__file__).parent.parent
     copy = tmp_path / "chewbot"
     shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    assert source_digest(copy) == source_digest(package)
+    modules = kinematics_kernel("target", "euler-angles").modules()
+    assert modules == ("chewbot.kinematics.functions",)
+    digest = KernelCache().source_digest(modules, package)
+    assert KernelCache().source_digest(modules, copy) == digest
     (copy / "report" / "html.py").write_text((copy / "report" / "html.py").read_text() + "\n# edited\n")
-    assert source_digest.__wrapped__(copy) == source_digest(package)
-    (copy / "kinematics" / "functions.py").write_text((copy / "kinematics" / "functions.py").read_text() + "\n# edited\n")
-    assert source_digest.__wrapped__(copy) != source_digest(package)
+    assert KernelCache().source_digest(modules, copy) == digest
+    (copy / "kinematics" / "symbolic.py").write_text((copy / "kinematics" / "symbolic.py").read_text() + "\n# edited\n")
+    assert KernelCache().source_digest(modules, copy) != digest
+    assert "chewbot.dynamics.hessian" in reduced_kernel("target", "hessian", hessian_rates).modules()
 
 
 def test_a_library_built_for_this_processor_is_keyed_by_it(monkeypatch):
@@ -68,7 +90,8 @@ def test_a_library_built_for_this_processor_is_keyed_by_it(monkeypatch):
     spec = _tiny("processor")
     native_flags, portable = ("-O3", "-march=native"), ("-O1",)
     here = casadi_tools.kernel_key(spec, native_flags), casadi_tools.kernel_key(spec, portable)
-    monkeypatch.setattr(casadi_tools, "_processor_identity", lambda: "x86_64 another processor")
+    identity = KERNELS._identity
+    monkeypatch.setattr(KERNELS, "_identity", lambda what, cc="": "x86_64 another processor" if what == "processor" else identity(what, cc))
     assert casadi_tools.kernel_key(spec, native_flags) != here[0]
     assert casadi_tools.kernel_key(spec, portable) == here[1]
 
@@ -107,15 +130,13 @@ def test_two_processes_compiling_the_same_kernel_both_succeed(tmp_path):
     """Two processes on an empty cache compile one kernel at the same moment: both load it, one library is
     left (the second rename replaces the first atomically) and no temporary file."""
     start = tmp_path / "go"
-    script = textwrap.dedent(f"""
-        import sys, time
+    script = TINY + textwrap.dedent(f"""
+        import time
         from pathlib import Path
-        sys.path.insert(0, {str(Path(__file__).parent)!r})
-        from test_cache import _tiny
         from chewbot.compiled.kernels import native
         while not Path({str(start)!r}).exists():
             time.sleep(0.01)
-        fn = native(_tiny("concurrent"))
+        fn = native(tiny("concurrent"))
         print(float(fn([1.0, 1.0], 2.0)[0][0]))
     """)
     env = {**os.environ, "CHEWBOT_CACHE": str(tmp_path / "cache")}
@@ -155,7 +176,7 @@ def test_eviction(tmp_path, monkeypatch):
 @needs_compiler
 def test_stale_temporaries_go_and_a_live_process_keeps_its_own(tmp_path, monkeypatch):
     monkeypatch.setenv("CHEWBOT_CACHE", str(tmp_path))
-    folder = cache_dir()
+    folder = KERNELS.folder()
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True).stdout.strip()
     stale = [folder / f".k-abc.{dead}.deadbeef.tmp", folder / f".k-abc.{dead}.deadbeef.build"]
     stale[0].write_bytes(b"half")
@@ -169,7 +190,7 @@ def test_stale_temporaries_go_and_a_live_process_keeps_its_own(tmp_path, monkeyp
 @needs_compiler
 def test_a_failed_or_interrupted_compilation_leaves_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("CHEWBOT_CACHE", str(tmp_path))
-    folder = cache_dir()
+    folder = KERNELS.folder()
     monkeypatch.setenv("CC", "false")  # a "compiler" that always fails
     with pytest.raises(RuntimeError, match="compiling kernel cache_test_fails failed"):
         compile_library(_tiny("fails"))

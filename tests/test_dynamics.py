@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import default_kinematics, model
 
+from chewbot.compiled.cache import folded
 from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.dynamics.dalembert import reduced_rhs, reduced_terms
@@ -107,7 +108,7 @@ def _sample_states(mechanism, count=3, seed=0):
 def test_coupler_inertia_against_quadrature(mechanism):
     """M_SM of Eq. (30) by Gauss-Legendre quadrature of J_P' rho A J_P along the rod, P(s) = (1 - s) S + s M."""
     m = model(mechanism)
-    e = energy(m)
+    e = energy(folded(m))
     s_sym = ca.SX.sym("s")
     nodes, weights = np.polynomial.legendre.leggauss(6)  # exact for the integrand, a polynomial of degree 2 in s
     q, _ = _sample_states(mechanism)
@@ -125,7 +126,7 @@ def test_coupler_inertia_against_quadrature(mechanism):
 @pytest.mark.parametrize("method", ("hessian", "liang"))
 def test_coriolis_against_finite_differences(mechanism, method):
     """C q_dot = d/dt(dT/dq_dot) - M q_ddot - dT/dq = (dM/dq . q_dot) q_dot - dT/dq, by central differences of T."""
-    e = energy(model(mechanism))
+    e = energy(folded(model(mechanism)))
     rates = DERIVATIONS[method](e)
     fn = ca.Function("f", [e.q, e.dq], [e.T, ca.mtimes(rates.C, e.dq), e.M])
     q, dq = _sample_states(mechanism)
@@ -152,7 +153,7 @@ def test_coriolis_against_finite_differences(mechanism, method):
 
 def test_coriolis_matrices_differ_but_agree_on_q_dot(mechanism):
     """Eq. (52) with H12 and Eq. (61) give different C matrices with the same C q_dot (documented in both modules)."""
-    e = energy(model(mechanism))
+    e = energy(folded(model(mechanism)))
     Ch, Cl = hessian_rates(e).C, liang_rates(e).C
     fn = ca.Function("f", [e.q, e.dq], [Ch, Cl, ca.mtimes(Ch - Cl, e.dq)])
     q, dq = _sample_states(mechanism)

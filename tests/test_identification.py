@@ -19,7 +19,8 @@ from chewbot import load_model
 from chewbot.cli import app
 from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.errors import ChewbotError, TaskError
-from chewbot.identification import identify, read_log
+from chewbot.identification.identifier import identify
+from chewbot.identification.log import read_log
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_of, x_of, x_of_phi
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.run.pipeline import compute

@@ -90,7 +90,7 @@ def test_parasitic_gamma_satisfies_the_difference_equation_and_the_printed_formu
 def test_parasitic_e3_satisfies_the_difference_equation():
     p1 = model("target").hkp.p1
     kin = smooth_kinematics("target", "euler-parameters", np.linspace(0, 3, 301))
-    pose, _, R = evaluate(pose_function(model("target"), "euler-parameters"), kin.q)
+    pose, _, R = evaluate(pose_function("target", "euler-parameters"), kin.q, model("target").vector())
     assert np.abs(p1 * R[:, 0, 1] + R[:, 2, 1]).max() < 1e-14
     assert np.abs((pose[:, 3:7] ** 2).sum(axis=1) - 1).max() < 1e-14  # |e| = 1 with e3 parasitic
 
@@ -134,7 +134,11 @@ def test_jacobians_against_finite_differences(mechanism, orientation):
     m = model(mechanism)
     kin = default_kinematics(mechanism, "left", orientation)
     jac = kin.jacobians()
-    pose = pose_function(m, orientation)
+    fn, p = pose_function(mechanism, orientation), m.vector()
+
+    def pose(x):
+        return fn(x, p)
+
     h = 1e-6  # coordinates are ~1e-3 m and ~0.1 rad: truncation ~1e-12, rounding ~1e-10 of the entries
     for k in range(1000, kin.n, 613):
         q, theta = kin.q[k], kin.theta[k]
@@ -168,7 +172,7 @@ def test_rates_against_finite_differences_in_time(mechanism, orientation):
     kin = smooth_kinematics(mechanism, orientation, t)
     n = t0.size
     lo, mid, hi = slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n)
-    _, p, R = evaluate(pose_function(model(mechanism), orientation), kin.q)
+    _, p, R = evaluate(pose_function(mechanism, orientation), kin.q, model(mechanism).vector())
     v = (p[hi] - p[lo]) / (2 * h)
     Rdot = (R[hi] - R[lo]) / (2 * h)
     omega = np.array([_vee(Rd @ Rm.T) for Rd, Rm in zip(Rdot, R[mid])])  # [omega]x = R_dot R^T
@@ -330,7 +334,7 @@ def test_parallel_singularity_is_reported(orientation):
 
     m = model("6rss")
     common = np.array([0.02, 0.0, -0.02])  # m, in {M}; at home {M} = {S}
-    singular = dataclasses.replace(m, M=np.tile(common, (6, 1)), coupler_length=np.linalg.norm(m.S0 - common, axis=1), _cache={})
+    singular = dataclasses.replace(m, M=np.tile(common, (6, 1)), coupler_length=np.linalg.norm(m.S0 - common, axis=1))
     task = _constant_task([0, 0, 0, 0, 0, 0], "6rss")
     with pytest.raises(KinematicsError, match=r"sample 0.*parallel \(type II\) singularity"):
         solve_kinematics(singular, task, orientation)

@@ -248,7 +248,7 @@ def test_friction_share_and_indices_follow_their_definitions():
 
 def _with_limits(name, **limits):
     m = model(name)
-    return dataclasses.replace(m, limits=dataclasses.replace(m.limits, **limits), _cache={})
+    return dataclasses.replace(m, limits=dataclasses.replace(m.limits, **limits))
 
 
 def test_active_torque_limit_is_respected_by_the_constrained_solution():

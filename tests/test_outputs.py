@@ -323,7 +323,7 @@ def test_check_model_prints_units_and_warns_near_a_singular_home_pose(monkeypatc
         R_C0 = m.R_C0.copy()
         R_C0[2] = m.R_C0[2] @ Rz(angle)
         S0 = m.G + m.crank_length[:, None] * R_C0[:, :, 0]
-        near = dataclasses.replace(m, R_C0=R_C0, S0=S0, coupler_length=np.linalg.norm(m.M - S0, axis=1), _cache={})
+        near = dataclasses.replace(m, R_C0=R_C0, S0=S0, coupler_length=np.linalg.norm(m.M - S0, axis=1))
         if np.degrees(np.arcsin(transmission(near, np.zeros((1, 3)), np.eye(3)[None])[0, 2])) < 6.0:
             break
     assert 3.0 < home_pose(near)["mu_deg"][2] < 6.0

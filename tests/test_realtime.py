@@ -91,7 +91,7 @@ def test_core_coriolis_matrix_is_passive(mechanism):
     differences of the kernel's M_f along q_dot, M_f(q + h q_dot) - M_f(q - h q_dot) over 2h with h = 1e-6 s:
     truncation O(h^2) and rounding ~eps/h, both far below the 1e-8 relative bound."""
     m, kin = model(mechanism), default_kinematics(mechanism)
-    fn = dynamics_kernel(m).graph()
+    fn = dynamics_kernel(mechanism).folded(m).graph()
     k = np.arange(1200, 4800, 97)  # inside the chewing cycles
     q, dq, ddq = generalised_state(kin)
     q, dq, ddq = q[k, 6:], dq[k, 6:], ddq[k, 6:]
@@ -116,7 +116,7 @@ def test_coupling_kernel_against_pseudo_inverse():
     for name in ("target", "6rss"):
         m, kin = model(name), default_kinematics(name)
         q, _, _ = generalised_state(kin)
-        J1 = evaluate(jacobians_function(m, "euler-angles"), q[:, :6], q[:, 6:])[2]
+        J1 = evaluate(jacobians_function(name, "euler-angles"), q[:, :6], q[:, 6:], m.vector())[2]
         _, _, M = energies(m, kin)
         J5 = np.concatenate([np.broadcast_to(np.eye(6), (kin.n, 6, 6)), np.linalg.pinv(J1)], axis=1)
         assert _rel(joint_space_inertia(m, kin), np.swapaxes(J5, 1, 2) @ M @ J5) <= 1e-10
@@ -153,7 +153,7 @@ def test_g1_kernel_with_more_friction(coulomb):
 
     base = model("target")
     fr = base.friction
-    m = dataclasses.replace(base, friction=Friction(coulomb[0], fr.hkp_viscous, fr.actuator_arm, coulomb[1], fr.actuator_viscous), _cache={})
+    m = dataclasses.replace(base, friction=Friction(coulomb[0], fr.hkp_viscous, fr.actuator_arm, coulomb[1], fr.actuator_viscous))
     kin = solve_kinematics(m, default_task(m), "euler-parameters")
     ne = inverse_dynamics(m, kin, "newton-euler", goal="min-torque", friction=True)
     out = g1_distribution(m, kin)

@@ -32,7 +32,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, parameter_input
 
 _OFF = ~np.eye(6, dtype=bool)
 
@@ -60,17 +60,17 @@ class Coupling:
                 "branch_variation": float(self.branch_variation.mean())}
 
 
-def coupling_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def coupling_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (theta, q_EE, p) -> M_A (6 x 6, kg m^2), MCI (6) (Eqs. 58-60), q_EE in Euler angles (no p
     for a model: its numbers folded in).
 
     J_theta1^+ is (J_theta1' J_theta1)^-1 J_theta1' for the target and J_theta1^-1 for the 6RSS, solved inside the
     graph, so the kernel is one straight-line C function (exported for the controller by ``chewbot export-c``).
     """
-    name = f"coupling_{c_name(mechanism_of(model_or_mechanism))}"
+    name = f"coupling_{c_name(mechanism)}"
 
-    def build():
-        e = energy(model_or_mechanism)
+    def build(params):
+        e = energy(params)
         s = e.kin
         J1 = s.J_theta1()
         J1_pinv = ca.solve(ca.mtimes(J1.T, J1), J1.T) if s.params.has_hkp else ca.inv(J1)
@@ -82,7 +82,7 @@ def coupling_kernel(model_or_mechanism: Model | str) -> KernelSpec:
         extra, names = parameter_input(s.params)
         return ca.Function(name, [s.theta, s.q, *extra], [ca.densify(M_A), MCI], ["theta", "q", *names], ["M_A", "MCI"], {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:

@@ -26,10 +26,10 @@ def cache(context: typer.Context) -> None:
     """
     if context.invoked_subcommand is not None:
         return
-    from chewbot.compiled.kernels import cache_info
+    from chewbot.compiled.cache import KERNELS
 
     try:
-        info = cache_info()
+        info = KERNELS.info()
     except (OSError, ValueError) as exc:
         fail(ChewbotError(f"the kernel cache cannot be read: {exc}"), EXIT_OUTPUT)
     stdout.print(f"location: {info['location']}\nlibraries: {info['libraries']}\n"
@@ -45,10 +45,10 @@ def cache_clear() -> None:
 
       chewbot cache clear
     """
-    from chewbot.compiled.kernels import cache_root, clear_cache
+    from chewbot.compiled.cache import KERNELS
 
     try:
-        count, size = clear_cache()
+        count, size = KERNELS.clear()
     except OSError as exc:
-        fail(ChewbotError(f"{cache_root()}: cannot clear the kernel cache ({exc.strerror or exc})"), EXIT_OUTPUT)
-    stdout.print(f"removed {count} libraries ({size / 1e6:.1f} MB) from {cache_root()}", highlight=False, markup=False)
+        fail(ChewbotError(f"{KERNELS.root()}: cannot clear the kernel cache ({exc.strerror or exc})"), EXIT_OUTPUT)
+    stdout.print(f"removed {count} libraries ({size / 1e6:.1f} MB) from {KERNELS.root()}", highlight=False, markup=False)

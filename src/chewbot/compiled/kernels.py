@@ -1,18 +1,13 @@
-"""Evaluating CasADi functions over whole trajectories, and compiling them to C with a cache on disk.
+"""Evaluating CasADi functions over whole trajectories, and compiling them to C.
 
 A per-sample CasADi ``Function`` is mapped over the N samples of a trajectory in one call (no Python loop).
-A kernel is described by a :class:`KernelSpec`: its C name, the function that builds its graph, and the key
-of what else determines the graph (mechanism, orientation, goal, folded parameter values ...). :func:`native`
+A kernel is described by a :class:`KernelSpec`: its C name, the function that builds its graph on the model's
+numbers, and the key of what else determines the graph (mechanism, orientation, goal ...). A kernel's graph takes
+the model's parameter vector p as its last input; :meth:`KernelSpec.folded` gives the same kernel with one model's
+numbers folded in as constants (no p: what ``chewbot export-c`` writes for a robot's controller). :func:`native`
 and :func:`compiled` turn a spec into a shared library with the system C compiler, kept in the kernel cache
-(:func:`cache_root`) under a key computed without building the graph or generating code (:func:`kernel_key`):
-on a hit the library is loaded and no graph is built. Where no C compiler is found, the graph runs in
-CasADi's virtual machine (same results, slower).
-
-The cache holds only chewbot's libraries, in one folder per chewbot and CasADi version; libraries of other
-versions are removed, and the least recently used ones beyond ``$CHEWBOT_CACHE_MAX_MB`` (default
-:data:`DEFAULT_MAX_MB`) when a new one is written. Libraries are written under a temporary name carrying the
-process id and renamed into place (atomic: two processes compiling the same kernel both succeed); temporary
-files are removed on failure and interrupt, and those of processes that no longer exist on the next write.
+(:mod:`chewbot.compiled.cache`); where no C compiler is found, the graph runs in CasADi's virtual machine (same
+results, slower).
 """
 
 from __future__ import annotations
@@ -20,61 +15,82 @@ from __future__ import annotations
 import ctypes
 import functools
 import hashlib
-import json
 import os
-import platform
-import re
 import shutil
 import subprocess
 import threading
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-_MAPPED: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
+from chewbot.compiled.cache import KERNELS, LibraryKey, builder_modules, c_compiler, folded, symbols
+from chewbot.model import Model
+from chewbot.model.symbolic import SymbolicModel
+from chewbot.model.vector import vector_digest
 
-DEFAULT_MAX_MB = 200  # cap of the kernel cache; a full set of chewbot's kernels takes about 4 MB
 # Compiler flags of every kernel library. The kernels are long straight-line code: -O1 runs them as fast as -O2
 # and -O3 (within 3 %) and compiles them about 35 % faster (docs/realtime.md).
 FLAGS = ("-O1",)
-# Modules of the package that build no compiled kernel, left out of the source hash of the cache key (so that
-# editing them does not recompile every kernel). Everything else in the package is in it, new modules included.
-NOT_IN_KEY = ("cli.py", "commands", "run", "files.py", "table.py", "outputs", "bench", "export", "report", "study", "task",
-              "sweep")
-_OWN_DIR = re.compile(r"^(chewbot-[^/]+-casadi-[^/]+|casadi-[0-9][^/]*)$")  # casadi-X: the layout before version folders
-_TEMP = re.compile(r"^\.(?:.+)\.(?P<pid>\d+)\.[A-Za-z0-9_]+\.(?:tmp|build)$")
-_GRAPHS: dict[tuple, ca.Function] = {}
-_LOADED: dict[tuple, object] = {}
-GRAPH_LOCK = threading.RLock()  # CasADi releases the GIL: graphs are built, generated and loaded one at a time
 
 
 @dataclass(frozen=True, eq=False)
 class KernelSpec:
     """A per-sample kernel known before its graph is built.
 
-    ``name``: the C function's name; ``build``: returns the CasADi ``Function`` (called once per process, and
-    only when the kernel is not in the cache); ``key``: everything besides chewbot's source that determines the
-    graph (mechanism, orientation, options, the parameter values where they are folded in).
-    """
+    ``name``: the C function's name; ``build(params)``: returns the CasADi ``Function`` built on the model's numbers
+    ``params`` (:class:`~chewbot.model.symbolic.SymbolicModel`: the symbol p of ``mechanism``, an input of the
+    graph, or one model's constants; called once per process and numbers, and only when the kernel is not in the
+    cache); ``key``: everything besides chewbot's source that determines the graph (mechanism, orientation,
+    options); ``mechanism``: the robot the graph is of (empty for a graph of no model); ``model``: the model whose
+    numbers are folded in (None: p is an input, one kernel for every model of the mechanism)."""
 
     name: str
-    build: Callable[[], ca.Function] = field(repr=False)
+    build: Callable = field(repr=False)
     key: tuple = ()
+    mechanism: str = ""
+    model: Model | None = field(default=None, repr=False)
 
-    def graph(self) -> ca.Function:
-        """The CasADi function (built once per process)."""
-        k = (self.name, self.key)
-        with GRAPH_LOCK:
-            if k not in _GRAPHS:
-                fn = self.build()
-                if fn.name() != self.name:
-                    raise ValueError(f"kernel {self.name!r}: its graph is named {fn.name()!r}")
-                _GRAPHS[k] = fn
-            return _GRAPHS[k]
+    def params(self) -> SymbolicModel | None:
+        """The numbers the graph is built on: the model's constants where folded, else the mechanism's symbol p."""
+        if self.model is not None:
+            return folded(self.model)
+        return symbols(self.mechanism) if self.mechanism else None
+
+    @property
+    def cache_key(self) -> tuple:
+        """The kernel's key with the digest of the numbers folded in (if any)."""
+        return self.key if self.model is None else (*self.key, ("p", vector_digest(self.model)))
+
+    def graph(self, params: SymbolicModel | None = None) -> ca.Function:
+        """The CasADi function (built once per process and numbers): on ``params`` where given (a builder composing
+        kernels passes its own), else on the spec's (:meth:`params`)."""
+        if params is not None:
+            numbers = params.key
+        else:
+            numbers = ("model", self.model.mechanism, vector_digest(self.model)) if self.model is not None else self.mechanism
+        key = (self.name, self.key, numbers)
+
+        def build():
+            fn = self.build(params if params is not None else self.params())
+            if fn.name() != self.name:
+                raise ValueError(f"kernel {self.name!r}: its graph is named {fn.name()!r}")
+            return fn
+
+        return KERNELS.graph(("kernel", *key), build)
+
+    def folded(self, model: Model) -> KernelSpec:
+        """The same kernel with ``model``'s numbers folded in as constants (no input p), for that robot's controller."""
+        if model.mechanism != self.mechanism:
+            raise ValueError(f"kernel {self.name!r} is of the {self.mechanism}, the model {model.name!r} of the {model.mechanism}")
+        return replace(self, model=model)
+
+    def modules(self) -> tuple[str, ...]:
+        """The chewbot modules the graph is built by (:func:`chewbot.compiled.cache.builder_modules`)."""
+        return builder_modules(self.build)
 
 
 def as_spec(kernel: KernelSpec | ca.Function) -> KernelSpec:
@@ -82,103 +98,19 @@ def as_spec(kernel: KernelSpec | ca.Function) -> KernelSpec:
     if isinstance(kernel, KernelSpec):
         return kernel
     digest = hashlib.sha256(kernel.serialize().encode()).hexdigest()
-    spec = KernelSpec(kernel.name(), lambda: kernel, ("graph", digest))
-    with GRAPH_LOCK:
-        _GRAPHS.setdefault((spec.name, spec.key), kernel)
+    spec = KernelSpec(kernel.name(), lambda params: kernel, ("graph", digest))
+    KERNELS.graph(("kernel", spec.name, spec.key, ""), lambda: kernel)
     return spec
 
 
-# ----------------------------------------------------------------------------------------------- cache
-
-
-def cache_root() -> Path:
-    """The kernel cache: ``$CHEWBOT_CACHE``, else ``$XDG_CACHE_HOME/chewbot``, else ``~/.cache/chewbot``."""
-    if os.environ.get("CHEWBOT_CACHE"):
-        return Path(os.environ["CHEWBOT_CACHE"])
-    if os.environ.get("XDG_CACHE_HOME"):
-        return Path(os.environ["XDG_CACHE_HOME"]) / "chewbot"
-    return Path(os.path.expanduser("~")) / ".cache" / "chewbot"
-
-
-def _chewbot_version() -> str:
-    from chewbot import __version__
-
-    return __version__
-
-
-def cache_dir() -> Path:
-    """The folder of this chewbot and CasADi version in the cache (created)."""
-    path = cache_root() / f"chewbot-{_chewbot_version()}-casadi-{ca.__version__}"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-def max_cache_bytes() -> int:
-    """The size cap of the cache: ``$CHEWBOT_CACHE_MAX_MB`` megabytes (default :data:`DEFAULT_MAX_MB`)."""
-    value = os.environ.get("CHEWBOT_CACHE_MAX_MB", "")
-    try:
-        mb = float(value) if value else DEFAULT_MAX_MB
-    except ValueError:
-        raise ValueError(f"$CHEWBOT_CACHE_MAX_MB must be a number of megabytes, not {value!r}") from None
-    return int(mb * 1e6)
-
-
-@functools.cache
-def source_digest(root: Path | None = None) -> str:
-    """SHA-256 of the package's Python source (``root``: the package folder, by default this one's), without the
-    modules of :data:`NOT_IN_KEY`."""
-    root = root or Path(__file__).resolve().parent.parent
-    h = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        rel = path.relative_to(root)
-        if rel.parts[0] in NOT_IN_KEY or "__pycache__" in rel.parts:
-            continue
-        h.update(str(rel.as_posix()).encode() + b"\0" + path.read_bytes() + b"\0")
-    return h.hexdigest()
-
-
-def c_compiler() -> str | None:
-    """The C compiler used for kernels (``$CC``, else cc/gcc/clang on the PATH), or None."""
-    for name in filter(None, (os.environ.get("CC"), "cc", "gcc", "clang")):
-        if shutil.which(name):
-            return name
-    return None
-
-
-@functools.cache
-def _compiler_identity(cc: str) -> str:
-    """The compiler's path and version line, part of the cache key: another compiler, another library."""
-    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()
-    return f"{shutil.which(cc)} {version[0] if version else ''}"
-
-
-@functools.cache
-def _processor_identity() -> str:
-    """The processor's architecture and model (Linux: /proc/cpuinfo's "model name"), part of the key of a library
-    built for this processor only (-march=native): a cache shared between machines never hands it to another."""
-    model = ""
-    try:
-        with open("/proc/cpuinfo") as info:
-            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), "")
-    except OSError:
-        pass
-    return f"{platform.machine()} {model or platform.processor()}"
-
-
-def kernel_key(spec: KernelSpec, flags: tuple[str, ...] = FLAGS) -> str:
-    """The cache key of a kernel, from what determines its code, without building it: chewbot's source
-    (:func:`source_digest`), the kernel's name and key, the chewbot and CasADi versions, the compiler and flags,
-    and the processor where a flag builds for it (-march=native)."""
-    cc = c_compiler() or ""
-    parts = [source_digest(), spec.name, repr(spec.key), _chewbot_version(), ca.__version__,
-             _compiler_identity(cc) if cc else "", list(flags)]
-    if any(flag.startswith("-march=native") or flag.startswith("-mcpu=native") for flag in flags):
-        parts.append(_processor_identity())
-    return hashlib.sha256(json.dumps(parts).encode()).hexdigest()[:24]
+def kernel_key(spec: KernelSpec, flags: tuple[str, ...] = FLAGS) -> LibraryKey:
+    """The cache key of a kernel's library (:meth:`chewbot.compiled.cache.KernelCache.key`), computed without
+    building it."""
+    return KERNELS.key(spec.name, spec.cache_key, spec.modules(), flags)
 
 
 def _library_path(spec: KernelSpec, flags: tuple[str, ...]) -> Path:
-    return cache_dir() / f"{spec.name}-{kernel_key(spec, flags)}.so"
+    return KERNELS.library(spec.name, kernel_key(spec, flags))
 
 
 def _batch_wrapper(fn: ca.Function) -> str:
@@ -211,7 +143,7 @@ class _Build:
         try:
             self.folder.mkdir()
             fn = spec.graph()
-            with GRAPH_LOCK:
+            with KERNELS.lock:
                 cg = ca.CodeGenerator(f"{spec.name}.c", {"with_header": False})
                 cg.add(fn)
                 cg.generate(f"{self.folder}{os.sep}")
@@ -257,7 +189,7 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
     libs = [_library_path(s, flags) for s in specs]
     missing = [(s, lib) for s, lib in zip(specs, libs) if not lib.exists()]
     if missing:
-        _remove_stale_temporaries(libs[0].parent)
+        KERNELS.remove_stale_temporaries(libs[0].parent)
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         running: list[_Build] = []
         try:
@@ -270,7 +202,7 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
         finally:
             for build in running:
                 build.cleanup()
-        evict(keep=set(libs))
+        KERNELS.evict(keep=set(libs))
     for lib in libs:
         try:
             os.utime(lib)  # the least recently used are evicted first
@@ -288,85 +220,6 @@ def prepare_kernels(kernels: list[KernelSpec | ca.Function], flags: tuple[str, .
         prepare(kernels, flags)
     except OSError as exc:
         _cache_unusable(exc)
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _remove_stale_temporaries(folder: Path) -> None:
-    """Temporary files and folders of processes that no longer exist (killed while compiling)."""
-    for path in folder.iterdir():
-        m = _TEMP.match(path.name)
-        if m and not _pid_alive(int(m.group("pid"))):
-            shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-
-
-def _own_files(folder: Path):
-    """chewbot's files in a folder of the cache: libraries and temporaries."""
-    for path in folder.iterdir():
-        if path.suffix == ".so" and path.is_file() or _TEMP.match(path.name):
-            yield path
-
-
-def evict(keep: set[Path] = frozenset()) -> None:
-    """Remove the libraries of other chewbot or CasADi versions, then the least recently used beyond the size
-    cap (:func:`max_cache_bytes`), never those in ``keep``."""
-    root, current = cache_root(), cache_dir()
-    for folder in root.iterdir():
-        if folder.is_dir() and folder != current and _OWN_DIR.match(folder.name):
-            _remove_folder(folder)
-    libs = [(p.stat().st_mtime, p.stat().st_size, p) for p in current.glob("*.so")]
-    total, cap = sum(size for _, size, _ in libs), max_cache_bytes()
-    for _, size, path in sorted(libs, key=lambda entry: entry[0]):
-        if total <= cap:
-            break
-        if path not in keep:
-            path.unlink(missing_ok=True)
-            total -= size
-
-
-def _remove_folder(folder: Path) -> tuple[int, int]:
-    count = size = 0
-    for path in list(_own_files(folder)):
-        if path.is_dir():
-            shutil.rmtree(path, ignore_errors=True)
-        else:
-            size += path.stat().st_size
-            path.unlink(missing_ok=True)
-            count += path.suffix == ".so"
-    try:
-        folder.rmdir()  # only when nothing else is left in it
-    except OSError:
-        pass
-    return count, size
-
-
-def cache_info() -> dict:
-    """The cache's location, and the number and total size (bytes) of chewbot's libraries in it."""
-    root = cache_root()
-    libs = [p for d in (root.iterdir() if root.is_dir() else []) if d.is_dir() and _OWN_DIR.match(d.name)
-            for p in d.glob("*.so")]
-    return {"location": root, "libraries": len(libs), "bytes": sum(p.stat().st_size for p in libs),
-            "max_bytes": max_cache_bytes()}
-
-
-def clear_cache() -> tuple[int, int]:
-    """Remove chewbot's libraries and temporary files from the cache (nothing else); (libraries, bytes) removed."""
-    root = cache_root()
-    count = size = 0
-    if root.is_dir():
-        for folder in root.iterdir():
-            if folder.is_dir() and _OWN_DIR.match(folder.name):
-                c, s = _remove_folder(folder)
-                count, size = count + c, size + s
-    return count, size
 
 
 # -------------------------------------------------------------------------------------- compiled kernels
@@ -390,15 +243,11 @@ def _load(kernel: KernelSpec | ca.Function, flags: tuple[str, ...], kind: str, l
     spec = as_spec(kernel)
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         return spec.graph()
-    key = (kind, spec.name, spec.key, flags)
-    with GRAPH_LOCK:
-        if key not in _LOADED:
-            try:
-                _LOADED[key] = load(spec)
-            except OSError as exc:
-                _cache_unusable(exc)
-                return spec.graph()
-        return _LOADED[key]
+    try:
+        return KERNELS.loaded((kind, spec.name, spec.cache_key, flags), lambda: load(spec))
+    except OSError as exc:
+        _cache_unusable(exc)
+        return spec.graph()
 
 
 def _cache_unusable(exc: OSError) -> None:
@@ -523,17 +372,6 @@ def _samples(inputs) -> int:
     return rows.pop()
 
 
-def mapped(fn: ca.Function, n: int) -> ca.Function:
-    """``fn`` mapped over n samples (``fn`` itself for one), kept: building a map costs about 10 us per sample,
-    more than a call of it."""
-    entry = _MAPPED.get((id(fn), n))
-    if entry is None or entry[0] is not fn:  # the id of a collected function may be reused
-        if len(_MAPPED) > 256:
-            _MAPPED.clear()
-        entry = _MAPPED[id(fn), n] = (fn, fn.map(n, "serial") if n > 1 else fn)
-    return entry[1]
-
-
 def evaluate(fn: ca.Function | NativeFunction, *inputs: np.ndarray) -> list[np.ndarray]:
     """Evaluate a per-sample function over N samples at once (a :class:`NativeFunction` in one C loop).
 
@@ -553,7 +391,7 @@ def evaluate(fn: ca.Function | NativeFunction, *inputs: np.ndarray) -> list[np.n
             args.append(x[None, :])
         else:
             args.append(x.reshape(-1, 1))  # the map broadcasts an input of one sample's size
-    out = mapped(fn, n).call(args)
+    out = KERNELS.mapped(fn, n).call(args)
     result = []
     for j, o in enumerate(out):
         arr = np.asarray(o)  # (rows, cols * n)

@@ -21,7 +21,8 @@ import numpy as np
 
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.kinematics.options import Orientation
-from chewbot.model.symbolic import SymbolicModel, symbols
+from chewbot.compiled.cache import symbols
+from chewbot.model.symbolic import SymbolicModel
 from chewbot.table import Table
 
 

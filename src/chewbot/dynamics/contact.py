@@ -48,7 +48,7 @@ from chewbot.dynamics.core import lifted_core
 from chewbot.dynamics.options import check_contact
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, mechanism_of
+from chewbot.model.symbolic import c_name
 from chewbot.table import Table
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
@@ -69,14 +69,14 @@ def bound_names(preload: float) -> list[str]:
     return [f"N_{j} >= {preload:g} N (contact.preload_N)" for j in "LR"]
 
 
-def contact_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def contact_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> N0 (2), K (2 x 6), J_theta1 (6 x 4) of the
     target, inputs as :func:`chewbot.dynamics.core6rss.torque_kernel`: N = N0 + K tau (N) for any tau that solves
     Eq. (53) (module docstring)."""
-    name = f"contact_{c_name(mechanism_of(model_or_mechanism))}"
+    name = f"contact_{c_name(mechanism)}"
 
-    def build():
-        lc = lifted_core(model_or_mechanism)
+    def build(params):
+        lc = lifted_core(params)
         m, x, core = lc.params, lc.x, lc.core
         R, n = matrix_from_euler_angles_sx(x[3], x[4], x[5]), m.hkp.normal
         # dT_j = M_0a' [I, -[r_T]x] dx in twist form (omega = R_omega [alpha, beta, gamma]_dot), so dT_j/dx' n = M_0a' [n; r_T x n]
@@ -87,7 +87,7 @@ def contact_kernel(model_or_mechanism: Model | str) -> KernelSpec:
         return ca.Function(name, lc.inputs, [ca.densify(o) for o in outputs],
                            ["q", "dq", "ddq", "B", "F_B", "p"][:len(lc.inputs)], list(CONTACT_OUTPUTS), {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def contact_kernels(mechanism: str) -> list[KernelSpec]:

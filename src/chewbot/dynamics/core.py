@@ -42,8 +42,8 @@ import casadi as ca
 import numpy as np
 
 from chewbot.kinematics.functions import lift_sx
-from chewbot.model import Model
-from chewbot.model.symbolic import SymbolicModel, cached_graph, parameter_input, symbols
+from chewbot.compiled.cache import cached_graph
+from chewbot.model.symbolic import SymbolicModel, parameter_input
 from chewbot.rotation import R_omega_sx, matrix_from_euler_angles_sx
 
 
@@ -55,10 +55,11 @@ def _skew(v):
 CORE_OUTPUTS = ("theta", "J6", "M6", "C6", "G6", "Q6", "f6")
 
 
-def core_function(model_or_mechanism: Model | str) -> ca.Function:
-    """The 6RSS core per sample: (x, x_dot, x_ddot, B, F_B, p) -> theta, J_6, M_6, C_6, G_6, Q_6 and
-    f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6 (module docstring); no p for a model (numbers folded in)."""
-    return cached_graph(model_or_mechanism, ("core6rss",), lambda: _core(symbols(model_or_mechanism)))
+def core_function(params: SymbolicModel) -> ca.Function:
+    """The 6RSS core per sample on the model's numbers ``params``: (x, x_dot, x_ddot, B, F_B, p) -> theta, J_6, M_6,
+    C_6, G_6, Q_6 and f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6 (module docstring); no p for a model's constants
+    (folded in)."""
+    return cached_graph(params, ("core6rss",), lambda: _core(params))
 
 
 def _augmented_body(model: SymbolicModel) -> tuple[ca.SX, ca.SX, ca.SX]:
@@ -183,10 +184,11 @@ class LiftedCore:
     core: dict
 
 
-def lifted_core(model_or_mechanism: Model | str) -> LiftedCore:
+def lifted_core(params: SymbolicModel) -> LiftedCore:
     """The 6RSS core along the mechanism's own coordinates q_EE: x = phi(q_EE) (the parasitic Z and gamma of the
-    target), x_dot = M_J q_EE_dot, x_ddot = M_J q_EE_ddot + M_J_dot q_EE_dot (module docstring)."""
-    model = symbols(model_or_mechanism)
+    target), x_dot = M_J q_EE_dot, x_ddot = M_J q_EE_ddot + M_J_dot q_EE_dot (module docstring), on the model's
+    numbers ``params``."""
+    model = params
     extra, _ = parameter_input(model)
     n = model.dof
     q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
@@ -196,5 +198,5 @@ def lifted_core(model_or_mechanism: Model | str) -> LiftedCore:
     dx = ca.mtimes(M_J, dq)
     dM_J = ca.jtimes(M_J, q, dq)
     ddx = ca.mtimes(M_J, ddq) + ca.mtimes(dM_J, dq)
-    core = dict(zip(CORE_OUTPUTS, core_function(model_or_mechanism)(x, dx, ddx, B, F, *extra)))
+    core = dict(zip(CORE_OUTPUTS, core_function(params)(x, dx, ddx, B, F, *extra)))
     return LiftedCore([q, dq, ddq, B, F, *extra], model, q, dq, ddq, x, M_J, dM_J, core)

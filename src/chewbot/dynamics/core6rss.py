@@ -16,16 +16,16 @@ from chewbot.dynamics.core import lifted_core
 from chewbot.dynamics.energy import require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, mechanism_of
+from chewbot.model.symbolic import SymbolicModel, c_name
 
 
 DYNAMICS_OUTPUTS = ("tau", "theta", "dtheta", "J_theta1", "M_f", "C_f", "G_f", "Q_B")
 TORQUE_OUTPUTS = ("tau", "theta", "dtheta")
 
 
-def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
-    lc = lifted_core(model_or_mechanism)
-    model, q, dq, ddq, M_J, dM_J, core = lc.params, lc.q, lc.dq, lc.ddq, lc.M_J, lc.dM_J, lc.core
+def _kernel_terms(params: SymbolicModel, matrices: bool):
+    lc = lifted_core(params)
+    model, dq, ddq, M_J, dM_J, core = lc.params, lc.dq, lc.ddq, lc.M_J, lc.dM_J, lc.core
     J1 = ca.mtimes(core["J6"], M_J)
     terms = {
         "theta": core["theta"], "dtheta": ca.mtimes(J1, dq), "J_theta1": J1,
@@ -41,33 +41,33 @@ def _kernel_terms(model_or_mechanism: Model | str, matrices: bool):
     return lc.inputs, terms
 
 
-def _kernel(model_or_mechanism: Model | str, prefix: str, outputs: tuple[str, ...]) -> KernelSpec:
-    name = f"{prefix}_{c_name(mechanism_of(model_or_mechanism))}"
+def _kernel(mechanism: str, prefix: str, outputs: tuple[str, ...]) -> KernelSpec:
+    name = f"{prefix}_{c_name(mechanism)}"
 
-    def build():
-        inputs, terms = _kernel_terms(model_or_mechanism, matrices=len(outputs) > len(TORQUE_OUTPUTS))
+    def build(params):
+        inputs, terms = _kernel_terms(params, matrices=len(outputs) > len(TORQUE_OUTPUTS))
         return ca.Function(name, inputs, [ca.densify(terms[k]) for k in outputs],
                            ["q", "dq", "ddq", "B", "F_B", "p"][:len(inputs)], list(outputs), {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
-def torque_kernel(model_or_mechanism: Model | str) -> KernelSpec:
-    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> tau, theta, theta_dot (no p for a model:
-    its numbers folded in, as ``chewbot export-c`` writes it).
+def torque_kernel(mechanism: str) -> KernelSpec:
+    """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> tau, theta, theta_dot (no p where a model's
+    numbers are folded in, :meth:`~chewbot.compiled.kernels.KernelSpec.folded`: what ``chewbot export-c`` writes).
 
     q_EE in Euler angles ([X, Y, alpha, beta] for the target, X_EE for the 6RSS; m, rad), B the bite point in
     {M} (m), F_B the bite force on the mandible in {S} (N). tau (N m) is the minimum-norm solution of Eq. (53)
     (unique for the 6RSS), its right-hand side built without the matrices (the lean kernel for a controller's
     feedforward).
     """
-    return _kernel(model_or_mechanism, "tau", TORQUE_OUTPUTS)
+    return _kernel(mechanism, "tau", TORQUE_OUTPUTS)
 
 
-def dynamics_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def dynamics_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel with the same inputs as :func:`torque_kernel` and the terms of Eq. (53) as well:
     tau, theta, theta_dot, J_theta1, M_f, C_f, G_f, Q_B (for model-based control that needs the matrices)."""
-    return _kernel(model_or_mechanism, "dynamics", DYNAMICS_OUTPUTS)
+    return _kernel(mechanism, "dynamics", DYNAMICS_OUTPUTS)
 
 
 def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices: bool = True) -> dict[str, np.ndarray]:

@@ -30,7 +30,7 @@ from chewbot.dynamics.base import Sample, minimum_norm_sx
 from chewbot.dynamics.energy import Energy, energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, parameter_input
 
 
 @dataclass(frozen=True)
@@ -51,16 +51,16 @@ Derivation = Callable[[Energy], Rates]
 REDUCED_OUTPUTS = ("J_theta1", "M_f", "C_f", "G_f", "Q_B")
 
 
-def reduced_kernel(model_or_mechanism: Model | str, name: str, derive: Derivation) -> KernelSpec:
+def reduced_kernel(mechanism: str, name: str, derive: Derivation) -> KernelSpec:
     """Per-sample kernel (theta, q_EE, q_EE_dot, B, F_B, p) -> J_theta1, M_f, C_f, G_f, Q_B of Eq. (53).
 
     ``B``: the bite point in {M} (m); ``F_B``: the bite force on the mandible in {S} (N). ``derive`` builds the
     formulation's :class:`Rates`, ``name`` names it (``"hessian"``, ``"liang"``).
     """
-    fname = f"{name}_{c_name(mechanism_of(model_or_mechanism))}"
+    fname = f"{name}_{c_name(mechanism)}"
 
-    def build():
-        e = energy(model_or_mechanism)
+    def build(params):
+        e = energy(params)
         s = e.kin
         rates = derive(e)
         J_theta, J1 = ca.diag(s.J_theta()), s.J_theta1()
@@ -79,7 +79,7 @@ def reduced_kernel(model_or_mechanism: Model | str, name: str, derive: Derivatio
         return ca.Function(fname, [s.theta, s.q, s.dq, B, F, *extra], [ca.densify(x) for x in (J1, M_f, C_f, G_f, Q_B)],
                            ["theta", "q", "dq", "B", "F_B", *names], list(REDUCED_OUTPUTS), {"cse": True})
 
-    return KernelSpec(fname, build, graph_key(model_or_mechanism, name))
+    return KernelSpec(fname, build, (mechanism, name), mechanism)
 
 
 def reduced_terms(model: Model, kin: Kinematics, name: str, derive: Derivation, side: str | None = None) -> dict[str, np.ndarray]:

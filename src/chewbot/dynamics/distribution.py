@@ -110,7 +110,7 @@ def problem_kernels(name: str, graph: Callable[[], ProblemGraph], key: tuple, ha
         return [J, grad, H, 2 * ca.mtimes(Jr.T, Jr)]
 
     def spec(suffix: str, outputs: Callable[[ProblemGraph], list], out_names: list[str]) -> KernelSpec:
-        def build():
+        def build(params):  # the problem's expressions hold their own numbers
             g = graph()
             ins, names = ([g.D], ["D"]) if suffix == "start" else ([g.D, g.x, g.friction], ["D", "x", "friction"])
             return ca.Function(f"{name}_{suffix}", ins + g.params, [ca.densify(o) for o in outputs(g)],
@@ -130,7 +130,7 @@ def build_problem(name: str, graph: Callable[[], ProblemGraph], nx: int, limit_n
     :func:`problem_kernels`; the graph is then built only for kernels missing from the cache), or None for a
     graph defined outside chewbot (built, and its kernels keyed by their serialised form)."""
     kernels = problem_kernels(name, graph, () if key is None else key, has_start)
-    loaded = [native(k if key is not None else k.build()) for k in kernels]
+    loaded = [native(k if key is not None else k.build(None)) for k in kernels]
     return Problem(*loaded[:3], list(limit_names), nx, loaded[3] if has_start else None, graph)
 
 

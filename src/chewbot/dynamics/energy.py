@@ -22,12 +22,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from chewbot.compiled.cache import cached_graph
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import Symbolic, symbolic
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, cached_graph, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import SymbolicModel, c_name, parameter_input
 
 ORIENTATION = "euler-angles"
 
@@ -68,10 +69,10 @@ def require_euler_angles(kin: Kinematics, method: str) -> None:
             "orientation is parametrised) or use a formulation written for Euler parameters")
 
 
-def energy(model_or_mechanism: Model | str) -> Energy:
-    """The symbolic energies of a mechanism (parameters as the symbol p) or of one model (its numbers folded
-    in); built once and cached."""
-    return cached_graph(model_or_mechanism, ("energy",), lambda: _build(symbolic(model_or_mechanism, ORIENTATION)))
+def energy(params: SymbolicModel) -> Energy:
+    """The symbolic energies on the model's numbers ``params`` (a mechanism's symbol p, or one model's constants);
+    built once per numbers."""
+    return cached_graph(params, ("energy",), lambda: _build(symbolic(params, ORIENTATION)))
 
 
 def _build(s: Symbolic) -> Energy:
@@ -106,16 +107,16 @@ def _build(s: Symbolic) -> Energy:
     return Energy(s, q, dq, ddq, M_cranks, tuple(couplers), M_mandible, M, T, V)
 
 
-def energy_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def energy_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (q, q_dot, p) -> (T [J], V [J], M [kg m^2 ...])."""
-    name = f"energy_{c_name(mechanism_of(model_or_mechanism))}"
+    name = f"energy_{c_name(mechanism)}"
 
-    def build():
-        e = energy(model_or_mechanism)
+    def build(params):
+        e = energy(params)
         extra, names = parameter_input(e.kin.params)
         return ca.Function(name, [e.q, e.dq, *extra], [e.T, e.V, ca.densify(e.M)], ["q", "dq", *names], ["T", "V", "M"])
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def generalised_state(kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

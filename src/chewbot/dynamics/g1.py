@@ -21,7 +21,8 @@ from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, goal_r
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.options import Orientation
 from chewbot.model import Model
-from chewbot.model.symbolic import cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.compiled.cache import cached_graph
+from chewbot.model.symbolic import SymbolicModel, parameter_input
 
 # Safeguarded Newton iterations of the G1 kernel, and step halvings tried in each. From the piecewise
 # least-squares start the optimum is reached to rounding within 10 iterations for Coulomb coefficients from the
@@ -33,7 +34,7 @@ ARMIJO = 1e-4
 G1_ORIENTATION = "euler-parameters"
 
 
-def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_ORIENTATION,
+def g1_kernel(mechanism: str = "target", orientation: str = G1_ORIENTATION,
               iterations: int = G1_ITERATIONS) -> KernelSpec:
     """Per-sample friction-aware goal-G1 distribution of the target: (theta, q, dq, ddq, F_B, B, p) ->
     tau (N m), N (N_L, N_R in N), grad: gradient of |tau|^2 w.r.t. N at the answer (N m^2/N), step: the size
@@ -45,26 +46,26 @@ def g1_kernel(model_or_mechanism: Model | str = "target", orientation: str = G1_
     Gauss-Newton's, and the longest of the steps 1, 1/2, ..., 1/2^(HALVINGS-1) that satisfies Armijo's
     condition (none: stay). Fixed cost, no branches in the C code. No p for a model (its numbers folded in).
     """
-    if mechanism_of(model_or_mechanism) != "target":
+    if mechanism != "target":
         raise ValueError("the G1 distribution kernel is for the target robot (the 6RSS has nothing to distribute)")
     if iterations < 1:
         raise ValueError(f"iterations must be at least 1, not {iterations}")
 
-    def build():
-        coeff = coefficients_kernel(model_or_mechanism, orientation).graph()
-        model = symbols(model_or_mechanism)
+    def build(params):
+        coeff = coefficients_kernel(mechanism, orientation).graph(params)
+        model = params
         extra, extra_names = parameter_input(model)
         theta, q, dq, ddq = (ca.SX.sym(name, coeff.size1_in(i)) for i, name in enumerate(("theta", "q", "dq", "ddq")))
         F, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
         D = coeff(theta, q, dq, ddq, F, B, *extra)[0]
-        tau, Nk, grad, newton_step, limits = distribution_function(model_or_mechanism, orientation, "min-torque", 1.0, iterations)(D, *extra)
+        tau, Nk, grad, newton_step, limits = distribution_function(params, orientation, "min-torque", 1.0, iterations)(D, *extra)
         return ca.Function("g1_target", [theta, q, dq, ddq, F, B, *extra], [tau, Nk, grad, newton_step, limits],
                            ["theta", "q", "dq", "ddq", "F_B", "B", *extra_names], ["tau", "N", "grad", "step", "limits"], {"cse": True})
 
-    return KernelSpec("g1_target", build, graph_key(model_or_mechanism, orientation, iterations))
+    return KernelSpec("g1_target", build, (mechanism, orientation, iterations), mechanism)
 
 
-def distribution_function(model_or_mechanism: Model | str, orientation: str, goal: str, friction: float,
+def distribution_function(params: SymbolicModel, orientation: str, goal: str, friction: float,
                           iterations: int = G1_ITERATIONS) -> ca.Function:
     """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
     (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
@@ -72,10 +73,10 @@ def distribution_function(model_or_mechanism: Model | str, orientation: str, goa
     (:func:`chewbot.dynamics.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
     |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values."""
     def build():
-        model = symbols(model_or_mechanism)
+        model = params
         extra, _ = parameter_input(model)
-        Dsym = ca.SX.sym("D", coefficients_kernel(model_or_mechanism, orientation).graph().size1_out(0))
-        N = ca.SX.sym("N", n_unknowns(model))
+        Dsym = ca.SX.sym("D", coefficients_kernel(model.mechanism, orientation).graph(params).size1_out(0))
+        N = ca.SX.sym("N", n_unknowns(model.mechanism))
         out = forces_sx(model, Dsym, N, friction)
         r = goal_residual(model, goal, Dsym, N, friction)
         J = ca.sumsqr(r)
@@ -106,7 +107,7 @@ def distribution_function(model_or_mechanism: Model | str, orientation: str, goa
         tau, grad, newton_step, limits = final(Dsym, Nk, *extra)
         return ca.Function("distribution", [Dsym, *extra], [tau, Nk, grad, newton_step, limits])
 
-    return cached_graph(model_or_mechanism, ("distribution", orientation, goal, friction, iterations), build)
+    return cached_graph(params, ("distribution", orientation, goal, friction, iterations), build)
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
@@ -127,5 +128,5 @@ def sample_torques(mechanism: str, goal: str = "min-torque", friction: bool = Tr
     D = coefficients_kernel(mechanism, ea).graph()(s.kinematics["theta"], s.q, s.dq, s.ddq, s.F, s.B, m.p)[0]
     fl = 1.0 if friction else 0.0
     if m.has_hkp:
-        return s.function(distribution_function(mechanism, ea, goal, fl)(D, m.p)[0])
+        return s.function(distribution_function(m, ea, goal, fl)(D, m.p)[0])
     return s.function(forces_sx(m, D, ca.SX(0, 1), fl)["tau"])

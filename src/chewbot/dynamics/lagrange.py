@@ -29,17 +29,17 @@ from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
 from chewbot.dynamics.energy import energy, generalised_state, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, mechanism_of, parameter_input
+from chewbot.model.symbolic import c_name, parameter_input
 
 LAGRANGE_OUTPUTS = ("D", "J_theta", "J_qEE", "Q_B")
 
 
-def lagrange_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def lagrange_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (q, q_dot, q_ddot, B, F_B, p) -> D (n), J_theta (diagonal, 6), J_qEE (6 x n_EE), Q_B (n_EE)."""
-    name = f"lagrange_{c_name(mechanism_of(model_or_mechanism))}"
+    name = f"lagrange_{c_name(mechanism)}"
 
-    def build():
-        e = energy(model_or_mechanism)
+    def build(params):
+        e = energy(params)
         s = e.kin
         L = e.T - e.V
         dL_ddq = ca.gradient(L, e.dq)
@@ -50,7 +50,7 @@ def lagrange_kernel(model_or_mechanism: Model | str) -> KernelSpec:
         return ca.Function(name, [e.q, e.dq, e.ddq, B, F, *extra], [ca.densify(x) for x in (D, ca.diag(s.J_theta()), s.J_qEE(), Q_B)],
                            ["q", "dq", "ddq", "B", "F_B", *names], list(LAGRANGE_OUTPUTS), {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def lagrange_terms(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:

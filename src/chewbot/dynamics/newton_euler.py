@@ -44,7 +44,8 @@ from chewbot.dynamics.distribution import Problem, ProblemGraph, SampleData, bui
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.model import Model
-from chewbot.model.symbolic import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.compiled.cache import cached_graph, symbols
+from chewbot.model.symbolic import SymbolicModel, c_name, parameter_input
 from chewbot.table import Table
 
 # Regularisation of sgn(theta_dot) and v_T/|v_T| (known inputs per sample): below these speeds Coulomb
@@ -59,9 +60,8 @@ DELTA_F_G = 1e-3  # N
 LIMIT_NAMES = ("torque", "power", "axial_load", "radial_load")
 
 
-def n_unknowns(model_or_mechanism: Model | SymbolicModel | str) -> int:
+def n_unknowns(mechanism: str) -> int:
     """Number of HKP normal forces to distribute: 2 for the target, 0 for the 6RSS."""
-    mechanism = model_or_mechanism if isinstance(model_or_mechanism, str) else model_or_mechanism.mechanism
     return 2 if mechanism == "target" else 0
 
 
@@ -76,7 +76,7 @@ def _layout(nN: int) -> dict[str, tuple[int, int]]:
     return out
 
 
-def coefficients_kernel(model_or_mechanism: Model | str, orientation: str) -> KernelSpec:
+def coefficients_kernel(mechanism: str, orientation: str) -> KernelSpec:
     """Per-sample kernel (theta, q, dq, ddq, F_B, B, p) -> D: the sample's equations with N and |N| left free.
 
     D packs (see :func:`_layout`) the forces f_i at S_i as f = f0 + fV + F1 N + F2 |N| (fV: the share of
@@ -84,12 +84,12 @@ def coefficients_kernel(model_or_mechanism: Model | str, orientation: str) -> Ke
     m_i (a_E,i - g) (so that the force on the mandible at M_i is f_i - m_i (a_E,i - g)), the crank vectors S_i - G_i, the crank inertia torques I_i theta_ddot_i and theta_dot. Also returned:
     the unit direction v_T/|v_T| (regularised, 3 x nN) and velocity v_T (3 x nN) of the ball centres.
     """
-    name = f"ne_coefficients_{c_name(mechanism_of(model_or_mechanism))}_{orientation.replace('-', '_')}"
+    name = f"ne_coefficients_{c_name(mechanism)}_{orientation.replace('-', '_')}"
 
-    def build():
-        s = symbolic(model_or_mechanism, orientation)
+    def build(params):
+        s = symbolic(params, orientation)
         m = s.params
-        nN = n_unknowns(m)
+        nN = n_unknowns(m.mechanism)
         F_B, B = ca.SX.sym("F_B", 3), ca.SX.sym("B", 3)
         dth, ddth = s.theta_rates()
         tw, twr = s.twist(), s.twist_rate()
@@ -156,7 +156,7 @@ def coefficients_kernel(model_or_mechanism: Model | str, orientation: str) -> Ke
         return ca.Function(name, [s.theta, s.q, s.dq, s.ddq, F_B, B, *extra], [ca.densify(x) for x in (D, vh, vt)],
                            ["theta", "q", "dq", "ddq", "F_B", "B", *names], ["D", "vhat_T", "v_T"], {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism, orientation))
+    return KernelSpec(name, build, (mechanism, orientation), mechanism)
 
 
 def _unpack(D, nN: int) -> dict:
@@ -202,20 +202,20 @@ def forces_sx(params: SymbolicModel, D, N, friction, absN=None):
             "radial": ca.vertcat(*radial), "absN": absN, "f_M": f - d["fE"]}
 
 
-def forces_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def forces_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (D, N, friction, p) -> tau, tau_f, tau_fT, f (FS), F_G, M_G, axial, radial, |N|, f_M."""
-    name = f"ne_forces_{c_name(mechanism_of(model_or_mechanism))}"
+    name = f"ne_forces_{c_name(mechanism)}"
 
-    def build():
-        m = symbols(model_or_mechanism)
-        nN = n_unknowns(m)
+    def build(params):
+        m = params
+        nN = n_unknowns(m.mechanism)
         D, N, fl = ca.SX.sym("D", _layout(nN)["size"][0]), ca.SX.sym("N", nN), ca.SX.sym("friction")
         out = forces_sx(m, D, N, fl)
         extra, names = parameter_input(m)
         return ca.Function(name, [D, N, fl, *extra], [ca.densify(x) for x in out.values()], ["D", "N", "friction", *names],
                            list(out), {"cse": True})
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def sample_data(model: Model, kin: Kinematics, side: str | None = None):
@@ -241,9 +241,9 @@ def problem(mechanism: str, goal: str) -> Problem:
     """
     check_goal(goal)
     names = [f"{what} (actuator {i + 1})" for what in LIMIT_NAMES for i in range(6)]
-    return cached_graph(mechanism, ("ne-problem-kernels", goal), lambda: build_problem(
+    return cached_graph(symbols(mechanism), ("ne-problem-kernels", goal), lambda: build_problem(
         _problem_name(mechanism, goal), _problem_graph(mechanism, goal), n_unknowns(mechanism), names, has_start=True,
-        key=graph_key(mechanism, goal)))
+        key=(mechanism, goal)))
 
 
 def _problem_name(mechanism: str, goal: str) -> str:
@@ -263,14 +263,14 @@ def _problem_graph(mechanism: str, goal: str):
         return ProblemGraph(D, N, fl, [m.p], goal_residual(m, goal, D, N, fl), limits,
                             start_sx(m, goal, D) if nN else ca.SX(0, 1))
 
-    return lambda: cached_graph(mechanism, ("ne-problem", goal), build)
+    return lambda: cached_graph(symbols(mechanism), ("ne-problem", goal), build)
 
 
 def kernels(mechanism: str, orientation: str, goal: str = "min-torque") -> list[KernelSpec]:
     """The compiled kernels of a Newton–Euler run: the sample's coefficients, the forces and the distribution
     problem of ``goal``."""
     return [coefficients_kernel(mechanism, orientation), forces_kernel(mechanism),
-            *problem_kernels(_problem_name(mechanism, goal), _problem_graph(mechanism, goal), graph_key(mechanism, goal))]
+            *problem_kernels(_problem_name(mechanism, goal), _problem_graph(mechanism, goal), (mechanism, goal))]
 
 
 GOAL_RESIDUALS = {"min-torque": "tau", "min-coupler-force": "f"}
@@ -292,7 +292,7 @@ def start_sx(params: SymbolicModel, goal: str, D) -> ca.SX:
     The optimum often lies on a kink (one condyle nearly unloaded), where Newton from the friction-free optimum
     converges slowly or to another local minimum; from this start it converges in a few steps.
     """
-    N = ca.SX.sym("N", n_unknowns(params))
+    N = ca.SX.sym("N", n_unknowns(params.mechanism))
     best, best_J = None, None
     # (0, 0) first: always finite, so a singular piece (NaN) never becomes the start (NaN < x is false)
     for signs in ((0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0)):

@@ -8,8 +8,8 @@
 | ``g1_target`` | theta, q_EE, rates, F_B, B | friction-aware minimum torques (goal G1), N_L/N_R, the gradient and last step, the limit values |
 
 Every kernel takes the model's parameter vector p last (:meth:`chewbot.model.Model.vector`), so one compiled
-kernel serves every model of its mechanism; :func:`kernels` gives them with one model's numbers folded in (no p),
-as ``chewbot export-c`` writes them for a robot's controller.
+kernel serves every model of its mechanism; :func:`kernels` gives them with one model's numbers folded in (no p,
+:meth:`chewbot.compiled.kernels.KernelSpec.folded`), as ``chewbot export-c`` writes them for a robot's controller.
 
 The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
 :func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction with the
@@ -91,11 +91,12 @@ def _view(buffer: np.ndarray, rows: int, cols: int) -> np.ndarray:
 LOOP_FLAGS = ("-O3", "-march=native")
 
 
-def loop_spec(model_or_mechanism: Model | str, kind: str) -> KernelSpec:
-    """The kernel of :func:`loop_kernel`'s ``kind`` for a model (its numbers folded in) or a mechanism (p an input)."""
+def loop_spec(mechanism: str, kind: str) -> KernelSpec:
+    """The kernel of :func:`loop_kernel`'s ``kind`` of a mechanism (p an input; :meth:`KernelSpec.folded` folds a
+    model's numbers in)."""
     if kind not in LOOP_KERNELS:
         raise ValueError(f"kind must be one of {', '.join(LOOP_KERNELS)}, not {kind!r}")
-    return {"tau": torque_kernel, "dynamics": dynamics_kernel, "coupling": coupling_kernel, "g1": g1_kernel}[kind](model_or_mechanism)
+    return {"tau": torque_kernel, "dynamics": dynamics_kernel, "coupling": coupling_kernel, "g1": g1_kernel}[kind](mechanism)
 
 
 def loop_kernel(model: Model, kind: str = "tau", side: str = "left", folded: bool = True, flags: tuple[str, ...] = LOOP_FLAGS) -> LoopKernel:
@@ -107,7 +108,8 @@ def loop_kernel(model: Model, kind: str = "tau", side: str = "left", folded: boo
     ``folded``: the model's numbers folded into the compiled code (the fastest; compiled once per parameter set,
     kept in the kernel cache under their SHA-256); else the mechanism's kernel with p as its last input, set here.
     """
-    k = LoopKernel(loop_spec(model if folded else model.mechanism, kind), flags)
+    spec = loop_spec(model.mechanism, kind)
+    k = LoopKernel(spec.folded(model) if folded else spec, flags)
     if "B" in k.inputs:
         k.B[:] = model.molar(side)
     if not folded:
@@ -133,25 +135,25 @@ def kernels(target: Model, sixrss: Model, sample: dict[str, dict[str, np.ndarray
         which = "minimum-norm actuator torques of the target (seed 000, Eq. 54)" if m.has_hkp else "actuator torques of the 6RSS (unique)"
         tag = m.mechanism.replace("6rss", "sixrss")
         out += [
-            Kernel(torque_kernel(m), f"The {which}, from the 6RSS core with the HKPs projected out; the lean kernel "
+            Kernel(torque_kernel(m.mechanism).folded(m), f"The {which}, from the 6RSS core with the HKPs projected out; the lean kernel "
                    "for a feedforward (no matrices formed).", torque_in, torque_out, sample[f"tau_{tag}"]),
-            Kernel(dynamics_kernel(m), f"The {which} with the terms of Eq. 53: J_theta1, M_f, C_f, G_f, Q_B "
+            Kernel(dynamics_kernel(m.mechanism).folded(m), f"The {which} with the terms of Eq. 53: J_theta1, M_f, C_f, G_f, Q_B "
                    "(J_theta1' tau = M_f q_ddot + C_f q_dot + G_f - Q_B).", torque_in, torque_out, sample[f"tau_{tag}"]),
-            Kernel(coupling_kernel(m), f"Joint-space inertia M_A and MCI (seed 000, Eqs. 58-60) of the {m.mechanism}.",
+            Kernel(coupling_kernel(m.mechanism).folded(m), f"Joint-space inertia M_A and MCI (seed 000, Eqs. 58-60) of the {m.mechanism}.",
                    coupling_in, coupling_out, sample[f"coupling_{tag}"]),
         ]
     forward_in = {"q": torque_in["q"], "dq": torque_in["dq"], "tau": "N m", "B": torque_in["B"], "F_B": torque_in["F_B"],
                   "friction": "0 (off) or 1 (the model's HKP and actuator friction)"}
     for m in (target, sixrss):
         tag = m.mechanism.replace("6rss", "sixrss")
-        out.append(Kernel(forward_kernel(m), f"Forward dynamics of the {m.mechanism}: the accelerations of the independent "
+        out.append(Kernel(forward_kernel(m.mechanism).folded(m), f"Forward dynamics of the {m.mechanism}: the accelerations of the independent "
                           f"coordinates{' and the HKP normal forces N_L, N_R' if m.has_hkp else ''} under the torques tau, "
                           f"friction regularised as in the inverse dynamics; {NEWTON_ITERATIONS} Newton steps from the "
                           "frictionless solution (exact without friction). Check residual (N m, ~1e-15 when converged).",
                           forward_in, {"ddq": "m/s^2, rad/s^2", "N": "N (N_L, N_R along the planes' normal)",
                                        "residual": "N m"}, sample[f"forward_{tag}"]))
     out.append(
-        Kernel(g1_kernel(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
+        Kernel(g1_kernel(target.mechanism).folded(target), f"Friction-aware optimal torque distribution, goal G1 (seed 001, Sect. 4.5), "
                f"{G1_ITERATIONS} safeguarded Newton steps from the best piecewise least-squares start; q in Euler "
                "parameters (X, Y, e0, e1, e2). Check step and grad (both ~0 at the optimum) and the limits.",
                {"theta": "rad", "q": "m, 1 (X, Y, e0, e1, e2)", "dq": "m/s, 1/s", "ddq": "m/s^2, 1/s^2",
@@ -175,7 +177,7 @@ def example_inputs(target: Model, sixrss: Model, t: float = EXAMPLE_T) -> dict[s
         B = m.molar("left")
         out[f"tau_{tag}"] = {"q": q, "dq": dq, "ddq": ddq, "B": B, "F_B": kin.force[k]}
         out[f"coupling_{tag}"] = {"theta": kin.theta[k], "q": q}
-        tau = np.asarray(torque_kernel(m).graph()(q, dq, ddq, B, kin.force[k])[0]).ravel()
+        tau = np.asarray(torque_kernel(m.mechanism).folded(m).graph()(q, dq, ddq, B, kin.force[k])[0]).ravel()
         out[f"forward_{tag}"] = {"q": q, "dq": dq, "tau": tau, "B": B, "F_B": kin.force[k], "friction": np.array([1.0])}
         if m.has_hkp:
             kp = solve_kinematics(m, task, G1_ORIENTATION)

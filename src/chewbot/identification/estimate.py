@@ -63,7 +63,7 @@ class ReducedProblem:
     def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray, used: np.ndarray | None = None, check=None):
         self.model, self.kin, self.tau = model, kin, np.asarray(tau, dtype=float)
         self.used = np.ones(kin.n, dtype=bool) if used is None else used  # samples in the fit; others weigh 0
-        self.nN = n_unknowns(model)
+        self.nN = n_unknowns(model.mechanism)
         self.B = model.molar(kin.side)
         self.coefficients = native(coefficients_kernel(model.mechanism, ORIENTATION))
         self.normal = native(normal_force_kernel(model.mechanism)) if self.nN else None

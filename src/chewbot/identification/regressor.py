@@ -28,7 +28,7 @@ from chewbot.compiled.kernels import KernelSpec
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.identification.parameters import N_X, p_entries
 from chewbot.model.vector import N_P
-from chewbot.model.symbolic import SymbolicModel, c_name, graph_key
+from chewbot.model.symbolic import SymbolicModel, c_name
 
 ORIENTATION = "euler-angles"
 
@@ -46,8 +46,8 @@ def normal_force_kernel(mechanism: str) -> KernelSpec:
     (off, r is affine in N)."""
     name = f"identify_{c_name(mechanism)}_normal_forces"
 
-    def build():
-        m = SymbolicModel(mechanism)
+    def build(params):
+        m = params
         D = ca.SX.sym("D", coefficients_kernel(mechanism, ORIENTATION).graph().size1_out(0))
         N, tau_m, fl = ca.SX.sym("N", n_unknowns(mechanism)), ca.SX.sym("tau_measured", 6), ca.SX.sym("friction")
         r = forces_sx(m, D, N, fl)["tau"] - tau_m
@@ -56,7 +56,7 @@ def normal_force_kernel(mechanism: str) -> KernelSpec:
         return ca.Function(name, [D, N, tau_m, fl, m.p], [ca.densify(o) for o in (r, dr_dN, H)],
                            ["D", "N", "tau_measured", "friction", "p"], ["r", "dr_dN", "H_NN"], {"cse": True})
 
-    return KernelSpec(name, build, graph_key(mechanism, "identify"))
+    return KernelSpec(name, build, (mechanism, "identify"), mechanism)
 
 
 def jacobian_kernel(mechanism: str) -> KernelSpec:
@@ -64,7 +64,7 @@ def jacobian_kernel(mechanism: str) -> KernelSpec:
     H_NN (nN x nN), H_Nx (nN x N_X): see the module docstring. q and its rates in Euler angles."""
     name = f"identify_{c_name(mechanism)}_jacobian"
 
-    def build():
+    def build(params):  # its own p, with x in place of the identified entries
         coefficients = coefficients_kernel(mechanism, ORIENTATION).graph()
         p, x = ca.SX.sym("p", N_P), ca.SX.sym("x", N_X)
         m = SymbolicModel(mechanism, _with_x(p, x))
@@ -80,4 +80,4 @@ def jacobian_kernel(mechanism: str) -> KernelSpec:
                            [*coefficients.name_in()[:6], "N", "tau_measured", "x", "p"],
                            ["r", "dr_dN", "dr_dx", "H_NN", "H_Nx"], {"cse": True})
 
-    return KernelSpec(name, build, graph_key(mechanism, "identify"))
+    return KernelSpec(name, build, (mechanism, "identify"), mechanism)

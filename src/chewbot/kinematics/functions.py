@@ -1,8 +1,8 @@
 """Per-sample CasADi functions of the kinematics, built once per (mechanism, orientation) and cached.
 
-Given a mechanism's name (``"target"``, ``"6rss"``) each function takes the model's parameter vector p as its
-last input (:meth:`chewbot.model.Model.vector`); given a :class:`~chewbot.model.Model` it has that model's numbers
-folded in and no p. Each is meant to be mapped over a trajectory with :func:`chewbot.compiled.kernels.evaluate`.
+Each function of a mechanism (``"target"``, ``"6rss"``) takes the model's parameter vector p as its last input
+(:meth:`chewbot.model.Model.vector`); each is meant to be mapped over a trajectory with
+:func:`chewbot.compiled.kernels.evaluate`.
 :func:`kinematics_kernel` is the compiled kernel of :func:`chewbot.kinematics.motion.solve_kinematics`: the whole
 stage in one call.
 """
@@ -14,34 +14,35 @@ import casadi as ca
 from chewbot.compiled.kernels import KernelSpec
 from chewbot.kinematics.options import check_orientation
 from chewbot.kinematics.symbolic import COORDINATES, Symbolic, Z_parasitic_sx, gamma_parasitic_sx, symbolic
-from chewbot.model import Model
-from chewbot.model.symbolic import SymbolicModel, c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.compiled.cache import cached_graph, symbols
+from chewbot.model.symbolic import SymbolicModel, c_name, parameter_input
 from chewbot.rotation import matrix_from_euler_angles_sx
 
 
-def _fn(model_or_mechanism: Model | str, orientation: str, name: str, inputs, outputs):
+def _fn(mechanism: str, orientation: str, name: str, inputs, outputs):
     """The function ``name`` of the symbolic kinematics: ``inputs(s)`` and ``outputs(s)`` give dicts of names to
-    expressions; p is appended to the inputs for a mechanism."""
+    expressions; p is appended to the inputs."""
+    params = symbols(mechanism)
 
     def make():
-        s = symbolic(model_or_mechanism, orientation)
+        s = symbolic(params, orientation)
         ins, outs = inputs(s), outputs(s)
         extra, names = parameter_input(s.params)
         return ca.Function(name, [*ins.values(), *extra], list(outs.values()), [*ins, *names], list(outs))
 
-    return cached_graph(model_or_mechanism, ("fn", orientation, name), make)
+    return cached_graph(params, ("fn", orientation, name), make)
 
 
-def pose_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def pose_function(mechanism: str, orientation: str) -> ca.Function:
     """q -> (pose, position, R): X_EE in the orientation's parametrisation, O_M (m) and R (3x3) in {S}."""
 
-    return _fn(model_or_mechanism, orientation, "pose", lambda s: {"q": s.q}, lambda s: {"pose": s.pose, "position": s.p, "R": s.R})
+    return _fn(mechanism, orientation, "pose", lambda s: {"q": s.q}, lambda s: {"pose": s.pose, "position": s.p, "R": s.R})
 
 
-def points_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def points_function(mechanism: str, orientation: str) -> ca.Function:
     """q -> positions in {S} of the condyles T_L, T_R, the incisor I and the molars B_L, B_R (m)."""
 
-    return _fn(model_or_mechanism, orientation, "points", lambda s: {"q": s.q}, lambda s: dict(zip(POINTS, _points(s))))
+    return _fn(mechanism, orientation, "points", lambda s: {"q": s.q}, lambda s: dict(zip(POINTS, _points(s))))
 
 
 POINTS = ("T_L", "T_R", "I", "B_L", "B_R")
@@ -52,31 +53,24 @@ def _points(s: Symbolic) -> list[ca.SX]:
     return [s.point(x) for x in (m.hkp.T_L, m.hkp.T_R, m.incisor, m.molar_left, m.molar_right)]
 
 
-def point_jacobian_function(model: Model, orientation: str, body_point) -> ca.Function:
-    """q -> (position, Jacobian d position / d q_EE) of a point fixed in {M}, with the model's numbers."""
-    s = symbolic(model, orientation)
-    x = s.point(body_point)
-    return ca.Function("point_jacobian", [s.q], [x, ca.jacobian(x, s.q)], ["q"], ["x", "J"])
-
-
-def jacobians_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def jacobians_function(mechanism: str, orientation: str) -> ca.Function:
     """(theta, q) -> J_theta (diagonal, as a 6-vector), J_qEE, J_theta1, M_J, M_0a, M_0b (seed 000, Sect. 4)."""
 
     def outputs(s: Symbolic):
         return {"J_theta": ca.diag(s.J_theta()), "J_qEE": s.J_qEE(), "J_theta1": s.J_theta1(), "M_J": s.M_J(),
                 "M_0a": s.M_0a(), "M_0b": s.M_0b()}
 
-    return _fn(model_or_mechanism, orientation, "jacobians", lambda s: {"theta": s.theta, "q": s.q}, outputs)
+    return _fn(mechanism, orientation, "jacobians", lambda s: {"theta": s.theta, "q": s.q}, outputs)
 
 
-def jacobian_rates_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def jacobian_rates_function(mechanism: str, orientation: str) -> ca.Function:
     """(theta, q, dq) -> J_theta2, J_theta3, J_theta4 (seed 000, Eqs. 17-19)."""
 
-    return _fn(model_or_mechanism, orientation, "jacobian_rates", lambda s: {"theta": s.theta, "q": s.q, "dq": s.dq},
+    return _fn(mechanism, orientation, "jacobian_rates", lambda s: {"theta": s.theta, "q": s.q, "dq": s.dq},
                lambda s: {"J_theta2": s.J_theta2(), "J_theta3": s.J_theta3(), "J_theta4": s.J_theta4()})
 
 
-def rates_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def rates_function(mechanism: str, orientation: str) -> ca.Function:
     """(theta, q, dq, ddq) -> theta_dot, theta_ddot, twist, twist rate, pose rate, pose acceleration."""
 
     def outputs(s: Symbolic):
@@ -84,7 +78,7 @@ def rates_function(model_or_mechanism: Model | str, orientation: str) -> ca.Func
         dpose, ddpose = _rates(s.pose, s.q, s.dq, s.ddq)
         return {"dtheta": dth, "ddtheta": ddth, "twist": s.twist(), "twist_rate": s.twist_rate(), "dpose": dpose, "ddpose": ddpose}
 
-    return _fn(model_or_mechanism, orientation, "rates", lambda s: {"theta": s.theta, "q": s.q, "dq": s.dq, "ddq": s.ddq}, outputs)
+    return _fn(mechanism, orientation, "rates", lambda s: {"theta": s.theta, "q": s.q, "dq": s.dq, "ddq": s.ddq}, outputs)
 
 
 def _rates(x: ca.SX, q: ca.SX, dq: ca.SX, ddq: ca.SX) -> tuple[ca.SX, ca.SX]:
@@ -93,32 +87,32 @@ def _rates(x: ca.SX, q: ca.SX, dq: ca.SX, ddq: ca.SX) -> tuple[ca.SX, ca.SX]:
     return dx, ca.jtimes(x, q, ddq) + ca.jtimes(dx, q, dq)
 
 
-def closure_function(model_or_mechanism: Model | str, orientation: str) -> ca.Function:
+def closure_function(mechanism: str, orientation: str) -> ca.Function:
     """(theta, q) -> closure residual H (m^2), its Jacobian J_qEE, and the unit-norm residual (parameters)."""
 
     def outputs(s: Symbolic):
         unit = s.unit if s.unit is not None else ca.SX(0)
         return {"H": s.H, "J_qEE": s.J_qEE(), "unit": unit, "J_unit": ca.jacobian(unit, s.q)}
 
-    return _fn(model_or_mechanism, orientation, "closure", lambda s: {"theta": s.theta, "q": s.q}, outputs)
+    return _fn(mechanism, orientation, "closure", lambda s: {"theta": s.theta, "q": s.q}, outputs)
 
 
-def parasitic_function(model_or_mechanism: Model | str) -> ca.Function:
+def parasitic_function(params: SymbolicModel) -> ca.Function:
     """Lift a motion in (X, Y, alpha, beta) to the full X_EE with the sockets' parasitic Z and gamma.
 
     (q, dq, ddq) of the four independent coordinates -> X_EE, X_EE_dot, X_EE_ddot (6 each), exact chain rule.
-    It uses the model's HKP geometry whatever the mechanism: for the 6RSS this gives the target's motion.
+    It uses the model's HKP geometry whatever the mechanism: for the 6RSS this gives the target's motion. Built on
+    the model's numbers ``params`` (a mechanism's symbol p: p is its last input; one model's constants: folded in).
     """
 
     def build():
-        params = symbols(model_or_mechanism)
         q, dq, ddq = ca.SX.sym("q", 4), ca.SX.sym("dq", 4), ca.SX.sym("ddq", 4)
         x = lift_sx(params, q)
         dx, ddx = _rates(x, q, dq, ddq)
         extra, names = parameter_input(params)
         return ca.Function("parasitic", [q, dq, ddq, *extra], [x, dx, ddx], ["q", "dq", "ddq", *names], ["X", "dX", "ddX"])
 
-    return cached_graph(model_or_mechanism, ("fn", "parasitic"), build)
+    return cached_graph(params, ("fn", "parasitic"), build)
 
 
 def lift_sx(params: SymbolicModel, q: ca.SX) -> ca.SX:
@@ -141,7 +135,7 @@ KINEMATICS_OUTPUTS = ("X", "dX", "ddX", "e", "de", "dde", "theta", "dtheta", "dd
                       *POINTS, "reach", "transmission", "J_theta1", "J_unit", "e3_denominator", "J_theta1_angles")
 
 
-def kinematics_kernel(model_or_mechanism: Model | str, orientation: str) -> KernelSpec:
+def kinematics_kernel(mechanism: str, orientation: str) -> KernelSpec:
     """The whole kinematics of a sample in one compiled call: (q, dq, ddq, p) -> :data:`KINEMATICS_OUTPUTS`.
 
     Inputs: the independent coordinates of the motion in Euler angles, whatever ``orientation`` (X, Y, alpha, beta
@@ -157,12 +151,12 @@ def kinematics_kernel(model_or_mechanism: Model | str, orientation: str) -> Kern
     own q_EE, itself computed from the inputs (exact chain rule).
     """
     check_orientation(orientation)
-    name = f"kinematics_{c_name(mechanism_of(model_or_mechanism))}_{orientation.replace('-', '_')}"
-    return KernelSpec(name, lambda: _kinematics(model_or_mechanism, orientation, name), graph_key(model_or_mechanism, orientation))
+    name = f"kinematics_{c_name(mechanism)}_{orientation.replace('-', '_')}"
+    return KernelSpec(name, lambda params: _kinematics(params, orientation, name), (mechanism, orientation), mechanism)
 
 
-def _kinematics(model_or_mechanism: Model | str, orientation: str, name: str) -> ca.Function:
-    s = symbolic(model_or_mechanism, orientation)
+def _kinematics(params: SymbolicModel, orientation: str, name: str) -> ca.Function:
+    s = symbolic(params, orientation)
     m = s.params
     n = len(COORDINATES[(m.mechanism, "euler-angles")])
     q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)

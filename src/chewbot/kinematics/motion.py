@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from chewbot.compiled.cache import symbols
 from chewbot.compiled.kernels import evaluate, native
 from chewbot.errors import KinematicsError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
@@ -102,7 +103,7 @@ def task_coordinates(model: Model, task: Task) -> tuple[np.ndarray, np.ndarray, 
     a 4-coordinate task on the 6RSS is lifted with the sockets' parasitic motions; a 6-coordinate task on the
     target is checked against them after the kinematics (:func:`check_parasitic`)."""
     if task.coords == TARGET_COORDS and not model.has_hkp:
-        return tuple(evaluate(parasitic_function(model.mechanism), task.q, task.dq, task.ddq, model.vector()))
+        return tuple(evaluate(parasitic_function(symbols(model.mechanism)), task.q, task.dq, task.ddq, model.vector()))
     if task.coords == FULL_COORDS and model.has_hkp:
         cols = euler_angle_columns(model)
         return task.q[:, cols], task.dq[:, cols], task.ddq[:, cols]

@@ -1,8 +1,8 @@
 """The kinematics of both mechanisms as CasADi expressions: one graph per (mechanism, orientation).
 
-The model's numbers enter as the symbol p (:class:`~chewbot.model.vector.SymbolicModel`): ``symbolic("target",
-orientation)`` is the graph of every target model, ``symbolic(model, orientation)`` the same graph with one
-model's numbers folded in (no p).
+The model's numbers enter as a :class:`~chewbot.model.symbolic.SymbolicModel`: ``symbolic(symbols("target"),
+orientation)`` is the graph of every target model (p a symbol), ``symbolic(folded(model), orientation)`` the same graph
+with one model's numbers folded in (no p; :mod:`chewbot.compiled.cache`).
 
 Generalised coordinates of the mandible, q_EE (docs/conventions.md):
 
@@ -25,8 +25,8 @@ import casadi as ca
 import numpy as np
 
 from chewbot.kinematics.options import check_orientation
-from chewbot.model import Model
-from chewbot.model.symbolic import SymbolicModel, cached_graph, symbols
+from chewbot.compiled.cache import cached_graph
+from chewbot.model.symbolic import SymbolicModel
 from chewbot.rotation import E_sx, R_omega_sx, matrix_from_euler_angles_sx, matrix_from_euler_parameters_sx
 
 COORDINATES = {
@@ -189,11 +189,12 @@ class Symbolic:
         return dth, ddth
 
 
-def symbolic(model_or_mechanism: Model | str, orientation: str = "euler-angles") -> Symbolic:
-    """The symbolic kinematics in ``orientation`` of a mechanism (``"target"``, ``"6rss"``: parameters as the
-    symbol p) or of one model (its numbers folded in); built once and cached."""
+def symbolic(params: SymbolicModel, orientation: str = "euler-angles") -> Symbolic:
+    """The symbolic kinematics in ``orientation`` on the model's numbers ``params`` (a mechanism's symbol p,
+    :func:`chewbot.compiled.cache.symbols`, or one model's constants, :func:`chewbot.compiled.cache.folded`); built
+    once per numbers and orientation. Expressions of it are in its own ``params`` (use ``symbolic(...).params``)."""
     check_orientation(orientation)
-    return cached_graph(model_or_mechanism, ("symbolic", orientation), lambda: _build(symbols(model_or_mechanism), orientation))
+    return cached_graph(params, ("symbolic", orientation), lambda: _build(params, orientation))
 
 
 def _build(model: SymbolicModel, orientation: str) -> Symbolic:

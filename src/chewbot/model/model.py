@@ -22,7 +22,8 @@ TOML file). Arrays are read-only; a model is hashable by identity and safe to sh
 | ``friction``, ``limits``, ``contact`` | | | :class:`Friction`, :class:`Limits`, :class:`Contact` |
 
 :meth:`Model.vector` gives the numbers the CasADi graphs take as their input ``p``, in the fixed layout of
-:mod:`chewbot.model.vector`.
+:mod:`chewbot.model.vector`. The model holds nothing else: what is built from it (graphs, compiled kernels) is kept in
+the kernel cache (:mod:`chewbot.compiled.cache`), keyed by the digest of its numbers.
 """
 
 from __future__ import annotations
@@ -31,9 +32,13 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from chewbot.model.vector import model_vector
+
 
 def _freeze(obj) -> None:
     for f in fields(obj):
+        if not f.init:
+            continue
         v = getattr(obj, f.name)
         if isinstance(v, np.ndarray):
             v = np.array(v, dtype=float)
@@ -158,20 +163,13 @@ class Model(MechanismMixin):
     contact: Contact = field(default_factory=Contact)
     overrides: dict = field(default_factory=dict)  # the --set values applied to the file, as given
     identified: tuple[str, ...] = ()  # keys estimated from robot logs (the file's `identified`)
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    p: np.ndarray = field(init=False, repr=False)  # the parameter vector, derived from the fields above
 
     def __post_init__(self):
         _freeze(self)
+        object.__setattr__(self, "p", model_vector(self))
 
     def vector(self) -> np.ndarray:
         """The model's numbers as one read-only vector (n_p,) in SI, the input ``p`` of every kernel
-        (layout: :mod:`chewbot.model.vector`)."""
-        from chewbot.model.vector import model_vector
-
-        return self.cached("vector", lambda: model_vector(self))
-
-    def cached(self, key, build):
-        """Per-model cache of derived objects (symbolic graphs, compiled functions)."""
-        if key not in self._cache:
-            self._cache[key] = build()
-        return self._cache[key]
+        (layout: :mod:`chewbot.model.vector`), computed when the model is made."""
+        return self.p

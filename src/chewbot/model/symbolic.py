@@ -1,13 +1,14 @@
 """The model's numbers as CasADi expressions: :class:`SymbolicModel`, the symbolic mirror of
 :class:`~chewbot.model.Model` whose attributes are slices of the parameter vector ``p`` (:mod:`chewbot.model.vector`),
-so a graph builder reads like code written against a model; and the helpers that name and key the graphs built on it.
+so a graph builder reads like code written against a model. Every graph of chewbot is built on one: the symbol p of
+a mechanism (the graph takes p as its last input and serves every model of the mechanism) or one model's constants
+(folded in: a robot's own controller).
 """
 
 from __future__ import annotations
 
 import casadi as ca
 
-from chewbot.compiled.kernels import GRAPH_LOCK
 from chewbot.model.model import MechanismMixin
 from chewbot.model.vector import BLOCKS, N_P, Block, block_slice, vector_digest
 
@@ -30,6 +31,9 @@ class SymbolicModel(MechanismMixin):
         if mechanism not in ("target", "6rss"):
             raise ValueError(f"mechanism must be 'target' or '6rss', not {mechanism!r}")
         self.mechanism = mechanism
+        # what graphs built on these numbers are cached under: the mechanism for its symbol p, the model's digest for
+        # its constants (:meth:`of`), nothing for other expressions
+        self.key: object = mechanism if p is None else None
         self.p = ca.SX.sym("p", N_P) if p is None else p
         if self.p.numel() != N_P:
             raise ValueError(f"p has {self.p.numel()} entries, the layout {N_P}")
@@ -48,7 +52,9 @@ class SymbolicModel(MechanismMixin):
     @classmethod
     def of(cls, model) -> SymbolicModel:
         """The numbers of ``model`` as constants: graphs built on it have them folded in (no input p)."""
-        return cls(model.mechanism, ca.SX(ca.DM(model.vector())))
+        params = cls(model.mechanism, ca.SX(ca.DM(model.vector())))
+        params.key = ("model", model.mechanism, vector_digest(model))
+        return params
 
     def _view(self, b: Block):
         x = self.p[block_slice(b.name)]
@@ -64,45 +70,9 @@ class SymbolicModel(MechanismMixin):
         return [ca.reshape(part, 3, 3).T for part in parts] if len(b.shape) == 3 else parts
 
 
-def symbols(model_or_mechanism) -> SymbolicModel:
-    """The parameters a graph is built on: a mechanism's name gives the symbol p (parametric graph), a
-    :class:`~chewbot.model.Model` its numbers as constants (folded graph)."""
-    if isinstance(model_or_mechanism, str):
-        return SymbolicModel(model_or_mechanism)
-    return SymbolicModel.of(model_or_mechanism)
-
-
 def c_name(mechanism: str) -> str:
     """The mechanism's name in C identifiers: ``target``, ``sixrss``."""
     return mechanism.replace("6rss", "sixrss")
-
-
-def mechanism_of(model_or_mechanism) -> str:
-    """``"target"`` or ``"6rss"`` of a model or a mechanism's name."""
-    return model_or_mechanism if isinstance(model_or_mechanism, str) else model_or_mechanism.mechanism
-
-
-_GRAPHS: dict[tuple, object] = {}
-
-
-def cached_graph(model_or_mechanism, key, build):
-    """``build()`` once per mechanism (a parametric graph, kept for the process) or once per model (a folded
-    graph, kept on the model)."""
-    with GRAPH_LOCK:
-        if not isinstance(model_or_mechanism, str):
-            return model_or_mechanism.cached(("graph", key), build)
-        k = (model_or_mechanism, key)
-        if k not in _GRAPHS:
-            _GRAPHS[k] = build()
-        return _GRAPHS[k]
-
-
-def graph_key(model_or_mechanism, *parts) -> tuple:
-    """The key of a kernel (:class:`chewbot.compiled.kernels.KernelSpec`): the mechanism and ``parts``, and for a
-    model (numbers folded in) the digest of its p."""
-    if isinstance(model_or_mechanism, str):
-        return (model_or_mechanism, *parts)
-    return (model_or_mechanism.mechanism, *parts, ("p", vector_digest(model_or_mechanism)))
 
 
 def parameter_input(params: SymbolicModel) -> tuple[list, list[str]]:

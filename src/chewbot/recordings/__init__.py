@@ -11,19 +11,21 @@ The stages, one module each, in the order the data takes (docs/recordings.md):
 
 from __future__ import annotations
 
-import importlib
-
-_EXPORTS = {
-    "import_motion": "importer", "ImportOptions": "importer", "MotionImport": "importer",
-    "Recording": "formats", "read_recording": "formats",
-    "Registration": "registration", "load_registration": "registration",
-    "RigidFit": "rigid", "kabsch": "rigid", "rigid_fit": "rigid", "scale_motion": "rigid",
-    "RobotFit": "fit", "fit_to_robot": "fit",
-}
-__all__ = sorted(_EXPORTS)
+__all__ = ["ImportOptions", "MotionImport", "Recording", "Registration", "RigidFit", "RobotFit", "fit_to_robot",
+           "import_motion", "kabsch", "load_registration", "read_recording", "rigid_fit", "scale_motion"]
 
 
 def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"chewbot.recordings.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'chewbot.recordings' has no attribute {name!r}")
+    if name in ("import_motion", "ImportOptions", "MotionImport"):
+        from chewbot.recordings import importer as module
+    elif name in ("Recording", "read_recording"):
+        from chewbot.recordings import formats as module
+    elif name in ("Registration", "load_registration"):
+        from chewbot.recordings import registration as module
+    elif name in ("RigidFit", "kabsch", "rigid_fit", "scale_motion"):
+        from chewbot.recordings import rigid as module
+    elif name in ("RobotFit", "fit_to_robot"):
+        from chewbot.recordings import fit as module
+    else:
+        raise AttributeError(f"module 'chewbot.recordings' has no attribute {name!r}")
+    return getattr(module, name)

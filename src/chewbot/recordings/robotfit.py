@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from chewbot.compiled.kernels import compiled, evaluate, mapped
+from chewbot.compiled.cache import KERNELS, cached_graph, folded
+from chewbot.compiled.kernels import compiled, evaluate
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
@@ -133,7 +134,7 @@ class FitFunctions:
         params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
         bounds = {"lbg": np.tile(self.lbg[:, None], (1, m)), "ubg": np.tile(self.ubg[:, None], (1, m))}
         try:
-            sol = mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
+            sol = KERNELS.mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
             return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
         except RuntimeError:  # an evaluation failed (a pose where a chain's closure is undefined): find which, alone
             z, lam = np.full((m, self.n), np.nan), np.full((m, self.lbg.size), np.nan)
@@ -148,7 +149,7 @@ class FitFunctions:
 
 def fit_functions(model: Model) -> FitFunctions:
     """The fit's functions for ``model`` (target: X, Y, alpha, beta; 6RSS: X, Y, Z, alpha, beta, gamma)."""
-    return model.cached(("recordings", "fit"), lambda: _build(model))
+    return cached_graph(folded(model), ("recordings", "fit"), lambda: _build(model))
 
 
 def _rotation_vector(A):
@@ -179,7 +180,7 @@ def _reach_sx(model: Model, p, R):
 
 
 def _build(model: Model) -> FitFunctions:
-    s = symbolic(model, "euler-angles")
+    s = symbolic(folded(model), "euler-angles")
     coords = COORDINATES[(model.mechanism, "euler-angles")]
     scale = np.array([MM if c in ("X", "Y", "Z") else DEG for c in coords])
     n = len(coords)

@@ -36,7 +36,8 @@ from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.model.vector import N_P
 from chewbot.kinematics.options import Orientation
-from chewbot.model.symbolic import c_name, cached_graph
+from chewbot.compiled.cache import cached_graph, symbols
+from chewbot.model.symbolic import c_name
 from chewbot.run.options import Switch, resolve_dynamics
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation import CONTROLLERS
@@ -67,7 +68,7 @@ def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = No
     f = formulation(method)
     options = {k: v for k, v in (("goal", goal), ("friction", bool(friction))) if k in f.sample_options and v is not None}
     key = ("controller-inverse", method, *(options.get(k, dict(f.defaults).get(k)) for k in ("goal", "friction")))
-    return cached_graph(mechanism, key, lambda: f.sample_torques(mechanism, **options))
+    return cached_graph(symbols(mechanism), key, lambda: f.sample_torques(mechanism, **options))
 
 
 # ------------------------------------------------------------------------------------------- control laws
@@ -86,7 +87,7 @@ def control_function(kind: str, mechanism: str, method: str = "hessian", goal: s
     if kind not in CONTROLLERS:
         raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, not {kind!r}")
     key = ("control", kind) + (() if kind == "pd" else (method, goal, bool(friction)))
-    return cached_graph(mechanism, key, lambda: _control(kind, mechanism, method, goal, friction))
+    return cached_graph(symbols(mechanism), key, lambda: _control(kind, mechanism, method, goal, friction))
 
 
 def _control(kind: str, mechanism: str, method: str, goal: str | None, friction: bool) -> ca.Function:
@@ -130,12 +131,12 @@ def control_kernel(kind: str, mechanism: str, method: str = "hessian", goal: str
     """:func:`control_function` compiled, for the ticks of a held-rate simulation."""
     name = f"control_{control_name(kind, mechanism, method, goal, friction)}"
 
-    def build():
+    def build(params):
         fn = control_function(kind, mechanism, method, goal, friction)
         x = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
         return ca.Function(name, x, fn.call(x), list(CONTROL_INPUTS), ["tau"], {"cse": True})
 
-    return KernelSpec(name, build, (mechanism, kind, method, goal, bool(friction)))
+    return KernelSpec(name, build, (mechanism, kind, method, goal, bool(friction)), mechanism)
 
 
 # ------------------------------------------------------------------------------------------- gains

@@ -37,7 +37,8 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, cached_graph, graph_key, mechanism_of, parameter_input, symbols
+from chewbot.compiled.cache import cached_graph
+from chewbot.model.symbolic import SymbolicModel, c_name, parameter_input
 
 ORIENTATION = "euler-angles"
 # Newton steps of the forward kernel after the friction-free start. Measured at 100 random states and torques of
@@ -54,51 +55,52 @@ TOLERANCE = 1e-13
 RESIDUAL_INPUTS = ("q", "dq", "ddq", "N", "tau", "B", "F_B", "friction")
 
 
-def n_coordinates(model_or_mechanism) -> int:
+def n_coordinates(mechanism: str) -> int:
     """Independent coordinates of the state: 4 for the target, 6 for the 6RSS."""
-    return 4 if mechanism_of(model_or_mechanism) == "target" else 6
+    return 4 if mechanism == "target" else 6
 
 
-def residual_function(model_or_mechanism: Model | str) -> ca.Function:
+def residual_function(params: SymbolicModel) -> ca.Function:
     """The Newton–Euler equations as a residual: (q, dq, ddq, N, tau, B, F_B, friction, p) -> r = tau_NE - tau (N m).
 
     q in Euler angles (the independent coordinates), N the normal forces (target; size 0 for the 6RSS), tau the
-    applied torques, B the bite point in {M}, F_B the bite force on the mandible in {S}, friction 0 or 1. No p for a
-    model (its numbers folded in). Built once per mechanism (or model).
+    applied torques, B the bite point in {M}, F_B the bite force on the mandible in {S}, friction 0 or 1. Built on
+    the model's numbers ``params`` (no p for a model's constants, folded in), once per numbers.
     """
-    return cached_graph(model_or_mechanism, ("forward-residual",), lambda: _residual(model_or_mechanism))
+    return cached_graph(params, ("forward-residual",), lambda: _residual(params))
 
 
-def _residual(model_or_mechanism) -> ca.Function:
-    m = symbols(model_or_mechanism)
+def _residual(params: SymbolicModel) -> ca.Function:
+    m = params
     extra, names = parameter_input(m)
-    n, nN = n_coordinates(m), n_unknowns(m)
+    n, nN = n_coordinates(m.mechanism), n_unknowns(m.mechanism)
     q, dq, ddq, N = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n), ca.SX.sym("N", nN)
     tau, B, F, fl = ca.SX.sym("tau", 6), ca.SX.sym("B", 3), ca.SX.sym("F_B", 3), ca.SX.sym("friction")
     # the graphs of the kinematics and of the Newton-Euler coefficients on the same parameters
-    kin = kinematics_kernel(model_or_mechanism, ORIENTATION).graph()
+    kin = kinematics_kernel(m.mechanism, ORIENTATION).graph(params)
     theta = kin(q, dq, ca.SX.zeros(n), *extra)[KINEMATICS_OUTPUTS.index("theta")]
-    D = coefficients_kernel(model_or_mechanism, ORIENTATION).graph()(theta, q, dq, ddq, F, B, *extra)[0]
+    D = coefficients_kernel(m.mechanism, ORIENTATION).graph(params)(theta, q, dq, ddq, F, B, *extra)[0]
     r = forces_sx(m, D, N, fl)["tau"] - tau
     return ca.Function("forward_residual", [q, dq, ddq, N, tau, B, F, fl, *extra], [r], [*RESIDUAL_INPUTS, *names], ["r"],
                        {"cse": True})
 
 
-def plant_outputs_function(model_or_mechanism: Model | str) -> ca.Function:
+def plant_outputs_function(params: SymbolicModel) -> ca.Function:
     """What is reported of the plant at a state with its solved accelerations and normal forces:
     (q, dq, ddq, N, B, F_B, friction, p) -> theta, dtheta (crank angles and rates), axial and radial loads at the
-    crank bearings G_i (N, the ``bearing-load`` check), margin (> 0 inside the workspace, :func:`workspace_margin_sx`)."""
-    return cached_graph(model_or_mechanism, ("plant-outputs",), lambda: _outputs(model_or_mechanism))
+    crank bearings G_i (N, the ``bearing-load`` check), margin (> 0 inside the workspace, :func:`workspace_margin_sx`);
+    on the model's numbers ``params``."""
+    return cached_graph(params, ("plant-outputs",), lambda: _outputs(params))
 
 
-def _outputs(model_or_mechanism) -> ca.Function:
-    m = symbols(model_or_mechanism)
+def _outputs(params: SymbolicModel) -> ca.Function:
+    m = params
     extra, names = parameter_input(m)
-    n, nN = n_coordinates(m), n_unknowns(m)
+    n, nN = n_coordinates(m.mechanism), n_unknowns(m.mechanism)
     q, dq, ddq, N = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n), ca.SX.sym("N", nN)
     B, F, fl = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3), ca.SX.sym("friction")
-    out = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(model_or_mechanism, ORIENTATION).graph()(q, dq, ddq, *extra)))
-    D = coefficients_kernel(model_or_mechanism, ORIENTATION).graph()(out["theta"], q, dq, ddq, F, B, *extra)[0]
+    out = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(m.mechanism, ORIENTATION).graph(params)(q, dq, ddq, *extra)))
+    D = coefficients_kernel(m.mechanism, ORIENTATION).graph(params)(out["theta"], q, dq, ddq, F, B, *extra)[0]
     forces = forces_sx(m, D, N, fl)
     margin = workspace_margin_sx(m, out)
     return ca.Function("plant_outputs", [q, dq, ddq, N, B, F, fl, *extra],
@@ -111,12 +113,12 @@ def plant_outputs_kernel(mechanism: str) -> KernelSpec:
     """:func:`plant_outputs_function` compiled (p as its last input), for whole simulations at once."""
     name = f"plant_outputs_{c_name(mechanism)}"
 
-    def build():
-        fn = plant_outputs_function(mechanism)
+    def build(params):
+        fn = plant_outputs_function(params)
         x = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
         return ca.Function(name, x, fn.call(x), fn.name_in(), fn.name_out(), {"cse": True})
 
-    return KernelSpec(name, build, graph_key(mechanism))
+    return KernelSpec(name, build, (mechanism,), mechanism)
 
 
 def workspace_margin_sx(m, kinematics: dict) -> ca.SX:
@@ -137,7 +139,7 @@ def workspace_margin_sx(m, kinematics: dict) -> ca.SX:
 FORWARD_OUTPUTS = {"target": ("ddq", "N", "residual"), "6rss": ("ddq", "residual")}
 
 
-def forward_kernel(model_or_mechanism: Model | str) -> KernelSpec:
+def forward_kernel(mechanism: str) -> KernelSpec:
     """Per-sample forward dynamics (q, dq, tau, B, F_B, friction, p) -> q_ddot, N (target only), residual.
 
     q, dq: the independent coordinates in Euler angles and their rates (m, rad; m/s, rad/s); tau (N m); B the bite
@@ -146,13 +148,11 @@ def forward_kernel(model_or_mechanism: Model | str) -> KernelSpec:
     residual = max abs(tau_NE - tau) at the answer (N m; rounding when the Newton iteration converged). No p for a
     model (its numbers folded in, as ``chewbot export-c`` writes it).
     """
-    mech = mechanism_of(model_or_mechanism)
-    name = f"forward_{c_name(mech)}"
+    name = f"forward_{c_name(mechanism)}"
 
-    def build():
-        m = symbols(model_or_mechanism)
-        n, nN = n_coordinates(m), n_unknowns(m)
-        R = residual_function(model_or_mechanism)
+    def build(params):
+        n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
+        R = residual_function(params)
         x = [ca.SX.sym(R.name_in(i), R.sparsity_in(i)) for i in range(R.n_in())]
         r = R.call(x)[0]
         newton_step = ca.Function("forward_newton_step", x, [r, -ca.solve(ca.jacobian(r, ca.vertcat(x[2], x[3])), r)],
@@ -189,9 +189,9 @@ def forward_kernel(model_or_mechanism: Model | str) -> KernelSpec:
         res = ca.norm_inf(r)
         outs = [z[:n], z[n:], res] if nN else [z[:n], res]
         return ca.Function(name, [q, dq, tau, B, F, fl, *extra], outs,
-                           ["q", "dq", "tau", "B", "F_B", "friction", *(["p"] if extra else [])], list(FORWARD_OUTPUTS[mech]))
+                           ["q", "dq", "tau", "B", "F_B", "friction", *(["p"] if extra else [])], list(FORWARD_OUTPUTS[mechanism]))
 
-    return KernelSpec(name, build, graph_key(model_or_mechanism, NEWTON_ITERATIONS))
+    return KernelSpec(name, build, (mechanism, NEWTON_ITERATIONS), mechanism)
 
 
 @dataclass(frozen=True)

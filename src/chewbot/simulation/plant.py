@@ -24,7 +24,8 @@ from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.model.vector import N_P
-from chewbot.model.symbolic import c_name, cached_graph, symbols
+from chewbot.compiled.cache import cached_graph, symbols
+from chewbot.model.symbolic import c_name
 from chewbot.simulation.forward import ORIENTATION, n_coordinates, residual_function, workspace_margin_sx
 from chewbot.simulation.integrator import C, STAGES, TOLERANCE, radau_step
 
@@ -39,20 +40,21 @@ class SimulationError(ChewbotError):
     """The plant's equations of motion cannot be solved (names the time and the residual)."""
 
 
-def state_function(model_or_mechanism: Model | str) -> ca.Function:
+def state_function(mechanism: str) -> ca.Function:
     """(q, dq, p) -> theta, dtheta (crank angles and rates, rad, rad/s) and margin (> 0 inside the workspace,
     :func:`chewbot.simulation.forward.workspace_margin_sx`) of a state in the independent coordinates."""
 
+    m = symbols(mechanism)
+
     def build():
-        m = symbols(model_or_mechanism)
-        n = n_coordinates(m)
+        n = n_coordinates(mechanism)
         q, dq = ca.SX.sym("q", n), ca.SX.sym("dq", n)
-        extra = [m.p] if m.p.is_symbolic() else []
-        out = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(model_or_mechanism, ORIENTATION).graph()(q, dq, ca.SX.zeros(n), *extra)))
+        extra = [m.p]
+        out = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(mechanism, ORIENTATION).graph()(q, dq, ca.SX.zeros(n), *extra)))
         return ca.Function("plant_state", [q, dq, *extra], [out["theta"], out["dtheta"], workspace_margin_sx(m, out)],
                            ["q", "dq", *(["p"] if extra else [])], ["theta", "dtheta", "margin"], {"cse": True})
 
-    return cached_graph(model_or_mechanism, ("plant-state",), build)
+    return cached_graph(m, ("plant-state",), build)
 
 
 def held_stage(mechanism: str) -> ca.Function:
@@ -63,10 +65,10 @@ def held_stage(mechanism: str) -> ca.Function:
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
         w, s = ca.SX.sym("w", 9), ca.SX.sym("s", 4 + N_P)
-        r = residual_function(mechanism)(q, v, a, N, w[:6], s[:3], w[6:], s[3], s[4:])
+        r = residual_function(symbols(mechanism))(q, v, a, N, w[:6], s[:3], w[6:], s[3], s[4:])
         return ca.Function("held_stage", [q, v, a, N, w, s], [r])
 
-    return cached_graph(mechanism, ("held-stage",), build)
+    return cached_graph(symbols(mechanism), ("held-stage",), build)
 
 
 STEP_INPUTS = ("q0", "v0", "z0", "W", "s", "h")
@@ -78,7 +80,7 @@ def step_kernel(mechanism: str, name: str, stage: Callable[[], ca.Function], key
     residual ``stage()``, followed by the crank angles, rates and workspace margin at the end of the step. The plant's
     p is ``s[n_p_offset : n_p_offset + N_P]``."""
 
-    def build():
+    def build(params):
         st = stage()
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         core = radau_step(f"{name}_radau", st, n, nN)
@@ -87,7 +89,7 @@ def step_kernel(mechanism: str, name: str, stage: Callable[[], ca.Function], key
         theta, dtheta, margin = state_function(mechanism)(q1, v1, ins[4][n_p_offset:n_p_offset + N_P])
         return ca.Function(name, ins, [q1, v1, z1, res, theta, dtheta, margin], list(STEP_INPUTS), list(STEP_KERNEL_OUTPUTS))
 
-    return KernelSpec(name, build, (mechanism, *key))
+    return KernelSpec(name, build, (mechanism, *key), mechanism)
 
 
 def plant_step_kernel(mechanism: str) -> KernelSpec:

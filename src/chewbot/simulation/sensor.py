@@ -26,7 +26,7 @@ import numpy as np
 from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
-from chewbot.model.symbolic import c_name, graph_key, symbols
+from chewbot.model.symbolic import c_name
 from chewbot.simulation.controllers import State
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 
@@ -38,8 +38,8 @@ def forward_kinematics_kernel(mechanism: str) -> KernelSpec:
     (Euler angles), and the scaled closure residual at the answer (m^2 / m^2)."""
     name = f"forward_kinematics_{c_name(mechanism)}"
 
-    def build():
-        m = symbols(mechanism)
+    def build(params):
+        m = params
         n = n_coordinates(mechanism)
         theta, q = ca.SX.sym("theta", 6), ca.SX.sym("q", n)
         closure = closure_function(mechanism, ORIENTATION)
@@ -56,7 +56,7 @@ def forward_kinematics_kernel(mechanism: str) -> KernelSpec:
         return ca.Function(name, [theta, q, m.p], [x, ca.norm_inf(residual(x)[0])], ["theta", "q_guess", "p"], ["q", "residual"],
                            {"cse": True})
 
-    return KernelSpec(name, build, graph_key(mechanism, FK_ITERATIONS))
+    return KernelSpec(name, build, (mechanism, FK_ITERATIONS), mechanism)
 
 
 @dataclass
@@ -78,7 +78,7 @@ class CrankSensor:
         self._rng = np.random.default_rng(self.seed)
         self._q, self._dq, self._t = np.array(q, float), np.array(dq, float), t
         self._fk = native(forward_kinematics_kernel(self.model.mechanism))
-        if len(q) != n_coordinates(self.model):
+        if len(q) != n_coordinates(self.model.mechanism):
             raise ValueError(f"the sensor's model is a {self.model.mechanism}, the state has {len(q)} coordinates")
 
     def __call__(self, t: float, theta: np.ndarray) -> State:

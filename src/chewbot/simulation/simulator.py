@@ -29,7 +29,7 @@ import numpy as np
 from chewbot.compiled.kernels import KernelSpec, evaluate, native, prepare_kernels
 from chewbot.errors import KinematicsError
 from chewbot.model.vector import N_P
-from chewbot.model.symbolic import cached_graph
+from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.simulation.controllers import ModelBasedController, State
 from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C
@@ -98,10 +98,10 @@ def closed_loop_stage(controller: ModelBasedController) -> ca.Function:
         gains, B_c, p_c, limit = s[4 + N_P: 4 + N_P + ng], s[4 + N_P + ng: 7 + N_P + ng], s[7 + N_P + ng: 7 + 2 * N_P + ng], s[-1]
         tau = law(q, v, w[:n], w[n:2 * n], w[2 * n:3 * n], w[3 * n:3 * n + 3], gains, B_c, p_c)
         tau = ca.fmin(ca.fmax(tau, -limit), limit)
-        r = residual_function(mech)(q, v, a, N, tau, s[:3], w[3 * n + 3:], s[3], s[4:4 + N_P])
+        r = residual_function(symbols(mech))(q, v, a, N, tau, s[:3], w[3 * n + 3:], s[3], s[4:4 + N_P])
         return ca.Function("closed_loop_stage", [q, v, a, N, w, s], [r])
 
-    return cached_graph(mech, ("closed-loop-stage", law.name(), controller.kind, controller.method, controller.goal,
+    return cached_graph(symbols(mech), ("closed-loop-stage", law.name(), controller.kind, controller.method, controller.goal,
                                controller.friction), build)
 
 

@@ -145,8 +145,9 @@ def default_task(model: Model | None = None, side: str = "left", params: Chewing
 def lift_to_full(model: Model, task: Task) -> Task:
     """The same task with all six coordinates (Z and gamma from the model's sockets)."""
     from chewbot.compiled.kernels import evaluate
+    from chewbot.compiled.cache import folded
     from chewbot.kinematics.functions import parasitic_function
 
-    X, dX, ddX = evaluate(parasitic_function(model), task.q, task.dq, task.ddq)
+    X, dX, ddX = evaluate(parasitic_function(folded(model)), task.q, task.dq, task.ddq)
     return Task(name=task.name, t=task.t, coords=FULL_COORDS, q=X, dq=dX, ddq=ddX, force=task.force, lines=task.lines,
                 side=task.side, source=task.source, meta=task.meta)

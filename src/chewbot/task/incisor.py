@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from chewbot.compiled.cache import cached_graph, folded
 from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.options import check_orientation
@@ -108,11 +109,11 @@ def _incisor_function(model: Model, orientation: str) -> ca.Function:
     """(q, dq, ddq) -> position, velocity and acceleration of the incisor point I in {S}."""
 
     def build():
-        s = symbolic(model, orientation)
+        s = symbolic(folded(model), orientation)
         levels = _levels(s.point(model.incisor), s.q, s.dq, s.ddq)
         return ca.Function("incisor", [s.q, s.dq, s.ddq], list(levels), ["q", "dq", "ddq"], ["I", "dI", "ddI"])
 
-    return model.cached(("incisor", orientation), build)
+    return cached_graph(folded(model), ("incisor", orientation), build)
 
 
 def _problems(model: Model, orientation: str, pin: str):
@@ -120,7 +121,7 @@ def _problems(model: Model, orientation: str, pin: str):
     the displacement, velocity and acceleration NLP solvers, and the scale of their variables."""
 
     def build():
-        s = symbolic(model, orientation)
+        s = symbolic(folded(model), orientation)
         incisor = _levels(s.point(model.incisor), s.q, s.dq, s.ddq)
         equal = [_levels(_pinned_sx(s, pin), s.q, s.dq, s.ddq)]
         if s.unit is not None:
@@ -146,7 +147,7 @@ def _problems(model: Model, orientation: str, pin: str):
             solvers.append(ca.nlpsol(f"incisor_{LEVELS[level]}", "sqpmethod", nlp, _SQP))
         return constraints, solvers, np.asarray(scale).ravel()
 
-    return model.cached(("incisor", orientation, pin), build)
+    return cached_graph(folded(model), ("incisor", orientation, pin), build)
 
 
 def incisor_path(model: Model, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, orientation: str = "euler-angles"):
@@ -267,7 +268,7 @@ def _angles(model: Model, orientation: str, q, dq, ddq, t):
 
 def _pose_rates(model: Model) -> ca.Function:
     def build():
-        s = symbolic(model, "euler-parameters")
+        s = symbolic(folded(model), "euler-parameters")
         return ca.Function("pose_rates", [s.q, s.dq, s.ddq], list(_levels(s.pose, s.q, s.dq, s.ddq)))
 
-    return model.cached(("incisor", "pose_rates"), build)
+    return cached_graph(folded(model), ("incisor", "pose_rates"), build)
