@@ -24,12 +24,6 @@ HEADER_CELL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\]
 _RATE_UNIT = re.compile(r"^(.+?)\s*/\s*(\w+)\s*(\^\s*2|2|²)?$")
 
 
-def header_cell(cell: str) -> tuple[str, str | None] | None:
-    """(name, unit or None) of a header cell ``NAME`` or ``NAME [unit]``; None if it is neither."""
-    m = HEADER_CELL.match(cell)
-    return None if m is None else (m.group(1), m.group(2))
-
-
 def column_header(name: str, unit: str) -> str:
     """The header cell of a column: ``name [unit]``, or the name alone without a unit."""
     return f"{name} [{unit}]" if unit else name

@@ -95,9 +95,6 @@ class Problem:
         return self._nlp
 
 
-PROBLEM_KERNELS = ("objective", "value", "limits", "start")
-
-
 def problem_kernels(name: str, graph: Callable[[], ProblemGraph], key: tuple, has_start: bool = True) -> list[KernelSpec]:
     """The kernels of a :class:`Problem` (objective, value, limits and start, see there) named ``name_...``, of the
     expressions ``graph()`` returns; ``key``: what determines the graph besides chewbot's source (see

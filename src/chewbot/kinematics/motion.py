@@ -69,7 +69,6 @@ class Kinematics:
     side: str
     points: dict
     transmission: np.ndarray
-    task_name: str = ""
     kappa: np.ndarray | None = None
 
     @property
@@ -238,6 +237,5 @@ def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles"
         side=task.side,
         points={k: out[k] for k in ("T_L", "T_R", "I", "B_L", "B_R")},
         transmission=out["transmission"],
-        task_name=task.name,
         kappa=reciprocal_condition(out["J_theta1_angles"]),
     )

@@ -35,7 +35,6 @@ COORDINATES = {
     ("6rss", "euler-angles"): ("X", "Y", "Z", "alpha", "beta", "gamma"),
     ("6rss", "euler-parameters"): ("X", "Y", "Z", "e0", "e1", "e2", "e3"),
 }
-POSE = {"euler-angles": ("X", "Y", "Z", "alpha", "beta", "gamma"), "euler-parameters": ("X", "Y", "Z", "e0", "e1", "e2", "e3")}
 
 
 def gamma_parasitic_sx(params: SymbolicModel, alpha, beta):

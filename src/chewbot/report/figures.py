@@ -95,14 +95,6 @@ def figure_jobs(view, method: str | None, folder: Path, contact: str = "") -> li
     return [(name, partial(draw[name], view.series, Path(folder) / name)) for name in figure_names(view.series.columns, method)]
 
 
-def write_figures(view, method: str | None, folder: Path, contact: str = "") -> list[Path]:
-    """Draw the figures of a run (:func:`figure_jobs`) into ``folder``; their paths."""
-    jobs = figure_jobs(view, method, folder, contact)
-    with drawn(jobs):
-        pass
-    return [Path(folder) / name for name, _ in jobs]
-
-
 @contextmanager
 def drawn(jobs: list[tuple[str, Callable[[], Path]]], progress=None):
     """Draw ``jobs`` (name, function) while the block runs: a forked process takes them one by one as soon as the

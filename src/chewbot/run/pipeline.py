@@ -140,15 +140,18 @@ class Chunk:
         return self.part.n
 
     @cached_property
-    def kinematics(self) -> Kinematics:
+    def _kinematic_stage(self) -> tuple[Kinematics, Table]:
         self.step("kinematics", done=self.offset)
         t0 = time.perf_counter()
         kin = _kinematics(self.model, self.task, self.part, self.offset, self.options.orientation, self.theta_before)
         table = kinematics_table(kin)
         singularity_columns(table, kin)
-        self._kinematic_columns = table
         self.timings["kinematics_s"] = time.perf_counter() - t0
-        return kin
+        return kin, table
+
+    @property
+    def kinematics(self) -> Kinematics:
+        return self._kinematic_stage[0]
 
     @cached_property
     def dynamics(self) -> Dynamics | None:
@@ -167,8 +170,7 @@ class Chunk:
     @property
     def kinematic_columns(self) -> Table:
         """The kinematics' columns of results.csv with the transmission angles and kappa_J (no inverse dynamics)."""
-        self.kinematics
-        return self._kinematic_columns
+        return self._kinematic_stage[1]
 
     @cached_property
     def columns(self) -> Table:
@@ -245,8 +247,7 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
     theta_end, carry = None, None
     for start in range(0, max(task.n, 1), size):
         part = Chunk(model, task, options, start, size, theta_end, carry, progress, check)
-        part.table
-        theta_end = part.kinematics.theta[-1] if part.n else theta_end
+        theta_end = part.kinematics.theta[-1] if part.table.n else theta_end
         carry = part.dynamics.carry if part.dynamics is not None else None
         yield part
 

@@ -4,8 +4,8 @@ A controller sees the time and a state estimate (:class:`State`: the independent
 their rates) and returns the six torques it commands (N m); the simulator saturates them at the actuators' limit and
 holds them until the next tick (:mod:`chewbot.simulation.simulator`). Any object with that call is a controller.
 
-The built-in controllers (:class:`Feedforward`, :class:`PD`, :class:`ComputedTorque`) also have a CasADi function of
-one signature, ``(q, dq, q_ref, dq_ref, ddq_ref, F_B, gains, B, p) -> tau``, which is what they evaluate, compiled,
+The built-in controllers (:class:`ModelBasedController` of kind feedforward, pd or computed-torque) also have a CasADi
+function of one signature, ``(q, dq, q_ref, dq_ref, ddq_ref, F_B, gains, B, p) -> tau``, which is what they evaluate, compiled,
 at each tick, and what the simulator puts inside its integrator's stages for ``rate=None`` (``--rate continuous``).
 Their model is the controller's (``--model`` with ``--set``), which may differ from the plant's; the bite force they
 use is the task's, or zero when it is hidden from them (``--bite-unknown``).
@@ -306,22 +306,3 @@ class ModelBasedController:
             self._kernel, self._shared = native(self.kernel_spec()), self.shared()
         q_ref, dq_ref, ddq_ref, force = self.reference.state(t)
         return self._kernel(state.q, state.dq, q_ref, dq_ref, ddq_ref, self.known_force(force), *self._shared)[0]
-
-
-def Feedforward(model: Model, reference: Reference, method: str = "hessian", goal: str | None = None, friction: bool = False,
-                bite_known: bool = True, gains: Gains | None = None) -> ModelBasedController:
-    """The inverse-dynamics torques of the reference, no feedback."""
-    return ModelBasedController("feedforward", model, reference, gains or Gains.load(mechanism=model.mechanism), method,
-                                goal, friction, bite_known)
-
-
-def PD(model: Model, reference: Reference, gains: Gains | None = None) -> ModelBasedController:
-    """Independent PD on the crank angles (the controller's model gives them from the state and the reference)."""
-    return ModelBasedController("pd", model, reference, gains or Gains.load(mechanism=model.mechanism))
-
-
-def ComputedTorque(model: Model, reference: Reference, method: str = "hessian", goal: str | None = None,
-                   friction: bool = False, bite_known: bool = True, gains: Gains | None = None) -> ModelBasedController:
-    """tau = ID(q, q_dot, q_ddot_ref + kd e_dot + kp e) at the state it is given."""
-    return ModelBasedController("computed-torque", model, reference, gains or Gains.load(mechanism=model.mechanism),
-                                method, goal, friction, bite_known)

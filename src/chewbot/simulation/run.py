@@ -41,9 +41,6 @@ from chewbot.simulation.sensor import CrankSensor
 from chewbot.simulation.simulator import DEFAULT_RATE, Simulation, simulate
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
-# Drift of the constraints in the simulated poses above this is reported as an error of the simulation (m): the plant
-# is integrated in independent coordinates, so what remains is rounding in the kinematics (about 1e-15 m).
-DRIFT_TOLERANCE_M = 1e-9
 
 
 @dataclass

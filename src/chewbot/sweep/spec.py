@@ -306,7 +306,7 @@ def parse_spec(raw: dict, source: str = "<spec>", base: Path | None = None) -> S
             raise top.error("samples", "must be at least 1")
         if kind == "sobol" and values["samples"] & (values["samples"] - 1):
             raise top.error("samples", f"{values['samples']} base samples: Sobol' sequences need a power of 2 (e.g. 1024)")
-        values["parameters"] = _parameters(top, ("uniform", "normal", "lognormal"))
+        values["parameters"] = _parameters(top, DISTRIBUTIONS)
         if kind == "sobol":
             sobol = _Reader(top.get("sobol", dict, {}), source, "sobol.")
             values["resamples"] = sobol.get("resamples", int, 100)
