@@ -6,13 +6,15 @@ which must take over SIGINT before anything heavy loads: :mod:`chewbot.__main__`
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
 __all__ = ["BUILTIN_MODELS", "ChewbotError", "KinematicsError", "Model", "ParameterError", "TaskError", "__version__",
            "load_model"]
 
 
 def __getattr__(name: str):
+    if name == "__version__":
+        from chewbot.files import VERSION
+
+        return VERSION
     if name in ("ChewbotError", "KinematicsError", "ParameterError", "TaskError"):
         from chewbot import errors
 

@@ -46,9 +46,9 @@ _flags_without_a_type()
 
 def _version(value: bool) -> None:
     if value:
-        from chewbot import __version__
+        from chewbot.files import VERSION
 
-        stdout.print(f"chewbot {__version__}")
+        stdout.print(f"chewbot {VERSION}")
         raise typer.Exit()
 
 

@@ -31,8 +31,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from chewbot.errors import ChewbotError
 
 
@@ -42,6 +40,10 @@ class OutputError(ChewbotError):
 
 class OutputExistsError(OutputError):
     """The output exists, and ``force`` was not given or chewbot did not write it."""
+
+
+# chewbot's version (chewbot.__version__): every output carries it, in its marker line or its record.
+VERSION = "0.1.0"
 
 
 # --- signals held back -------------------------------------------------------------------------------------------
@@ -124,9 +126,7 @@ def marker_line(comment: str = "#", about: str = "") -> str:
     ``comment`` opens a comment in the file's format: ``#`` for CSV (the task reader skips such lines) and
     TOML, ``<!--`` for Markdown and HTML (closed on the same line).
     """
-    from chewbot import __version__
-
-    text = f"{comment} {_MARKER_TEXT} {__version__}" + (f": {about}" if about else "")
+    text = f"{comment} {_MARKER_TEXT} {VERSION}" + (f": {about}" if about else "")
     return text + " -->" if comment == "<!--" else text
 
 
@@ -449,10 +449,8 @@ def to_json(obj) -> str:
             return {str(k): clean(v) for k, v in o.items()}
         if isinstance(o, (list, tuple)):
             return [clean(v) for v in o]
-        if isinstance(o, np.ndarray):
+        if hasattr(o, "tolist"):  # NumPy arrays and scalars (tolist gives Python numbers)
             return clean(o.tolist())
-        if isinstance(o, (np.floating, np.integer, np.bool_)):
-            return clean(o.item())
         if isinstance(o, float) and not math.isfinite(o):
             return None
         if isinstance(o, Path):

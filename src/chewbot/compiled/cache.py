@@ -36,6 +36,8 @@ from typing import Callable
 
 import casadi as ca
 
+from chewbot.files import VERSION
+
 DEFAULT_MAX_MB = 200  # cap of the kernel cache; a full set of chewbot's kernels takes about 4 MB
 _OWN_DIR = re.compile(r"^(chewbot-[^/]+-casadi-[^/]+|casadi-[0-9][^/]*)$")  # casadi-X: the layout before version folders
 TEMP = re.compile(r"^\.(?:.+)\.(?P<pid>\d+)\.[A-Za-z0-9_]+\.(?:tmp|build)$")
@@ -115,7 +117,7 @@ class KernelCache:
 
     def folder(self) -> Path:
         """The folder of this chewbot and CasADi version in the cache (created)."""
-        path = self.root() / f"chewbot-{_chewbot_version()}-casadi-{ca.__version__}"
+        path = self.root() / f"chewbot-{VERSION}-casadi-{ca.__version__}"
         path.mkdir(parents=True, exist_ok=True)
         return path
 
@@ -134,7 +136,7 @@ class KernelCache:
         with ``flags``."""
         cc = c_compiler() or ""
         native = any(flag.startswith("-march=native") or flag.startswith("-mcpu=native") for flag in flags)
-        return LibraryKey(name, repr(key), _chewbot_version(), ca.__version__, self._identity("cc", cc) if cc else "",
+        return LibraryKey(name, repr(key), VERSION, ca.__version__, self._identity("cc", cc) if cc else "",
                           tuple(flags), self._identity("processor") if native else "", self.source_digest(modules))
 
     def library(self, name: str, key: LibraryKey) -> Path:
@@ -255,12 +257,6 @@ def folded(model):
     from chewbot.model.vector import vector_digest
 
     return KERNELS.graph(("symbols", "model", model.mechanism, vector_digest(model)), lambda: SymbolicModel.of(model))
-
-
-def _chewbot_version() -> str:
-    from chewbot import __version__
-
-    return __version__
 
 
 def _module_file(module: str, root: Path) -> str | None:

@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, as_spec
-from chewbot.files import EXPORT_FOLDER, atomic_folder, to_json
+from chewbot.files import EXPORT_FOLDER, VERSION, atomic_folder, to_json
 
 # Version of chewbot-export.json, the exported folder's marker.
 EXPORT_FORMAT = 1
@@ -152,10 +152,8 @@ def export_c(kernels: list[Kernel], out: Path, prefix: str = "chewbot_kernels", 
     with ``force`` and only if chewbot exported it (:func:`chewbot.files.atomic_folder`); ``inputs`` (the
     model files) may not lie inside it.
     """
-    from chewbot import __version__
-
     with atomic_folder(Path(out), force, EXPORT_FOLDER, inputs) as tmp:
-        (tmp / EXPORT_FOLDER.file).write_text(to_json({EXPORT_FOLDER.key: EXPORT_FORMAT, "chewbot": __version__, "model": model_name,
+        (tmp / EXPORT_FOLDER.file).write_text(to_json({EXPORT_FOLDER.key: EXPORT_FORMAT, "chewbot": VERSION, "model": model_name,
                                                        "prefix": prefix, "kernels": [k.name for k in kernels]}))
         cg = ca.CodeGenerator(f"{prefix}.c", {"with_header": True})
         for k in kernels:
