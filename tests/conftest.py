@@ -1,26 +1,11 @@
-"""Shared fixtures: the built-in models and the kinematics of the default task, built once per session."""
+"""Shared fixtures: the built-in models, both mechanisms, a small task file (helpers called with arguments are in
+support.py)."""
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import pytest
-
-from chewbot import load_model
-from chewbot.kinematics.motion import solve_kinematics
-from chewbot.task.default import default_task
-
-
-@functools.cache
-def model(name: str):
-    return load_model(name)
-
-
-@functools.cache
-def default_kinematics(name: str = "target", side: str = "left", orientation: str = "euler-angles"):
-    m = model(name)
-    return solve_kinematics(m, default_task(m, side), orientation)
+from support import model
 
 
 @pytest.fixture(scope="session")

@@ -32,7 +32,7 @@ from chewbot.run.options import RunOptions
 from chewbot.model.chains import crank_tips
 from chewbot.rotation import matrix_from_euler_angles
 
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 
 def _coupler_ends(m, kin):

@@ -1,4 +1,4 @@
-"""The command line end to end: help, models, check-model, run, exit codes, and bad input of every kind."""
+"""The command line end to end: models, check-model, run, exit codes, and bad input of every kind (help: test_help.py)."""
 
 from __future__ import annotations
 
@@ -27,15 +27,6 @@ def _edited(task_csv, tmp_path, name: str, edit) -> str:
     path = tmp_path / name
     path.write_text("\n".join(edit(lines)) + "\n")
     return str(path)
-
-
-def test_help_everywhere_with_examples():
-    top = invoke("--help")
-    assert top.exit_code == 0 and "Exit codes" in top.output
-    for command in ("run", "models", "check-model", "study", "bench"):
-        result = invoke(command, "--help")
-        assert result.exit_code == 0, command
-        assert "chewbot " + command in result.output or "Example" in result.output, command
 
 
 def test_models_lists_the_builtin_files():

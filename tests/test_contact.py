@@ -23,7 +23,7 @@ from chewbot.errors import InfeasibleError
 from chewbot.model.params import load_model
 from chewbot.bench.reference import _equations, slsqp_distribution
 
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 FRICTIONLESS = ("hessian", "lagrange", "liang", "6rss-core")
 # One chewing cycle of the default task (t = 1.5 .. 2.3 s): the bite burst and, under G2, the right condyle pulled.

@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.analysis.coupling import coupling, mci
 from chewbot.dynamics.energy import energies

@@ -12,7 +12,7 @@ import functools
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.compiled.cache import folded
 from chewbot.compiled.kernels import evaluate

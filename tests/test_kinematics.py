@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError

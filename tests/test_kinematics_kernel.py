@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.compiled.cache import symbols
 from chewbot.compiled.kernels import evaluate

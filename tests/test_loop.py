@@ -7,7 +7,7 @@ import functools
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.analysis.coupling import coupling
 from chewbot.compiled.kernels import FLAGS, c_compiler

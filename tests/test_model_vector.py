@@ -8,7 +8,7 @@ import tomllib
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.compiled.kernels import c_compiler, evaluate, native
 from chewbot.dynamics.core6rss import torque_kernel

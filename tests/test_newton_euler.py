@@ -17,10 +17,9 @@ from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.dynamics.newton_euler import DELTA_N, EPS_V_T
 from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
-from chewbot.model import Limits
 from chewbot.rotation import matrix_from_euler_angles
 
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 
 @functools.cache
@@ -101,7 +100,7 @@ def test_every_body_satisfies_its_newton_euler_equations(name, goal):
     tol_F, tol_M = 1e-10 * scale_F, 1e-10 * scale_M
 
     # couplers: Newton at the mass centre E, Euler about E with the rod's inertia tensor (no spin inertia)
-    pos_M, a_M = [], []
+    pos_M = []
     for i in range(6):
         P, r, v, a = body(m.M[i])
         S = m.G[i] + r_GS[:, i]

@@ -18,14 +18,13 @@ import pytest
 pin = pytest.importorskip("pinocchio", reason="Pinocchio (the package pin, a test extra) is not installed")
 
 from chewbot.kinematics.motion import solve_kinematics  # noqa: E402
-from chewbot.model.chains import crank_tips
+from chewbot.model.chains import crank_tips  # noqa: E402
 from chewbot.rotation import matrix_from_euler_angles  # noqa: E402
 from chewbot.simulation.forward import forward_dynamics  # noqa: E402
 from chewbot.simulation.run import motion_task  # noqa: E402
 from chewbot.task.default import default_task  # noqa: E402
 
-from conftest import model  # noqa: E402
-from test_simulation import random_states  # noqa: E402
+from support import model, random_states  # noqa: E402
 
 
 def build(m):

@@ -12,7 +12,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 from typer.testing import CliRunner
 
 from chewbot.compiled.kernels import NativeFunction, c_compiler, evaluate

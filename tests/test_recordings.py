@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import model
+from support import model
 from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation

@@ -26,7 +26,7 @@ from chewbot.report import view as report_view
 from chewbot.report.summary import column_stats, infeasible_samples, near_singular, performance_indices
 from chewbot.table import Table
 from chewbot.run.columns import kinematics_table
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 # Debian's Chromium, or another build named by $CHEWBOT_CHROMIUM

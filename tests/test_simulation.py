@@ -16,31 +16,16 @@ from chewbot.dynamics.dalembert import reduced_kernel
 from chewbot.dynamics.energy import energies
 from chewbot.dynamics.hessian import hessian_rates
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.model.vector import N_P
 from chewbot.model.params import load_model
 from chewbot.simulation.controllers import Gains, ModelBasedController, inverse_dynamics_function
-from chewbot.simulation.forward import forward_dynamics, n_coordinates, residual_function
+from chewbot.simulation.forward import forward_dynamics, residual_function
 from chewbot.simulation.plant import Plant
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.run import SimulateOptions, compute, constraint_drift, motion_task
 from chewbot.simulation.simulator import simulate
 from chewbot.task.default import default_task, parameters_with
 
-from conftest import default_kinematics, model
-
-
-def random_states(name: str, count: int, seed: int):
-    """States near the default task's poses (random samples of it) with random rates and torques around those of
-    the task: q (count, n), dq, tau (count, 6), bite forces of the task."""
-    rng = np.random.default_rng(seed)
-    m = model(name)
-    ref = Reference.from_task(m, default_task(m))
-    k = rng.choice(ref.t.size, count, replace=False)
-    n = n_coordinates(name)
-    scale = np.where(np.arange(n) < (2 if n == 4 else 3), 0.02, 0.3)  # m/s and rad/s
-    dq = ref.dq[k] + rng.normal(0, 1, (count, n)) * scale
-    tau = rng.normal(0, 0.2, (count, 6))
-    return m, ref.q[k], dq, tau, ref.force[k]
+from support import default_kinematics, model, random_states
 
 
 def states_kinematics(m, q, dq, ddq, force):

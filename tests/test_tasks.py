@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import default_kinematics, model
+from support import default_kinematics, model
 
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.motion import solve_kinematics

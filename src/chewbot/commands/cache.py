@@ -7,7 +7,7 @@ import typer
 from chewbot.commands.common import EXIT_OUTPUT, fail, stdout
 from chewbot.errors import ChewbotError
 
-cache_app = typer.Typer(help="The kernel cache: where the compiled kernels are kept.", no_args_is_help=False,
+cache_app = typer.Typer(no_args_is_help=False,
                         add_completion=False, pretty_exceptions_enable=False)
 
 

@@ -1,0 +1,40 @@
+"""What several test modules share and that is not a fixture: the built-in models and the default task's kinematics,
+built once per session and called with arguments (a mechanism, a side, an orientation), and states of the robot
+near the default task. Not a test module: nothing is collected from it."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from chewbot.kinematics.motion import solve_kinematics
+from chewbot.model.params import load_model
+from chewbot.simulation.forward import n_coordinates
+from chewbot.simulation.reference import Reference
+from chewbot.task.default import default_task
+
+
+@functools.cache
+def model(name: str):
+    return load_model(name)
+
+
+@functools.cache
+def default_kinematics(name: str = "target", side: str = "left", orientation: str = "euler-angles"):
+    m = model(name)
+    return solve_kinematics(m, default_task(m, side), orientation)
+
+
+def random_states(name: str, count: int, seed: int):
+    """States near the default task's poses (random samples of it) with random rates and torques around those of
+    the task: q (count, n), dq, tau (count, 6), bite forces of the task."""
+    rng = np.random.default_rng(seed)
+    m = model(name)
+    ref = Reference.from_task(m, default_task(m))
+    k = rng.choice(ref.t.size, count, replace=False)
+    n = n_coordinates(name)
+    scale = np.where(np.arange(n) < (2 if n == 4 else 3), 0.02, 0.3)  # m/s and rad/s
+    dq = ref.dq[k] + rng.normal(0, 1, (count, n)) * scale
+    tau = rng.normal(0, 0.2, (count, 6))
+    return m, ref.q[k], dq, tau, ref.force[k]
