@@ -14,7 +14,7 @@ from pathlib import Path
 import typer
 
 from chewbot.identification import MAX_RELATIVE_SE
-from chewbot.task.smoothing import WINDOW_S
+from chewbot.task import WINDOW_S
 
 
 def identify(

@@ -21,12 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from chewbot.errors import TaskError
+from chewbot.task import WINDOW_S
 
 # Degree of the local polynomial: exact for quintics, so the acceleration keeps a cubic's worth of detail.
 POLYORDER = 5
-# Window length: 0.05 s passes the chewing band (cycles of ~0.8 s, harmonics below ~10 Hz) with an acceleration
-# error of ~4e-4 of its peak and cuts noise above ~40 Hz (at 1 kHz sampling; measured in docs/tasks.md).
-WINDOW_S = 0.05
 # Time steps may differ from their median by this fraction (rounding of the printed times), no more.
 UNIFORM_RTOL = 1e-3
 
