@@ -26,6 +26,7 @@ from chewbot.errors import ChewbotError
 from chewbot.files import RESULTS_FOLDER, OutputError, atomic_folder, atomic_members, to_json
 from chewbot.model import Model
 from chewbot.outputs.record import RunRecord, read_record, run_record
+from chewbot.report.figures import drawing_process
 from chewbot.report.folder import draw, drawing_names
 from chewbot.report.view import RunView, ViewBuilder, report_columns
 from chewbot.run.options import RunOptions
@@ -90,7 +91,7 @@ def write_run(options: RunOptions, out: Path, force: bool = False, progress=None
     options, model, task = inputs(options)
     step("kinematics", done=0, total=task.n)
     out = Path(out)
-    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp:
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp, drawing_process(figures) as drawer:
         totals = Totals(model, options)
         writer = ResultsWriter(tmp, task.t, run_view_columns(model, options.contact))
         try:
@@ -108,7 +109,7 @@ def write_run(options: RunOptions, out: Path, force: bool = False, progress=None
             writer.close()
         view = writer.view()
         step("figures and report", done=task.n)
-        written = draw(tmp, record, model, view, figures, report, step)
+        written = draw(tmp, record, model, view, figures, report, step, drawer=drawer)
     return RunRecord(record, model, checks, view, [out / RESULTS_FILE, out / RECORD_FILE, *(out / p.name for p in written)])
 
 
@@ -132,9 +133,9 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
     (:func:`chewbot.run.pipeline.compute`), atomically as :func:`write_run`."""
     step = _stepper(progress)
     out = Path(out)
-    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp:
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp, drawing_process(figures) as drawer:
         record, view = write_table(tmp, result.table, run_json(result), run_view_columns(result.model, result.options.contact), step)
-        draw(tmp, record, result.model, view, figures, report, step)
+        draw(tmp, record, result.model, view, figures, report, step, drawer=drawer)
     return out
 
 
@@ -175,25 +176,26 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     if record["model"].get("parameters_sha256") not in (None, vector_digest(model)):
         raise ChewbotError(f"{path}: the model {spec} (with the run's overrides) no longer has the run's parameters "
                            "(their SHA-256 differs): the figures and report would not show the run's robot")
-    columns = record.get("columns", {})
-    csv_path = folder / RESULTS_FILE
-    step("reading results.csv")
-    t = np.array([float(line.partition(",")[0]) for line in _data_lines(csv_path)])
-    if t.size != record["task"]["samples"]:
-        raise ChewbotError(f"{csv_path}: {t.size} rows, run.json says {record['task']['samples']} samples")
-    view = ViewBuilder(t, derived=run_view_columns(model, record["options"].get("contact", "bilateral")))
-    units = {name: c.get("unit", "") for name, c in columns.items()}
-    done = 0
-    for part in read_csv_chunks(csv_path, units, chunk):
-        step("reading results.csv", done=done, total=t.size)
-        part.descriptions = {name: c["description"] for name, c in columns.items() if c.get("description") and name in part.columns}
-        view.update(part)
-        done += part.n
-    view = view.result()
-    names = drawing_names(record, view, figures, report)
-    with atomic_members(folder, names, force) as tmp:
-        draw(tmp, record, model, view, figures, report, step, beside=folder)
-    return [folder / name for name in names]
+    with drawing_process(figures) as drawer:  # loads matplotlib while results.csv is read
+        columns = record.get("columns", {})
+        csv_path = folder / RESULTS_FILE
+        step("reading results.csv")
+        t = np.array([float(line.partition(",")[0]) for line in _data_lines(csv_path)])
+        if t.size != record["task"]["samples"]:
+            raise ChewbotError(f"{csv_path}: {t.size} rows, run.json says {record['task']['samples']} samples")
+        view = ViewBuilder(t, derived=run_view_columns(model, record["options"].get("contact", "bilateral")))
+        units = {name: c.get("unit", "") for name, c in columns.items()}
+        done = 0
+        for part in read_csv_chunks(csv_path, units, chunk):
+            step("reading results.csv", done=done, total=t.size)
+            part.descriptions = {name: c["description"] for name, c in columns.items() if c.get("description") and name in part.columns}
+            view.update(part)
+            done += part.n
+        view = view.result()
+        names = drawing_names(record, view, figures, report)
+        with atomic_members(folder, names, force) as tmp:
+            draw(tmp, record, model, view, figures, report, step, beside=folder, drawer=drawer)
+        return [folder / name for name in names]
 
 
 def _data_lines(path: Path):

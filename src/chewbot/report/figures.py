@@ -4,8 +4,12 @@
 
 from __future__ import annotations
 
+import io
 import os
+import pickle
 import signal
+import sys
+import tempfile
 import traceback
 from contextlib import contextmanager
 from functools import partial
@@ -83,56 +87,80 @@ def figure_names(columns, method: str | None) -> list[str]:
     return names
 
 
-def figure_jobs(view, method: str | None, folder: Path, contact: str = "") -> list[tuple[str, Callable[[], Path]]]:
-    """The figures of a run (:func:`figure_names`), each as (file name, a function that draws it from the
-    ``series`` of the run's view, :class:`chewbot.report.view.RunView`, into ``folder``); ``contact``: the run's
-    contact model, named on the torques figure."""
+def figure_jobs(series: Table, method: str | None, folder: Path, contact: str = "") -> list[tuple[str, Callable[[], Path]]]:
+    """The figures of a run (:func:`figure_names`), each as (file name, a function that draws it from ``series``,
+    the decimated series of the run's view, :class:`chewbot.report.view.RunView`, into ``folder``); ``contact``: the
+    run's contact model, named on the torques figure."""
     from chewbot.report import dynamics_figures, newton_euler_figures
 
     draw = {"task_space.png": task_space, "joint_space.png": joint_space, "bite_force.png": bite_force,
             "torques.png": lambda table, path: dynamics_figures.torques(table, path, method or "", contact),
             "coupling.png": dynamics_figures.coupling_indices, **newton_euler_figures.FIGURES}
-    return [(name, partial(draw[name], view.series, Path(folder) / name)) for name in figure_names(view.series.columns, method)]
+    return [(name, partial(draw[name], series, Path(folder) / name)) for name in figure_names(series.columns, method)]
 
 
 @contextmanager
-def drawn(jobs: list[tuple[str, Callable[[], Path]]], progress=None):
-    """Draw ``jobs`` (name, function) while the block runs: a forked process takes them one by one as soon as the
-    block starts (where a second core is available); when the block ends, this process takes those still
-    waiting, then waits for the other to finish its current one. The drawing process inherits the data (no
-    copy) and imports matplotlib itself, so a run's figures cost it little beyond its own work.
+def drawing_process(enabled: bool = True):
+    """A :class:`Drawer` forked now, where a second core can draw (None otherwise): created before the data is
+    written, it loads matplotlib meanwhile. Stopped on the way out (at once, on an error or a signal)."""
+    drawer = Drawer() if enabled and _cores() > 1 and hasattr(os, "fork") else None
+    try:
+        yield drawer
+    finally:
+        if drawer:
+            drawer.stop()
+
+
+@contextmanager
+def drawn(series: Table, method: str | None, folder: Path, contact: str = "", progress=None, drawer: Drawer | None = None):
+    """Draw the figures of a run (:func:`figure_jobs`) while the block runs; their paths are yielded. A drawing
+    process (``drawer``, or one forked here) takes them one by one as soon as the block starts; when the block ends,
+    this process takes those still waiting if it has matplotlib loaded already (loading it costs more than the
+    drawing process takes for the rest), then waits for the other to finish.
 
     A failure in the drawing process is raised here (RuntimeError with its traceback); an error or a signal in
     the block stops the drawing process at once. ``progress(message)`` is told each figure drawn here.
     """
     step = progress or (lambda msg: None)
-    child = _Drawer(jobs) if len(jobs) > 1 and _cores() > 1 and hasattr(os, "fork") else None
-    try:
-        yield
-        for name, draw in (child.remaining() if child else jobs):
-            step(f"drawing {name}")
-            draw()
+    jobs = figure_jobs(series, method, folder, contact)
+    with drawing_process(drawer is None and len(jobs) > 1) as forked:
+        child = drawer or forked
+        if child:
+            child.start(series, method, folder, contact, len(jobs))
+        yield [path for path in (Path(folder) / name for name, _ in jobs)]
+        if child is None or "matplotlib.figure" in sys.modules:
+            for name, draw in (child.remaining(jobs) if child else jobs):
+                step(f"drawing {name}")
+                draw()
         if child:
             child.wait()
-    finally:
-        if child:
-            child.stop()
 
 
 def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-class _Drawer:
-    """A forked process drawing jobs. The jobs are handed out through a pipe holding one byte per job: each
-    process reads the next byte (a read of one byte is atomic) and draws that job; an empty pipe means done."""
+def _warm_up() -> None:
+    """Load what drawing a figure loads (matplotlib, its fonts, the Agg renderer, the PNG writer)."""
+    from chewbot.report import dynamics_figures, newton_euler_figures  # noqa: F401  (imported to be loaded)
 
-    def __init__(self, jobs):
-        self.jobs = jobs
-        tokens, fill = os.pipe()
-        os.write(fill, bytes(range(len(jobs))))
-        os.close(fill)
-        self.tokens = tokens
+    fig, ax = subplots(figsize=(2, 1))
+    ax.plot([0, 1], [0, 1], label="x")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_title("warm-up")
+    fig.savefig(io.BytesIO(), format="png", pil_kwargs={"compress_level": 1})
+
+
+class Drawer:
+    """A process forked to draw a run's figures before they can be drawn: meanwhile it loads matplotlib
+    (:func:`_warm_up`). :meth:`start` hands it the figures (the series to draw from, through a file both processes
+    hold, and one byte per figure in a pipe); each process reads the next byte (a read of one byte is atomic) and
+    draws that figure; an empty pipe means done. Closing the start pipe without starting ends it."""
+
+    def __init__(self):
+        self.data = tempfile.TemporaryFile()
+        self.tokens, self.fill = os.pipe()
+        self.go_read, self.go = os.pipe()
         self.report, report = os.pipe()
         self.pid = os.fork()
         if self.pid == 0:  # the drawing process: never returns into the caller's frames
@@ -140,22 +168,39 @@ class _Drawer:
             try:
                 signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C reaches the process group: just stop
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
-                os.close(self.report)
-                for _, draw in self.remaining():
-                    draw()
+                for fd in (self.fill, self.go, self.report):
+                    os.close(fd)
+                _warm_up()
+                if os.read(self.go_read, 1):
+                    self.data.seek(0)
+                    jobs = figure_jobs(*pickle.load(self.data))
+                    for _, draw in self.remaining(jobs):
+                        draw()
             except BaseException:
                 code = 1
                 os.write(report, traceback.format_exc().encode()[-20000:])
             finally:
                 os._exit(code)
-        os.close(report)
+        for fd in (self.go_read, report):
+            os.close(fd)
 
-    def remaining(self):
+    def start(self, series: Table, method: str | None, folder: Path, contact: str, count: int) -> None:
+        """Hand the ``count`` figures of :func:`figure_jobs` with these arguments to both processes."""
+        pickle.dump((series, method, Path(folder), contact), self.data, protocol=pickle.HIGHEST_PROTOCOL)
+        self.data.flush()
+        os.write(self.fill, bytes(range(count)))
+        os.close(self.fill)
+        self.fill = None
+        os.write(self.go, b"1")
+
+    def remaining(self, jobs):
         """The jobs not yet taken, each taken as it is yielded."""
         while token := os.read(self.tokens, 1):
-            yield self.jobs[token[0]]
+            yield jobs[token[0]]
 
     def wait(self) -> None:
+        os.close(self.go)
+        self.go = None
         _, status = os.waitpid(self.pid, 0)
         self.pid = None
         message = b""
@@ -172,8 +217,10 @@ class _Drawer:
             except (ProcessLookupError, ChildProcessError):
                 pass
             self.pid = None
-        for fd in (self.tokens, self.report):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        for fd in (self.tokens, self.fill, self.go, self.report):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.data.close()

@@ -5,6 +5,7 @@ DIR`` later from the folder: the same inputs, the same drawings."""
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from pathlib import Path
 
 from chewbot.model import Model
@@ -19,23 +20,22 @@ def drawing_names(record: dict, view: RunView, figures: bool = True, report: boo
 
 
 def draw(folder: Path, record: dict, model: Model, view: RunView, figures: bool = True, report: bool = True, progress=None,
-         beside: Path | None = None) -> list[Path]:
+         beside: Path | None = None, drawer=None) -> list[Path]:
     """Draw the figures and write report.html (as asked) into ``folder``; their paths. The figures are drawn by two
-    processes where there are two cores (:func:`chewbot.report.figures.drawn`). The report links to results.csv,
-    run.json, the figures drawn and those that ``beside`` (the folder these files will join) has."""
-    from chewbot.report.figures import drawn, figure_jobs, figure_names
+    processes where there are two cores (:func:`chewbot.report.figures.drawn`; ``drawer``: a drawing process forked
+    before, :func:`chewbot.report.figures.drawing_process`). The report links to results.csv, run.json, the figures
+    drawn and those that ``beside`` (the folder these files will join) has."""
+    from chewbot.report.figures import drawn, figure_names
     from chewbot.report.html import write_report
 
     step = progress or (lambda msg, done=None, total=None, stage=None: None)
     options = record["options"]
     method, contact = options.get("method"), options.get("contact", "bilateral")
     folder = Path(folder)
-    jobs = figure_jobs(view, method, folder, contact) if figures else []
-    written = [folder / name for name, _ in jobs]
-    with drawn(jobs, step):
+    with drawn(view.series, method, folder, contact, step, drawer) if figures else nullcontext([]) as written:
         if report:
             step("writing report.html")
-            linked = {name for name, _ in jobs} | {name for name in figure_names(view.columns, method)
-                                                    if beside is not None and (beside / name).exists()}
-            written.append(write_report(record, model, view, folder / "report.html", files=sorted(["results.csv", "run.json", *linked])))
-    return written
+            linked = {p.name for p in written} | {name for name in figure_names(view.columns, method)
+                                                  if beside is not None and (beside / name).exists()}
+            report_path = write_report(record, model, view, folder / "report.html", files=sorted(["results.csv", "run.json", *linked]))
+    return [*written, *([report_path] if report else [])]
