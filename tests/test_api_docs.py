@@ -130,4 +130,4 @@ def test_the_api_document_s_examples_run(tmp_path, monkeypatch):
             exec(compile(block, f"docs/api.md, Python block {number}", "exec"), namespace)
         except Exception as exc:  # the block that failed, in the message
             pytest.fail(f"docs/api.md's Python block {number} fails: {type(exc).__name__}: {exc}\n{block}")
-    assert (tmp_path / "results.csv").is_file() and (tmp_path / "runs" / "newton-euler" / "report.html").is_file()
+    assert (tmp_path / "results.csv").is_file() and (tmp_path / "runs" / "right" / "report.html").is_file()
