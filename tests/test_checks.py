@@ -61,8 +61,10 @@ def test_transmission_angles_of_the_default_task_are_those_the_docs_state():
     """docs/conventions.md: chains 3 and 4 at 17.96 deg at home, chain 4 down to 13.98 deg (left side), the others
     above 32 deg (to the 0.01 deg the docs print)."""
     mu = np.degrees(np.arcsin(default_kinematics("target").transmission))
-    assert np.round(mu[0, 2:4], 2).tolist() == [17.96, 17.96]
-    assert round(mu[:, 3].min(), 2) == 13.98 and mu[:, [0, 1, 4, 5]].min() > 32
+    # the docs print 0.01 deg: the values within half of it (rounding a value that lies on a rounding boundary
+    # could differ from machine to machine; a tolerance cannot)
+    assert mu[0, 2:4] == pytest.approx([17.96, 17.96], abs=0.005)
+    assert mu[:, 3].min() == pytest.approx(13.98, abs=0.005) and mu[:, [0, 1, 4, 5]].min() > 32
     assert mu.min() > NEAR_SINGULAR_DEG
 
 

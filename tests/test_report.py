@@ -232,12 +232,29 @@ def test_report_command_writes_only_into_chewbot_s_results_folders(tmp_path, run
 # --- in a real browser ----------------------------------------------------------------------------------
 
 
-@pytest.mark.browser
-def test_report_renders_in_headless_chromium(run_folder):
-    """Open report.html from disk in Chromium: no console error, every plot drawn, the 3D robot animated."""
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')")
+def _chromium():
+    """The playwright module, or a skip where the browser cannot run. With $CHEWBOT_REQUIRE_BROWSER set (the
+    README's test command and .ci/run set it, after installing Chromium from the system's packages) a missing
+    browser fails the test instead: on a fresh machine the report's JavaScript is always run."""
+    required = bool(os.environ.get("CHEWBOT_REQUIRE_BROWSER"))
+    try:
+        from playwright import sync_api
+    except ImportError:
+        if required:
+            pytest.fail("playwright is not installed (pip install -e '.[test]') and $CHEWBOT_REQUIRE_BROWSER is set")
+        pytest.skip("playwright is not installed (pip install -e '.[test]')")
     if not CHROMIUM.exists():
+        if required:
+            pytest.fail(f"no browser: {CHROMIUM} is missing and $CHEWBOT_REQUIRE_BROWSER is set (Debian: apt-get install chromium)")
         pytest.skip(f"no browser: {CHROMIUM} is missing (Debian: apt-get install chromium)")
+    return sync_api
+
+
+def _check_report_in_chromium(report: Path, screenshots: bool = False) -> None:
+    """Open ``report`` from disk in headless Chromium and assert: no exception thrown by the page, no console error,
+    no network request, every plot drawn, the 3D robot animated. An exception thrown by the page ends the wait at
+    once (it is caught by a listener installed before the page's own scripts run)."""
+    sync_api = _chromium()
     errors: list[str] = []
     profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
     try:
@@ -247,11 +264,15 @@ def test_report_renders_in_headless_chromium(run_folder):
                 args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
                       "--disable-component-update", "--disable-sync"])
             page = browser.new_page()
+            page.add_init_script("window.addEventListener('error', e => { window.__thrown = String(e.message); });")
             page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
-            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
             page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
-            page.goto((run_folder / "report.html").as_uri())
-            page.wait_for_selector("body[data-plots-drawn]", timeout=60_000)
+            page.goto(report.as_uri())
+            page.wait_for_function("document.body && (document.body.dataset.plotsDrawn !== undefined || window.__thrown !== undefined)",
+                                   timeout=60_000)
+            thrown = page.evaluate("window.__thrown === undefined ? null : window.__thrown")
+            assert thrown is None and errors == [], (thrown, errors)
             drawn = int(page.get_attribute("body", "data-plots-drawn"))
             plots = page.eval_on_selector_all(".js-plotly-plot", "els => els.map(e => e.id)")
             assert drawn == len(plots) >= 7  # robot, task space, joint space, bite force, transmission, tau, MCI
@@ -267,10 +288,28 @@ def test_report_renders_in_headless_chromium(run_folder):
             # jump to a frame inside a bite-force burst (the arrow shows) and keep a picture
             assert page.evaluate("Plotly.animate('robot', ['1.640'], {frame: {duration: 0, redraw: true}, mode: 'immediate'}).then(() => 'shown')") == 'shown'
             page.wait_for_timeout(500)
-            ARTIFACTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "report.png"))
-            page.screenshot(path=str(ARTIFACTS / "report-full.png"), full_page=True)
+            if screenshots:
+                ARTIFACTS.mkdir(exist_ok=True)
+                page.screenshot(path=str(ARTIFACTS / "report.png"))
+                page.screenshot(path=str(ARTIFACTS / "report-full.png"), full_page=True)
             browser.close()
     finally:
         shutil.rmtree(profile, ignore_errors=True)
     assert errors == []
+
+
+@pytest.mark.browser
+def test_report_renders_in_headless_chromium(run_folder):
+    """Open report.html from disk in Chromium: no exception or console error, every plot drawn, the 3D robot animated."""
+    _check_report_in_chromium(run_folder / "report.html", screenshots=True)
+
+
+@pytest.mark.browser
+def test_the_browser_check_fails_when_the_page_throws(run_folder, tmp_path):
+    """The same check on the report with one script that throws: it must fail (naming the exception), so a
+    report whose JavaScript breaks cannot pass."""
+    broken = tmp_path / "report.html"
+    html = (run_folder / "report.html").read_text(encoding="utf-8")
+    broken.write_text(html.replace("<head>", "<head><script>throw new Error('injected by the test');</script>", 1), encoding="utf-8")
+    with pytest.raises(AssertionError, match="injected by the test"):
+        _check_report_in_chromium(broken)

@@ -168,7 +168,7 @@ def test_computed_torque_on_the_exact_model_reproduces_the_task(name):
     ref = Reference.from_task(m, default_task(m))
     ct = ModelBasedController("computed-torque", m, ref, Gains.load(mechanism=m.mechanism))
     sim = simulate(Plant(m), ct, ref, rate=None)
-    assert sim.stopped is None and sim.t[-1] == ref.end
+    assert sim.stopped is None and sim.t[-1] == pytest.approx(ref.end, rel=0, abs=1e-12)  # to the last sample (t in s)
     assert np.max(np.abs(sim.q_ref - sim.q)) < 1e-6
 
 
