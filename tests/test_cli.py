@@ -83,7 +83,7 @@ def test_an_unwritable_destination_is_an_output_error(task_csv, tmp_path):
 @pytest.mark.parametrize(
     "name, edit, expected",
     [
-        ("missing.csv", None, "no such task file"),
+        ("missing.csv", None, "no such file (expected a target task)"),
         ("backwards.csv", lambda ls: ls[:5] + [ls[6], ls[5]] + ls[7:], "does not increase"),
         ("nan.csv", lambda ls: ls[:9] + [ls[9].replace(ls[9].split(",")[2], "nan", 1)] + ls[10:], "line 10"),
         ("no_beta.csv", lambda ls: [",".join(c for j, c in enumerate(line.split(",")) if j != 4) for line in ls], "beta"),

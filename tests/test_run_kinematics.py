@@ -70,7 +70,7 @@ def _cli(args):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--task", "absent.csv"], "no such task file"),
+        (["--task", "absent.csv"], "no such file (expected a target task)"),
         (["--model", "absent.toml"], "no such parameter file"),
     ],
 )

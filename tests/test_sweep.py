@@ -46,7 +46,7 @@ outputs = ["peak_tau_Nm", "peak_tau3_Nm", "rms_tau_Nm", "peak_power_W", "mean_MC
            "min_kappa_J", "feasible", "failed_checks", "peak_N_L", "min_N_R", "contact_pull_share"]
 
 [set]
-"friction.hkp_coulomb" = 0.2
+"mandible.mass_g" = 350.0
 
 [parameters]
 "couplers.density_g_per_mm3" = { uniform = [2.7e-3, 7.8e-3] }
@@ -155,7 +155,7 @@ def test_a_sample_equals_chewbot_run(local_sweep):
     assert any(r["error"] for r in table) and not all(r["error"] for r in table)  # the SPEC's beta range gives both
     keys = ("couplers.density_g_per_mm3", "task.force_z_N", "task.beta_deg")
     for row in table:
-        overrides = {"friction.hkp_coulomb": 0.2, **{k: row[k] for k in keys}}
+        overrides = {"mandible.mass_g": 350.0, **{k: row[k] for k in keys}}
         if row["error"]:
             with pytest.raises(KinematicsError) as exc:
                 compute(RunOptions(method="hessian", overrides=overrides))

@@ -74,8 +74,8 @@ ROWS = [f"{0.001 * i!r},0,0,0,{0.001 * i!r}" for i in range(10)]
 @pytest.mark.parametrize(
     "text, pattern",
     [
-        ("", r"empty task file"),
-        ("\n# only a comment\n", r"empty task file"),
+        ("", r"empty file \(expected a target task"),
+        ("\n# only a comment\n", r"empty file \(expected a target task"),
         (GOOD + "\n" + "\n".join(ROWS[:3]), r"3 data row\(s\); a target task needs at least 7"),
         ("t,X,Y,alpha\n" + "\n".join(r.rsplit(",", 1)[0] for r in ROWS), r"missing column\(s\) beta"),
         (GOOD + ",foo\n" + "\n".join(r + ",0" for r in ROWS), r"line 1: unknown column 'foo'"),
@@ -103,7 +103,7 @@ def test_csv_defects_name_file_line_or_column(tmp_path, text, pattern):
 
 
 def test_missing_csv_file(tmp_path):
-    with pytest.raises(TaskError, match=r"absent.csv: no such task file"):
+    with pytest.raises(TaskError, match=r"absent.csv: no such file \(expected a"):
         read_task_csv(tmp_path / "absent.csv")
 
 

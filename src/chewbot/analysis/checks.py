@@ -57,7 +57,7 @@ class CheckResult:
     """The verdict of one check, as run.json records it (docs/cli.md)."""
 
     name: str
-    passed: bool
+    passed: bool | None  # None: not evaluated (run.json: null)
     samples: int | None  # how many samples fail; None: not evaluated (the run has no such quantity)
     first_sample: dict | None  # {"index": k, "t": t} of the first failing sample
     worst: dict | None  # {"value": v, "unit": u}: the worst value over all samples, failing or not
@@ -67,7 +67,7 @@ class CheckResult:
     @property
     def fails_run(self) -> bool:
         """True if this result makes the run fail (exit code 4): failed, and a failure under the contact model."""
-        return not self.passed and self.severity == "failure"
+        return self.passed is False and self.severity == "failure"
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -146,7 +146,7 @@ class Check:
     def result(self) -> CheckResult:
         severity = self.severity()
         if not self.evaluated:
-            return CheckResult(self.name, True, None, None, None, f"not evaluated: {self.reason}", severity)
+            return CheckResult(self.name, None, None, None, None, f"not evaluated: {self.reason}", severity)
         if self.worst is None:  # evaluated on chunks without a sample
             return CheckResult(self.name, True, 0, None, None, "no samples to check", severity)
         first = None if self.first is None else {"index": self.first[0], "t": self.first[1]}

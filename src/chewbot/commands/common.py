@@ -185,7 +185,7 @@ def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> No
     if quiet:
         failed = [c for c in checks if c.fails_run] if stops else []
     else:
-        failed = [c for c in checks if not c.passed]
+        failed = [c for c in checks if c.passed is False]
     if failed:
         from rich import box
         from rich.markup import escape
@@ -208,6 +208,19 @@ def exit_after_checks(checks, allow_violations: bool, quiet: bool = False) -> No
         _console().print("[yellow]warning:[/] a validity check failed; exit code 0 because of --allow-violations", highlight=False)
 
 
+def options_line(options: dict) -> str:
+    """The options a computation actually used, from its run.json's ``"options"``: method (and the orientation it is
+    computed in), goal, friction, contact; a default that another option switched (the method of
+    ``--orientation euler-parameters``) is visible in every run's console summary."""
+    parts = [f"method {options.get('method') or 'none (kinematics only)'}"]
+    if options.get("orientation"):
+        parts[0] += f" ({options['orientation']})"
+    parts.append(f"goal {options.get('goal') or 'none (minimum-norm torques)'}")
+    parts.append(f"friction {options.get('friction') or 'none (frictionless formulation)'}")
+    parts.append(f"contact {options.get('contact', 'bilateral')}")
+    return "used: " + ", ".join(parts)
+
+
 @contextmanager
 def resolved():
     """Report the run options that do not apply (:class:`chewbot.run.options.OptionError`) as the command line's
@@ -222,12 +235,13 @@ def resolved():
             fail(ChewbotError(exc.worded(lambda option: f"--{option}")), EXIT_BAD_INPUT)
 
 
-def set_overrides(arguments: list[str]) -> dict[str, float]:
-    """``--set KEY=VALUE`` arguments as a dict, in order (a key given twice: the last value); exit 2 on a bad one."""
+def set_overrides(arguments: list[str], option: str = "--set") -> dict[str, float]:
+    """``--set KEY=VALUE`` arguments (or those of ``option``) as a dict, in order (a key given twice: the last
+    value); exit 2 on a bad one (not a number, NaN, infinite)."""
     from chewbot.model.params import parse_override
 
     with errors_reported():
-        return dict(parse_override(a) for a in arguments)
+        return dict(parse_override(a, option) for a in arguments)
 
 
 @contextmanager

@@ -80,12 +80,14 @@ def run(
 
 def _print_run_summary(done, out: Path) -> None:
     """The lines a person wants after a run: where the report is and the peak torque (the checks follow)."""
+    from chewbot.commands.common import options_line
     from chewbot.report.summary import contact_note, normal_force_stats, numbered_columns
 
     view = done.view
     report = out / "report.html"
     where = f"open {escape(str(report))}" if any(p.name == "report.html" for p in done.files) else f"chewbot report {escape(str(out))} draws the report"
     stdout.print(f"wrote [bold]{escape(str(out))}[/] ({view.n} samples, {len(view.columns)} columns); {where}", highlight=False)
+    stdout.print(escape(options_line(done.record["options"])), highlight=False)
     taus = numbered_columns(view.rows, "tau")
     if taus:
         top = max((view.stats[name] for name in taus), key=lambda s: abs(s.peak))
@@ -98,6 +100,6 @@ def _print_run_summary(done, out: Path) -> None:
         stdout.print("normal forces: " + ", ".join(f"{f.name} from {f.low:.4g} to {f.high:.4g} N ({f.below:.3g} % of the samples "
                                                     f"below {preload:g} N)" for f in forces), highlight=False)
     checks = done.checks
-    passed = sum(c.passed and c.samples is not None for c in checks)
-    stdout.print(f"validity checks: {passed} passed, {sum(not c.passed for c in checks)} failed, "
+    passed = sum(c.passed is True for c in checks)
+    stdout.print(f"validity checks: {passed} passed, {sum(c.passed is False for c in checks)} failed, "
                  f"{sum(c.samples is None for c in checks)} not evaluated (run.json, \"checks\")", highlight=False)

@@ -40,7 +40,7 @@ def simulate(
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     model: str = typer.Option("target", "--model", help="The controller's model: a built-in model or a TOML parameter file (also the plant's unless --plant)."),
     side: str | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts (left or right). Default: left, or the side of the run whose results.csv is the --task."),
-    method: str = typer.Option("hessian", "--method", help="The controller's inverse dynamics: hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles)."),
+    method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of the model-based controllers (feedforward, computed-torque): hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles). Default: hessian."),
     goal: str | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: the distribution of the redundant torques (min-torque, min-coupler-force, min-hkp-force). Default: min-torque."),
     friction: str = typer.Option("off", "--friction", help="on|off: HKP and actuator friction in the plant (the model's coefficients); the controller's model has it only with --method newton-euler."),
     contact: str = typer.Option("bilateral", "--contact", help="bilateral|unilateral: whether the contact-pull check (the plant's N_L, N_R < 0, or below contact.preload_N) fails the run (unilateral) or is reported (bilateral). The plant keeps both contacts closed either way."),
@@ -85,13 +85,13 @@ def simulate(
     from chewbot.outputs.simulation import SIMULATION_FOLDER
     from chewbot.simulation.run import SimulateOptions, input_files
 
-    gain_overrides = set_overrides(gain)
+    gain_overrides = set_overrides(gain, "--gain")
     options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
-                              plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set),
+                              plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set, "--plant-set"),
                               bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides)
     with resolved():
-        options = options.resolved()
+        options = options.resolved(controllers=CONTROLLERS if compare else (controller,))
     if noise > 0 and options.rate is None:
         fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
     with errors_reported():
@@ -130,11 +130,18 @@ def _print_summary(stdout, results: dict, out: Path, compare: bool) -> None:
         stdout.print("  ".join(c.ljust(w) if j == 0 else c.rjust(w) for j, (c, w) in enumerate(zip(line, widths))),
                      highlight=False, markup=False)
     for label, r in results.items():
+        o = r.options
+        dynamics = ("no inverse dynamics" if o.controller == "pd" else
+                    f"inverse dynamics {o.method} (goal {o.goal or 'none: minimum-norm torques'}, friction in its model "
+                    f"{'on' if o.controller_friction else 'off'}, bite force {'unknown' if o.bite_unknown else 'known'})")
+        stdout.print(f"{label}: used: controller {o.controller} at {'every integrator stage' if o.rate is None else f'{o.rate:g} Hz'} "
+                     f"({dynamics}), plant friction {o.friction}, contact {o.contact}, sensor noise {o.noise_rad:g} rad",
+                     highlight=False, markup=False)
         stopped = r.metrics["stopped"]
         if stopped is not None:
             stdout.print(f"{label}: the robot left the workspace at t = {stopped['t']:.4g} s ({escape(stopped['reason'])}); "
                          "its motion ends at the last pose inside", highlight=False)
-        passed = sum(c.passed and c.samples is not None for c in r.checks)
-        stdout.print(f"{label}: validity checks {passed} passed, {sum(not c.passed for c in r.checks)} failed, "
+        passed = sum(c.passed is True for c in r.checks)
+        stdout.print(f"{label}: validity checks {passed} passed, {sum(c.passed is False for c in r.checks)} failed, "
                      f"{sum(c.samples is None for c in r.checks)} not evaluated; largest drift of the constraints "
                      f"{max(float(r.table[n].max()) for n in r.table.columns if n.startswith('drift_')):.3g} m", highlight=False)

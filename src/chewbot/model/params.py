@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from chewbot.errors import ParameterError
 from chewbot.model.model import Contact, Friction, HKPGeometry, Limits, Model
@@ -43,8 +43,16 @@ Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 Six3 = Annotated[list[Vec3], Field(min_length=6, max_length=6)]
 Range = Annotated[list[float], Field(min_length=2, max_length=2)]
-# Limits that may be unbounded: +/-inf allowed (TOML writes them inf, -inf), NaN refused by their checks.
-MaybeInfinite = Annotated[float, Field(allow_inf_nan=True)]
+
+
+def _not_nan(value: float) -> float:
+    if math.isnan(value):
+        raise ValueError("must be a number or +/-inf, not nan")
+    return value
+
+
+# Limits that may be unbounded: +/-inf allowed (TOML writes them inf, -inf), NaN refused.
+MaybeInfinite = Annotated[float, Field(allow_inf_nan=True), AfterValidator(_not_nan)]
 
 
 class _Strict(BaseModel):
@@ -382,16 +390,20 @@ _KEY = re.compile(r"^(?P<path>[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)?)
 _CHAIN_POINTS = ("G_mm", "S0_mm", "M_mm")
 
 
-def parse_override(argument: str) -> tuple[str, float]:
-    """``"KEY=VALUE"`` (a ``--set`` argument) -> (KEY, float VALUE); a ParameterError names the argument."""
+def parse_override(argument: str, option: str = "--set") -> tuple[str, float]:
+    """``"KEY=VALUE"`` (a ``--set`` argument; ``option`` names the option in errors) -> (KEY, float VALUE); a
+    ParameterError names the argument. NaN and infinities are refused: no key of chewbot takes them from the command
+    line (a limit the file leaves out is already unbounded)."""
     key, sep, value = argument.partition("=")
     key, value = key.strip(), value.strip()
     if not sep or not key:
-        raise ParameterError(f"--set {argument!r}: expected KEY=VALUE, e.g. --set friction.hkp_coulomb=0.2")
+        raise ParameterError(f"{option} {argument!r}: expected KEY=VALUE, e.g. --set friction.hkp_coulomb=0.2")
     try:
         number = float(value)
     except ValueError:
-        raise ParameterError(f"--set {argument}: {value!r} is not a number") from None
+        raise ParameterError(f"{option} {argument}: {value!r} is not a number") from None
+    if not math.isfinite(number):
+        raise ParameterError(f"{option} {argument}: {value!r} is not a finite number (NaN and infinities are not values of {key})")
     return key, number
 
 

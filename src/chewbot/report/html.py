@@ -459,7 +459,7 @@ def checks_section(record: dict) -> str:
         return '<section id="checks"><h2>Validity checks</h2><p class="note">No validity checks were run.</p></section>'
     rows, failing = [], []
     for c in checks:
-        fails_run = not c["passed"] and c["severity"] == "failure"
+        fails_run = c["passed"] is False and c["severity"] == "failure"
         if fails_run:
             failing.append(c["name"])
         verdict = ("not evaluated" if c["samples"] is None else "passed" if c["passed"]

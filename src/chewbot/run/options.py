@@ -8,7 +8,10 @@ The rules (docs/cli.md):
 * ``goal`` and ``friction`` apply to the formulations that take them (newton-euler): given to another, they are
   an error; where they apply and are not given they take the formulation's defaults (min-torque, on);
 * ``goal`` distributes redundant torques: on the 6RSS (no redundancy) it is an error, and it is left out;
-* the ``unilateral`` contact model needs the HKPs: on the 6RSS it is an error.
+* the ``unilateral`` contact model needs the HKPs: on the 6RSS it is an error;
+* a ``--set`` override of a model key the run does not use is an error naming what would use it
+  (:func:`unused_override`: the friction coefficients without friction, the preload without the unilateral
+  contact).
 
 :func:`resolve` applies them and gives a :class:`RunOptions`, complete and consistent: what run.json records under
 ``"options"``. ``RunOptions()`` is the default run (the target robot, the default task, Hessian). A combination
@@ -138,6 +141,42 @@ def resolve_dynamics(method: str | None = None, orientation: str = Orientation.e
     return DynamicsOptions(method, goal, friction, contact)
 
 
+def friction_methods() -> str:
+    """The formulations that compute friction (from the formulation table): ``"newton-euler"``."""
+    from chewbot.dynamics.registry import FORMULATIONS
+
+    return " and ".join(n for n, f in FORMULATIONS.items() if "friction" in f.options)
+
+
+def unused_override(key: str, *, friction: bool, contact: str, friction_users: str | None = None) -> str | None:
+    """Why the model key ``key`` (a ``--set`` key: ``friction.hkp_coulomb``, ``contact.preload_N``, ``chains.G_mm[2][1]``)
+    changes nothing in a computation with these options, naming what would use it; None where it is used.
+
+    ``friction``: the computation has friction (``run``: a formulation that takes it, with friction on;
+    ``simulate``: the plant's ``--friction on``), ``friction_users`` says what has it (default: the formulations of
+    the table that take friction, with ``--friction on``); ``contact``: the contact model (the preload bounds the
+    unilateral contact only). Every other key of the parameter file is used by every computation (geometry,
+    inertia, limits of the checks). The ``task.*`` keys are the default task's (refused with a task file by
+    :func:`chewbot.run.pipeline.load_task`)."""
+    path = key.split("[", 1)[0].strip()
+    if path.startswith("friction.") and not friction:
+        users = friction_users or f"the {friction_methods()} method with --friction on (its default)"
+        return f"changes nothing: the friction coefficients are used by {users}, and this computation has no friction"
+    if path == "contact.preload_N" and contact != Contact.unilateral:
+        return ("changes nothing: the preload is the smallest normal force of the unilateral contact (--contact "
+                "unilateral), and this computation's contact is bilateral")
+    return None
+
+
+def refuse_unused(overrides: dict[str, float], option: str = "set", **use) -> None:
+    """Raise :class:`OptionError` naming the first override (``option KEY=VALUE``) that :func:`unused_override`
+    finds unused with the options ``use``: a value that would change nothing is an error, not silence."""
+    for key, value in overrides.items():
+        why = unused_override(key, **use)
+        if why:
+            raise OptionError(f"{option} {key}={value:g}", why)
+
+
 def complete(options: RunOptions, has_hkp: bool) -> RunOptions:
     """``options`` with the defaults that apply filled in and checked (:func:`resolve_dynamics`); ``has_hkp``: the
     model is the target. A run without inverse dynamics (``method`` None) takes neither goal nor friction."""
@@ -157,5 +196,8 @@ def resolve(model: str = "target", task: str = "default", side: str | None = Non
     where a rule needs it)."""
     side = _choice("side", side, Side)
     d = resolve_dynamics(method, orientation, goal, friction, contact, has_hkp=has_hkp, model=model)
+    uses = f"the {friction_methods()} method with --friction on (its default)"
+    refuse_unused(dict(overrides or {}), friction=d.friction == Switch.on, contact=d.contact,
+                  friction_users=uses if d.friction is None else f"{uses}; this run has --friction off")
     return RunOptions(model=model, task=task, side=side, orientation=Orientation(orientation).value, method=d.method,
                       goal=d.goal, friction=d.friction, contact=d.contact, overrides=dict(overrides or {}))

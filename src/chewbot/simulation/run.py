@@ -31,7 +31,7 @@ from chewbot.model.chains import crank_tips
 from chewbot.table import Table
 from chewbot.run.columns import POSE_UNITS
 from chewbot.kinematics.options import Orientation, Side
-from chewbot.run.options import OptionError, RunOptions, Switch, resolve_dynamics
+from chewbot.run.options import OptionError, RunOptions, Switch, refuse_unused, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
 from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
@@ -54,7 +54,7 @@ class SimulateOptions:
     model: str = "target"
     task: str = "default"
     side: str | None = None
-    method: str = "hessian"
+    method: str | None = None  # None: hessian (the default of Euler angles), recorded resolved
     goal: str | None = None
     friction: str = "off"
     contact: str = "bilateral"
@@ -76,17 +76,43 @@ class SimulateOptions:
 
         return "friction" in formulation(self.method).options and self.friction == Switch.on
 
-    def resolved(self, has_hkp: bool | None = None) -> SimulateOptions:
+    def refuse_unused(self, controllers: tuple[str, ...]) -> None:
+        """:class:`~chewbot.run.options.OptionError` for an option that none of ``controllers`` uses, naming what
+        would use it: ``method``, ``goal`` and ``bite_unknown`` (the inverse dynamics of the model-based controllers,
+        not pd's), the gains of a controller that does not run, the estimator's cut-off without sensor noise."""
+        model_based = [c for c in CONTROLLERS if c != "pd"]
+        if not set(controllers) & set(model_based):
+            for option, given in (("method", self.method is not None), ("goal", self.goal is not None), ("bite-unknown", self.bite_unknown)):
+                if given:
+                    raise OptionError(option, f"applies to the model-based controllers ({' and '.join(model_based)}), not "
+                                      f"{' and '.join(controllers)} (PD on the crank angles uses no inverse dynamics)")
+        for key, value in self.gain_overrides.items():
+            section = key.split(".", 1)[0]
+            kind = section.replace("_", "-")
+            if kind in CONTROLLERS and kind not in controllers:
+                raise OptionError(f"gain {key}={value:g}", f"changes nothing: it is a gain of --controller {kind}, and "
+                                  f"this simulation runs {' and '.join(controllers)}")
+            if section == "estimator" and not self.noise_rad > 0:
+                raise OptionError(f"gain {key}={value:g}", "changes nothing: the estimator runs only with sensor noise "
+                                  "(--noise RAD > 0); without it the controller sees the plant's state")
+
+    def resolved(self, has_hkp: bool | None = None, controllers: tuple[str, ...] | None = None) -> SimulateOptions:
         """These options checked and completed by the rules of a run (:func:`chewbot.run.options.resolve_dynamics`):
         the controller's method, its goal where it distributes the target's torques; the plant's friction switch,
         the side, the contact model; :class:`~chewbot.run.options.OptionError` names an option that does not apply.
         The controller computes in Euler angles. ``has_hkp``: the controller's model is the target (None: read from
-        its file where a rule needs it)."""
+        its file where a rule needs it). ``controllers``: the controllers that will run (``--compare``: all three);
+        given, an option none of them uses is an error too (:meth:`refuse_unused`)."""
+        if controllers is not None:
+            self.refuse_unused(controllers)
         for option, value, kind in (("side", self.side, Side), ("friction", self.friction, Switch)):
             if value is not None and value not in tuple(kind):
                 raise OptionError(option, f"must be one of {', '.join(kind)}, not {value!r}")
         d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, None, self.contact, has_hkp=has_hkp,
                              model=self.model)
+        for option, overrides in (("set", self.overrides), ("plant-set", self.plant_overrides)):
+            refuse_unused(overrides, option, friction=self.friction == Switch.on, contact=d.contact,
+                          friction_users="the plant with --friction on (and a newton-euler controller's model with it)")
         return replace(self, method=d.method, goal=d.goal, contact=d.contact)
 
 

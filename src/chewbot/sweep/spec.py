@@ -510,6 +510,13 @@ def _check_against_model(spec: Spec, top: _Reader) -> None:
         key = next(k for k in list(spec.fixed) + list(spec.keys) if k.startswith("task."))
         raise top.error(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}",
                         f"the default task's parameters apply to task = \"default\", not to {spec.task}")
+    from chewbot.run.options import friction_methods, unused_override
+
+    for key in list(spec.fixed) + list(spec.keys):
+        why = unused_override(key, friction=spec.friction == "on", contact=spec.contact,
+                              friction_users=f"the {friction_methods()} method with friction = \"on\" (its default)")
+        if why:
+            raise top.error(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}", why)
     central = {p.key: p.central() for p in spec.parameters}
     for role, name in models:
         try:

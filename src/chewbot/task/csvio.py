@@ -122,14 +122,15 @@ def read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str
     try:
         f = open(path, encoding="utf-8-sig", newline="")
     except FileNotFoundError:
-        raise TaskError(f"{path}: no such task file") from None
+        raise TaskError(f"{path}: no such file (expected {what})") from None
     except OSError as exc:
-        raise TaskError(f"{path}: cannot read the task file ({exc})") from None
+        raise TaskError(f"{path}: cannot read it as {what} ({exc})") from None
     with f:
         rows = _rows(path, f)
         first = next(rows, None)
         if first is None:
-            raise TaskError(f"{path}: empty task file (expected a header such as 't,X,Y,alpha,beta' and one row per sample)")
+            raise TaskError(f"{path}: empty file (expected {what}: a header such as '{','.join(required[:5])}{',...' if len(required) > 5 else ''}' "
+                            "and one row per sample)")
         header_line, header = first
         names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
         missing = [c for c in required if c not in names]
