@@ -12,6 +12,7 @@ import signal
 import subprocess
 
 import numpy as np
+import pandas as pd
 import pytest
 import typer
 from typer.testing import CliRunner
@@ -29,6 +30,7 @@ from chewbot.files import (
     cannot_write,
     check_output,
     marker_line,
+    sidecar,
     remove_stale,
 )
 from chewbot.model.params import builtin_model_path
@@ -126,18 +128,45 @@ def test_outputs_that_hold_the_current_folder_or_an_input_are_refused(finished_r
 
 def test_single_files_carry_the_marker_and_are_written_all_or_none(tmp_path):
     a, b = tmp_path / "task.csv", tmp_path / "task.residuals.csv"
-    with atomic_files([a, b]) as (ta, tb):
-        ta.write_text(marker_line("#", "a task") + "\nt\n")
-        tb.write_text(marker_line("#", "residuals") + "\nt\n")
-    assert a.read_text().startswith("# written by chewbot ") and WRITTEN_FILE.present(a)
+    with atomic_files([a, b], about={a: "a task"}) as (ta, tb):
+        ta.write_text("t [s]\n0.5\n")
+        tb.write_text("t [s]\n0.25\n")
+    # plain CSV, read with no options; the marker is the sidecar beside each, with the file's SHA-256
+    assert list(pd.read_csv(a).columns) == ["t [s]"] and pd.read_csv(a)["t [s]"].tolist() == [0.5]
+    assert WRITTEN_FILE.present(a) and WRITTEN_FILE.present(b)
+    assert json.loads(sidecar(a).read_text())["about"] == "a task"
     with pytest.raises(RuntimeError, match="report"):  # the second file fails: neither is replaced
         with atomic_files([a, b], force=True) as (ta, tb):
-            ta.write_text(marker_line() + "\nnew\n")
+            ta.write_text("t [s]\n1\n")
             raise RuntimeError("report failed")
-    assert a.read_text().endswith("\nt\n") and sorted(p.name for p in tmp_path.iterdir()) == ["task.csv", "task.residuals.csv"]
-    with pytest.raises(RuntimeError, match="did not mark"):  # a file without chewbot's line could never be replaced
-        with atomic_files([tmp_path / "c.csv"]) as (tc,):
-            tc.write_text("t\n")
+    assert a.read_text() == "t [s]\n0.5\n" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "task.csv", "task.csv.chewbot.json", "task.residuals.csv", "task.residuals.csv.chewbot.json"]
+    with atomic_files([a], force=True) as (ta,):  # replaced with --force: new content, new SHA-256
+        ta.write_text("t [s]\n2\n")
+    assert a.read_text() == "t [s]\n2\n" and WRITTEN_FILE.present(a)
+    a.write_text("t [s]\n3\n")  # edited by the user since: no longer chewbot's, never replaced
+    with pytest.raises(OutputExistsError, match="changed since chewbot wrote it"):
+        check_output(a, True, WRITTEN_FILE)
+    with pytest.raises(RuntimeError, match="did not mark"):  # a TOML file without chewbot's line could never be replaced
+        with atomic_files([tmp_path / "c.toml"]) as (tc,):
+            tc.write_text("x = 1\n")
+
+
+def test_csv_files_written_before_the_sidecars_are_still_chewbot_s(tmp_path):
+    """A CSV of an earlier version begins with the marker line and has no sidecar: --force still replaces it (and
+    the new one is plain, with its sidecar); without the line and the sidecar it is the user's."""
+    old = tmp_path / "task.csv"
+    old.write_text("# written by chewbot 0.1.0: a task, read it with chewbot run --task\nt [s]\n0\n")
+    assert WRITTEN_FILE.present(old)
+    with pytest.raises(OutputExistsError, match="pass --force"):
+        check_output(old, False, WRITTEN_FILE)
+    with atomic_files([old], force=True) as (tmp,):
+        tmp.write_text("t [s]\n1\n")
+    assert old.read_text() == "t [s]\n1\n" and sidecar(old).is_file() and WRITTEN_FILE.present(old)
+    mine = tmp_path / "mine.csv"
+    mine.write_text("t [s]\n0\n")
+    with pytest.raises(OutputExistsError, match="not written by chewbot"):
+        check_output(mine, True, WRITTEN_FILE)
     mine = tmp_path / "notes.md"
     mine.write_text("# my notes\n")
     with pytest.raises(OutputExistsError, match="not written by chewbot"):
@@ -145,7 +174,8 @@ def test_single_files_carry_the_marker_and_are_written_all_or_none(tmp_path):
     with pytest.raises(RuntimeError, match="did not mark"):  # a folder without its marker, likewise
         with atomic_folder(tmp_path / "run") as tmp:
             (tmp / "results.csv").write_text("t\n")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.md", "task.csv", "task.residuals.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.md", "task.csv", "task.csv.chewbot.json", "task.residuals.csv",
+                                                          "task.residuals.csv.chewbot.json"]
 
 
 def test_bench_out_follows_the_force_rule(tmp_path, monkeypatch):
@@ -360,3 +390,20 @@ def test_study_prints_its_table_of_claims(tmp_path, monkeypatch):
     assert "torques agree" in result.output and "1e-15" in result.output and "yes" in result.output
     assert invoke("study", "fake", "--out", str(tmp_path / "s")).exit_code == EXIT_OUTPUT
     assert invoke("study", "fake", "--out", str(tmp_path / "s"), "--force").exit_code == 0
+
+
+def test_read_results_gives_a_dataframe_with_plain_names_and_units(finished_run):
+    """chewbot.read_results: the same numbers as the Table reader (another parser: csv + float), plain names, the
+    units of run.json in attrs; a folder that is not chewbot's is named."""
+    import chewbot
+
+    frame = chewbot.read_results(finished_run)
+    run, table = read_results(finished_run)
+    assert list(frame.columns) == list(table.columns)
+    assert frame.attrs["units"] == {n: run["columns"][n]["unit"] for n in table.columns}
+    assert frame.attrs["units"]["tau1"] == "N*m" and frame.attrs["descriptions"]["tau1"]
+    for name in table.columns:  # the shortest repr that reads back exactly: both parsers give the same doubles
+        assert np.array_equal(frame[name].to_numpy(), table[name], equal_nan=True), name
+    assert chewbot.read_results(finished_run / "results.csv").shape == frame.shape
+    with pytest.raises(chewbot.ChewbotError, match="not a results folder"):
+        chewbot.read_results(finished_run.parent)

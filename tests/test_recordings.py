@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import json
+
 import numpy as np
 import pytest
 from support import model
@@ -532,10 +534,10 @@ def test_command_writes_a_task_that_runs_to_torques(tmp_path):
     result = runner.invoke(app, ["import-motion", rec, "--registration", registration(tmp_path), "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "robot fit: position error up to" in result.output and "wrote" in result.output
-    for path in (out, tmp_path / "task.residuals.csv"):
-        first = path.read_text().splitlines()[0]
-        assert first.startswith("# written by chewbot") and "chewbot import-motion " in first  # the marker line
-    header = out.read_text().splitlines()[1]
+    for path in (out, tmp_path / "task.residuals.csv"):  # plain CSV; the marker is the sidecar, with the command
+        side = json.loads((tmp_path / (path.name + ".chewbot.json")).read_text())
+        assert side["chewbot_file"] == 1 and "chewbot import-motion " in side["about"]
+    header = out.read_text().splitlines()[0]
     assert header.startswith("t [s],X [m],Y [m],alpha [rad],beta [rad],dX [m/s]") and header.endswith("Fz [N]")
     assert "position_error [mm],orientation_error [deg]" in (tmp_path / "task.residuals.csv").read_text()
     task = read_task_csv(out)

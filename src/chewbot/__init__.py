@@ -7,7 +7,7 @@ which must take over SIGINT before anything heavy loads: :mod:`chewbot.__main__`
 from __future__ import annotations
 
 __all__ = ["BUILTIN_MODELS", "ChewbotError", "KinematicsError", "Model", "ParameterError", "TaskError", "__version__",
-           "load_model"]
+           "load_model", "read_results"]
 
 
 def __getattr__(name: str):
@@ -27,4 +27,8 @@ def __getattr__(name: str):
         from chewbot.model import params
 
         return getattr(params, name)
+    if name == "read_results":
+        from chewbot.outputs.record import read_frame
+
+        return read_frame
     raise AttributeError(f"module 'chewbot' has no attribute {name!r}")

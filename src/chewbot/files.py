@@ -6,7 +6,10 @@ Every command writes through this module (docs/cli.md, "Writing a new command"):
   more single files written together (a task and its residuals, a Markdown table). The output is written
   under a temporary name beside it and renamed into place once complete; an error or a signal removes it.
 * ``--force`` replaces only an output that chewbot wrote, recognised by its :class:`Marker`: a file inside a
-  folder (a results folder's ``run.json``) or the first line of a single file (:func:`marker_line`). Anything
+  folder (a results folder's ``run.json``); for a single file, a small JSON file beside it (its *sidecar*,
+  ``task.csv.chewbot.json``, :func:`sidecar`) that records the SHA-256 of the file as written, for CSV tables, so
+  that any reader takes them with no options (``pandas.read_csv(path)``); the first line of the file
+  (:func:`marker_line`) for TOML and Markdown, and for the CSV tables written before the sidecars. Anything
   else is refused (:class:`OutputExistsError`, exit code 5) and left untouched. :func:`check_output` applies
   the rule before the work starts; the atomic writers apply it again before they rename.
 * An output may not be the current folder or contain it, nor contain (or be) one of the command's inputs.
@@ -93,6 +96,7 @@ class Marker:
     file: str | None = None
     key: str | None = None
 
+
     @property
     def is_folder(self) -> bool:
         return self.file is not None
@@ -103,7 +107,7 @@ class Marker:
         if path.is_symlink():  # chewbot never writes links: replacing one would replace what it points to
             return False
         if not self.is_folder:
-            return path.is_file() and _starts_with_marker(path)
+            return path.is_file() and (_starts_with_marker(path) or _sidecar_marks(path))
         try:
             content = json.loads((path / self.file).read_text(encoding="utf-8"))
         except (OSError, ValueError):
@@ -128,6 +132,56 @@ def marker_line(comment: str = "#", about: str = "") -> str:
     """
     text = f"{comment} {_MARKER_TEXT} {VERSION}" + (f": {about}" if about else "")
     return text + " -->" if comment == "<!--" else text
+
+
+SIDECAR_SUFFIX = ".chewbot.json"
+SIDECAR_KEY = "chewbot_file"
+_SIDECAR_FORMATS = (".csv",)  # tables whose readers take no comment line: their marker is a sidecar
+
+
+def sidecar(path: Path) -> Path:
+    """The sidecar of a table chewbot writes (``task.csv`` -> ``task.csv.chewbot.json``): ``{"chewbot_file": 1,
+    "version", "file", "about", "sha256", ...}``, the marker of :mod:`chewbot.files`'s module docstring. A file whose
+    content no longer has the recorded SHA-256 (edited since) is no longer chewbot's: ``--force`` refuses it."""
+    path = Path(path)
+    return path.with_name(path.name + SIDECAR_SUFFIX)
+
+
+def uses_sidecar(path: Path) -> bool:
+    """True for the files whose marker is a sidecar (CSV tables), False for those that begin with the marker line."""
+    return Path(path).suffix.lower() in _SIDECAR_FORMATS
+
+
+def file_sha256(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_sidecar(path: Path, side: Path | None = None) -> dict | None:
+    """The sidecar of ``path`` (or the file ``side``) as a dict, if it is chewbot's; None otherwise."""
+    try:
+        content = json.loads(Path(side or sidecar(path)).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return content if isinstance(content, dict) and isinstance(content.get(SIDECAR_KEY), int) else None
+
+
+def _sidecar_marks(path: Path, side: Path | None = None) -> bool:
+    content = read_sidecar(path, side)
+    try:
+        return content is not None and content.get("sha256") == file_sha256(path)
+    except OSError:
+        return False
+
+
+def sidecar_text(path: Path, name: str, about: str = "", **extra) -> str:
+    """The sidecar's JSON for the file ``path`` as written (its SHA-256), to be named after ``name``."""
+    return to_json({SIDECAR_KEY: 1, "version": VERSION, "file": name, "about": about, **extra, "sha256": file_sha256(path)})
 
 
 def _starts_with_marker(path: Path) -> bool:
@@ -173,7 +227,12 @@ def check_output(out: Path, force: bool, marker: Marker = RESULTS_FOLDER, inputs
             raise OutputExistsError(f"{out}: exists (a {marker.kind} written by chewbot); pass --force to replace it, "
                                     "or choose another --out")
         return
-    what = f"has no {marker.file} of chewbot" if marker.is_folder else f"does not start with chewbot's line '{marker_line()}'"
+    if marker.is_folder:
+        what = f"has no {marker.file} of chewbot"
+    elif read_sidecar(out) is not None:
+        what = f"it changed since chewbot wrote it: its content is not that recorded in {sidecar(out).name}"
+    else:
+        what = f"has no {sidecar(out).name} beside it and does not start with chewbot's line '{marker_line()}'"
     if out.is_symlink():
         what = "is a symbolic link"
     elif marker.is_folder != out.is_dir():
@@ -298,25 +357,38 @@ def atomic_folder(out: Path, force: bool = False, marker: Marker = RESULTS_FOLDE
 
 
 @contextmanager
-def atomic_files(paths, force: bool = False, inputs=()):
+def atomic_files(paths, force: bool = False, inputs=(), about: dict | None = None):
     """Yield one temporary path beside each of ``paths`` (single files written together, e.g. a task and its
-    residuals); when the block ends without an error each becomes its path, all or none. Each file must start
-    with :func:`marker_line` (its absence is a bug); an existing file is replaced only as :func:`check_output`
-    allows. On an error or a signal the temporary files are removed and the paths stay as they were."""
+    residuals); when the block ends without an error each becomes its path, all or none. A CSV table gets its
+    sidecar (:func:`sidecar`, written here, with ``about[path]``: a dict of what it holds, or a string), every
+    other file must start with :func:`marker_line` (its absence is a bug); an existing file is replaced only as
+    :func:`check_output` allows. On an error or a signal the temporary files are removed and the paths stay as
+    they were."""
     paths = [Path(p) for p in paths]
     for p in paths:
         check_output(p, force, WRITTEN_FILE, inputs)
+        if uses_sidecar(p) and (sidecar(p).exists() or sidecar(p).is_symlink()) and read_sidecar(p) is None:
+            raise OutputExistsError(f"{sidecar(p)}: exists and is not a sidecar of chewbot's; chewbot never replaces it: "
+                                    "choose another --out")
     for p in paths:
         _prepare_folder(p.parent, p)
     pairs = [(_temporary(p, "partial"), p) for p in paths]
-    with _committed(pairs, force, WRITTEN_FILE):
+    sides = [(_temporary(sidecar(p), "partial"), sidecar(p), tmp, p) for tmp, p in pairs if uses_sidecar(p)]
+
+    def mark():
+        for side_tmp, _, tmp, p in sides:
+            what = (about or {}).get(p, (about or {}).get(str(p), ""))
+            extra = what if isinstance(what, dict) else {"about": what}
+            side_tmp.write_text(sidecar_text(tmp, p.name, **{"about": "", **extra}), encoding="utf-8")
+
+    with _committed(pairs + [(s, o) for s, o, _, _ in sides], force, WRITTEN_FILE, mark, {tmp: s for s, _, tmp, _ in sides}):
         yield [tmp for tmp, _ in pairs]
 
 
 @contextmanager
-def atomic_file(path: Path, force: bool = False, inputs=()):
+def atomic_file(path: Path, force: bool = False, inputs=(), about: dict | None = None):
     """:func:`atomic_files` for one file: yields its temporary path."""
-    with atomic_files([path], force, inputs) as (tmp,):
+    with atomic_files([path], force, inputs, about) as (tmp,):
         yield tmp
 
 
@@ -399,23 +471,34 @@ def atomic_member(path: Path):
 
 
 @contextmanager
-def _committed(pairs: list[tuple[Path, Path]], force: bool, marker: Marker):
+def _committed(pairs: list[tuple[Path, Path]], force: bool, marker: Marker, mark=None, sidecars: dict | None = None):
     """Run the block, then rename each (temporary, output) pair into place, moving an existing output aside
     first; on any error or signal remove the temporaries and the outputs placed so far, and put back what was
-    moved aside: all the outputs or none."""
+    moved aside: all the outputs or none. ``mark()`` writes the sidecars after the block; ``sidecars`` maps a
+    temporary file to its temporary sidecar (the sidecars are pairs too, marked by their content)."""
     aside: dict[Path, Path] = {}
     placed: list[Path] = []
     current = pairs[0][1]
+    sidecars = sidecars or {}
+    side_tmps = set(sidecars.values())
     try:
         yield
+        if mark is not None:
+            mark()
         for tmp, out in pairs:
-            if not marker.present(tmp):
+            if tmp in side_tmps:
+                continue
+            if tmp in sidecars:
+                if not _sidecar_marks(tmp, sidecars[tmp]):
+                    raise RuntimeError(f"{out}: its sidecar does not record it")
+            elif not marker.present(tmp):
                 raise RuntimeError(f"{out}: the command did not mark its output "
                                    f"({marker.file or repr(marker_line())}); chewbot could not recognise it later")
         with shield():
             for tmp, out in pairs:
                 current = out
-                check_output(out, force, marker)  # again: a concurrent process may have written it meanwhile
+                if tmp not in side_tmps:
+                    check_output(out, force, marker)  # again: a concurrent process may have written it meanwhile
                 if out.exists() or out.is_symlink():
                     aside[out] = _temporary(out, "replaced")
                     os.replace(out, aside[out])

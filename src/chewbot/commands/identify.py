@@ -68,9 +68,9 @@ def identify(
         header = [marker_line("#", f"the model {m.source} with the values estimated by {about}"),
                   *[f"# {line}" for line in summary]]
         text = model_text(Path(m.source).read_text("utf-8"), result.values(), result.identified, header, comments)
-        with atomic_files([out, table], force, inputs) as (tmp_model, tmp_table):
+        with atomic_files([out, table], force, inputs, about={table: {"about": f"estimates of {about}", "summary": summary}}) as (tmp_model, tmp_table):
             tmp_model.write_text(text, encoding="utf-8")
-            tmp_table.write_text(table_text(marker_line("#", f"estimates of {about}"), summary, result.rows()), encoding="utf-8")
+            tmp_table.write_text(table_text(result.rows()), encoding="utf-8")
     _print_table(stdout, result)
     for line in summary:
         stdout.print(line, highlight=False, markup=False)

@@ -63,7 +63,7 @@ def import_motion(
     """
     from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
-    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
@@ -84,9 +84,9 @@ def import_motion(
         files = [(residuals, result.residuals(), "residuals of " + about)]
         if result.task is not None:
             files.insert(0, (out, _task_table(result.task), "a task, read it with chewbot run --task; from " + about))
-        with atomic_files([path for path, _, _ in files], force, inputs) as temporaries:
-            for (_, table, what), tmp in zip(files, temporaries):
-                table.to_csv(tmp, first_line=marker_line("#", what))
+        with atomic_files([path for path, _, _ in files], force, inputs, about={path: what for path, _, what in files}) as temporaries:
+            for (_, table, _), tmp in zip(files, temporaries):
+                table.to_csv(tmp)
     for note in result.notes:
         console.print(f"note: {note}", highlight=False, markup=False)
     _print_maxima(stdout, result)

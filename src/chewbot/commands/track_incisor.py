@@ -29,7 +29,7 @@ def track_incisor(
 
       chewbot track-incisor incisor.csv --out task.csv --pin alpha && chewbot run --task task.csv --out runs/tracked
     """
-    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output
     from chewbot.model.params import load_model
     from chewbot.task.csvio import read_incisor_csv
     from chewbot.task.incisor import track_incisor as track
@@ -45,9 +45,10 @@ def track_incisor(
             step("solving")
             result = track(m, path_data["t"], path_data["p"], path_data["v"], path_data["a"], orientation=orientation.value,
                            pin=pin, pinned=path_data["pinned"].get(pin), force=path_data["force"], side=side.value, name=out.stem)
-        with atomic_files((out, residuals), force, inputs) as temporaries:
-            for table, tmp, what in zip(result.tables(), temporaries, ("a task, read it with chewbot run --task",
-                                                                       "residuals of chewbot track-incisor")):
-                table.to_csv(tmp, first_line=marker_line("#", f"{what}; from {path.name}"))
+        about = {out: f"a task, read it with chewbot run --task; from {path.name}",
+                 residuals: f"residuals of chewbot track-incisor; from {path.name}"}
+        with atomic_files((out, residuals), force, inputs, about=about) as temporaries:
+            for table, tmp in zip(result.tables(), temporaries):
+                table.to_csv(tmp)
     stdout.print(f"wrote {escape(str(out))} and {escape(str(residuals))}; max |f_D| = {abs(result.f_D).max():.3g} m, "
                  f"max |f_V| = {abs(result.f_V).max():.3g} m/s, max |f_A| = {abs(result.f_A).max():.3g} m/s^2")

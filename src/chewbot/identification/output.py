@@ -71,12 +71,10 @@ def _insert_after(doc, after: str, key: str, value) -> None:
             doc[key] = value
 
 
-def table_text(marker: str, summary: list[str], rows: list[dict]) -> str:
-    """The CSV of the estimates: the marker line, the summary as # lines, the header, a row per parameter."""
+def table_text(rows: list[dict]) -> str:
+    """The CSV of the estimates: the header, a row per parameter (plain CSV: the marker and the fit's summary are
+    in its sidecar, ``NAME.identification.csv.chewbot.json``)."""
     out = io.StringIO()
-    out.write(marker + "\n")
-    for line in summary:
-        out.write(f"# {line}\n")
     writer = csv.DictWriter(out, TABLE_COLUMNS, lineterminator="\n")
     writer.writeheader()
     for row in rows:

@@ -123,3 +123,43 @@ def read_results(folder: Path) -> tuple[dict, Table]:
     run = read_record(folder)
     units = {name: c.get("unit", "") for name, c in run.get("columns", {}).items()}
     return run, Table.read_csv(Path(folder) / "results.csv", units)
+
+
+RESULTS_RECORDS = ("chewbot_run", "chewbot_simulation")  # the folders with a results.csv: a run's, a simulation's
+
+
+def read_frame(folder: Path):
+    """The results.csv of a run's or a simulation's folder (``folder``, or the path of its results.csv) as a pandas
+    DataFrame: plain column names (``tau1``), each column's unit in ``frame.attrs["units"]`` (``"N*m"``, SI) and
+    its description in ``frame.attrs["descriptions"]``, the folder's run.json in ``frame.attrs["record"]``.
+    A :class:`ChewbotError` names the folder that is not such a folder."""
+    import pandas as pd
+
+    folder = Path(folder)
+    if folder.name == "results.csv":
+        folder = folder.parent
+    path = folder / "run.json"
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ChewbotError(f"{folder}: not a results folder of chewbot (no run.json)") from None
+    except (OSError, ValueError) as exc:
+        raise ChewbotError(f"{path}: cannot read it ({exc})") from None
+    if not isinstance(record, dict) or not any(key in record for key in RESULTS_RECORDS):
+        raise ChewbotError(f"{path}: not the record of a run or a simulation (no key {' or '.join(RESULTS_RECORDS)}); "
+                           "chewbot.read_results reads the folders of chewbot run and chewbot simulate")
+    try:
+        frame = pd.read_csv(folder / "results.csv")
+    except FileNotFoundError:
+        raise ChewbotError(f"{folder}: no results.csv") from None
+    from chewbot.units import HEADER_CELL
+
+    columns = record.get("columns", {})
+    cells = [HEADER_CELL.match(c) for c in frame.columns]
+    names = [m.group(1) if m else c for m, c in zip(cells, frame.columns)]
+    frame.attrs["units"] = {n: columns.get(n, {}).get("unit", (m.group(2) or "") if m else "") for n, m in zip(names, cells)}
+    frame.columns = names
+    frame.attrs["descriptions"] = {n: columns.get(n, {}).get("description", "") for n in names}
+    frame.attrs["record"] = record
+    return frame
+
