@@ -174,8 +174,7 @@ def test_csv_files_written_before_the_sidecars_are_still_chewbot_s(tmp_path):
     with pytest.raises(RuntimeError, match="did not mark"):  # a folder without its marker, likewise
         with atomic_folder(tmp_path / "run") as tmp:
             (tmp / "results.csv").write_text("t\n")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.md", "task.csv", "task.csv.chewbot.json", "task.residuals.csv",
-                                                          "task.residuals.csv.chewbot.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.csv", "notes.md", "task.csv", "task.csv.chewbot.json"]
 
 
 def test_bench_out_follows_the_force_rule(tmp_path, monkeypatch):
@@ -407,3 +406,39 @@ def test_read_results_gives_a_dataframe_with_plain_names_and_units(finished_run)
     assert chewbot.read_results(finished_run / "results.csv").shape == frame.shape
     with pytest.raises(chewbot.ChewbotError, match="not a results folder"):
         chewbot.read_results(finished_run.parent)
+
+
+def test_a_results_folder_carries_its_model_and_task_and_is_redrawn_elsewhere(task_csv, tmp_path):
+    """The folder holds copies of its parameter file and task file (run.json names them, with the SHA-256 of the
+    originals); with the originals gone and the folder moved, `chewbot report` draws it from the copies, and the
+    copied task reads back as the task the run read."""
+    import shutil
+
+    from chewbot.files import file_sha256
+
+    mine = tmp_path / "my_robot.toml"
+    shutil.copyfile(builtin_model_path("target"), mine)
+    task = tmp_path / "chewing.csv"
+    shutil.copyfile(task_csv, task)
+    out = tmp_path / "runs" / "mine"
+    result = invoke("run", "--model", str(mine), "--task", str(task), "--no-figures", "--no-report", "--out", str(out), "-q")
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["model"]["copy"] == "model.toml" and run["task"]["copy"] == "task.csv"
+    assert file_sha256(out / "model.toml") == run["model"]["sha256"] == file_sha256(mine)
+    assert file_sha256(out / "task.csv") == run["task"]["sha256"] == file_sha256(task)
+    mine.unlink()
+    task.unlink()
+    moved = tmp_path / "elsewhere"
+    out.rename(moved)
+    result = invoke("report", str(moved), "--no-figures", "-q")
+    assert result.exit_code == 0, result.output
+    assert (moved / "report.html").is_file()
+    assert np.array_equal(read_task_csv(moved / "task.csv").q, read_task_csv(task_csv).q)
+    # a run of the folder's results.csv copies the task it read (not the results table): it reads back exactly
+    again = tmp_path / "again"
+    result = invoke("run", "--model", str(moved / "model.toml"), "--task", str(moved / "results.csv"), "--no-figures",
+                    "--no-report", "--out", str(again), "-q")
+    assert result.exit_code == 0, result.output
+    copied, read = read_task_csv(again / "task.csv"), read_task_csv(moved / "results.csv")
+    assert np.array_equal(copied.q, read.q) and np.array_equal(copied.dq, read.dq) and np.array_equal(copied.force, read.force)

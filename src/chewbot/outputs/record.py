@@ -72,6 +72,53 @@ def task_record(task: Task) -> dict:
             "samples": task.n, "side": task.side, **({"meta": task.meta} if task.meta else {})}
 
 
+MODEL_COPY = "model.toml"
+TASK_COPY = "task.csv"
+
+
+def copy_inputs(folder: Path, models: dict, task: Task | None = None) -> dict[str, str]:
+    """Copy into ``folder`` the parameter file of each model of ``models`` (``{"model": model, "plant": plant}``;
+    named model.toml, plant.toml, ...) and, where the task came from a file, the task (task.csv): the folder
+    carries its inputs, so that ``chewbot report``, a colleague on another machine or a later chewbot read it as
+    it is. The copies are the files' bytes (their SHA-256 is checked against the one the run read: a file changed
+    meanwhile is an error); a task that is a run's results.csv is copied as the task it read (its motion and bite
+    force, :func:`chewbot.task.csvio.task_table`), which reads back exactly. Returns ``{role: file name}``."""
+    import shutil
+
+    from chewbot.files import file_sha256
+
+    copies: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    for role, model in models.items():
+        name = MODEL_COPY if role == "model" else f"{role}.toml"
+        if model.source in sources:  # the same file: one copy
+            copies[role] = sources[model.source]
+            continue
+        target = folder / name
+        shutil.copyfile(model.source, target)
+        if model.sha256 and file_sha256(target) != model.sha256:
+            raise ChewbotError(f"{model.source}: changed while the run read it (its SHA-256 is not the one loaded); run again")
+        copies[role] = sources[model.source] = name
+    if task is not None and Path(task.source).is_file():
+        from chewbot.task.csvio import run_beside, task_table
+
+        source, target = Path(task.source), folder / TASK_COPY
+        if run_beside(source) is not None:
+            task_table(task).to_csv(target)
+        else:
+            shutil.copyfile(source, target)
+        copies["task"] = TASK_COPY
+    return copies
+
+
+def with_copies(record: dict, copies: dict[str, str]) -> dict:
+    """``record`` (run.json) with the name of each input's copy in the folder under its entry (``"model": {...,
+    "copy": "model.toml"}``, ``"task": {..., "copy": "task.csv"}``)."""
+    for role, name in copies.items():
+        record[role] = {**record[role], "copy": name}
+    return record
+
+
 def environment_record(*extra: str) -> dict:
     """The versions of chewbot and its libraries (and of the packages ``extra``), and the platform."""
     return {"versions": versions(*extra), "platform": platform.platform()}

@@ -41,8 +41,11 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path
     from chewbot.report import dynamics_figures, figures, simulation_figures
     from chewbot.report.simulation_html import controller_label, write_simulation_report
 
+    from chewbot.outputs.record import copy_inputs, with_copies
+
     step = progress or (lambda msg, stage=None: None)
-    record, view = write_table(folder, result.table, simulation_json(result), progress=step)
+    copies = copy_inputs(folder, {"model": result.model, "plant": result.plant}, result.task)
+    record, view = write_table(folder, result.table, with_copies(simulation_json(result), copies), progress=step)
     series = view.series
     step("drawing figures")
     drawn = [

@@ -25,7 +25,7 @@ import numpy as np
 from chewbot.errors import ChewbotError
 from chewbot.files import RESULTS_FOLDER, OutputError, atomic_folder, atomic_members, to_json
 from chewbot.model import Model
-from chewbot.outputs.record import RunRecord, read_record, run_record
+from chewbot.outputs.record import RunRecord, copy_inputs, read_record, run_record, with_copies
 from chewbot.report.figures import drawing_process
 from chewbot.report.folder import draw, drawing_names
 from chewbot.report.view import RunView, ViewBuilder, report_columns
@@ -104,7 +104,8 @@ def write_run(options: RunOptions, out: Path, force: bool = False, progress=None
             totals.timings["results_csv_s"] = writer.seconds
             checks = totals.checks.results()
             step("writing run.json", done=task.n, stage="writing")
-            record = writer.record(run_record(options, model, task, columns, checks, totals.info()))
+            copies = copy_inputs(tmp, {"model": model}, task)
+            record = writer.record(with_copies(run_record(options, model, task, columns, checks, totals.info()), copies))
         finally:
             writer.close()
         view = writer.view()
@@ -134,7 +135,9 @@ def write(result: RunResult, out: Path, force: bool = False, progress=None, figu
     step = _stepper(progress)
     out = Path(out)
     with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp, drawing_process(figures) as drawer:
-        record, view = write_table(tmp, result.table, run_json(result), run_view_columns(result.model, result.options.contact), step)
+        copies = copy_inputs(tmp, {"model": result.model}, result.task)
+        record, view = write_table(tmp, result.table, with_copies(run_json(result), copies),
+                                   run_view_columns(result.model, result.options.contact), step)
         draw(tmp, record, result.model, view, figures, report, step, drawer=drawer)
     return out
 
@@ -154,8 +157,9 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
 
     Only the figures and report.html are written (:func:`chewbot.files.atomic_members`: all or none, each under
     a temporary name until all are complete); results.csv and run.json are read, never written. An existing figure
-    or report is replaced only with ``force``. The model is loaded from the parameter file run.json names, with
-    the run's overrides, and must have the run's parameters (their SHA-256 in run.json)."""
+    or report is replaced only with ``force``. The model is loaded from the folder's copy of its parameter file
+    (run.json's ``model.copy``; a folder written before the copies: the file run.json names), with the run's
+    overrides, and must have the run's parameters (their SHA-256 in run.json)."""
     from chewbot.model.params import BUILTIN_MODELS, load_model, split_overrides
     from chewbot.model.vector import vector_digest
 
@@ -169,7 +173,7 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     path = folder / RECORD_FILE
     record = read_record(folder)
     model_overrides, _ = split_overrides(record.get("overrides", {}))
-    spec = record["model"]["file"]
+    spec = str(folder / record["model"]["copy"]) if record["model"].get("copy") else record["model"]["file"]
     if not Path(spec).is_file() and record["model"]["name"] in BUILTIN_MODELS:
         spec = record["model"]["name"]  # a built-in model, from another installation
     model = load_model(spec, model_overrides)

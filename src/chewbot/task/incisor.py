@@ -77,14 +77,10 @@ class IncisorTracking:
     def tables(self) -> tuple[Table, Table]:
         """The task (t, X, Y, alpha, beta, their rates, Fx, Fy, Fz; SI, as ``chewbot run --task`` reads it) and
         the residuals (t, f_D, f_V, f_A per axis) as tables."""
-        task, res = Table(), Table()
-        for table in (task, res):
-            table.add("t", self.task.t, "s")
-        units = {"X": "m", "Y": "m", "alpha": "rad", "beta": "rad"}
-        for prefix, arr, per in (("", self.task.q, ""), ("d", self.task.dq, "/s"), ("dd", self.task.ddq, "/s^2")):
-            for j, c in enumerate(self.task.coords):
-                task.add(prefix + c, arr[:, j], units[c] + per)
-        task.add_block(["Fx", "Fy", "Fz"], self.task.force, "N")
+        from chewbot.task.csvio import task_table
+
+        task, res = task_table(self.task), Table()
+        res.add("t", self.task.t, "s")
         for label, arr, unit in (("f_D", self.f_D, "m"), ("f_V", self.f_V, "m/s"), ("f_A", self.f_A, "m/s^2")):
             res.add_block([f"{label}_{c}" for c in "xyz"], arr, unit)
         return task, res
