@@ -64,10 +64,23 @@ def write_log(path, kin, tau, theta=None, rates=True, degrees=False):
     return path
 
 
+PROGRESS: list[str] = []  # the messages of exact_identification's progress
+
+
 @functools.cache
 def exact_identification(tmp):
     m, kin, tau = robot()
-    return identify(load_model("target"), read_log(write_log(tmp / "exact.csv", kin, tau, degrees=True)))
+    return identify(load_model("target"), read_log(write_log(tmp / "exact.csv", kin, tau, degrees=True)),
+                    progress=lambda msg, done=None, total=None, stage=None: PROGRESS.append(msg))
+
+
+def test_the_least_squares_report_each_evaluation_with_its_cost(tmp_path_factory):
+    """The progress callable is told every evaluation of the residual with the cost 1/2 sum r^2, which the solver
+    drives down: the last reported cost is the fit's own (SciPy's ``cost``) and far below the first."""
+    result = exact_identification(tmp_path_factory.mktemp("exact"))
+    costs = [float(re.search(r"evaluation \d+, cost (\S+) \(N\*m\)\^2", m).group(1)) for m in PROGRESS if "evaluation" in m]
+    assert len(costs) >= 3 and costs[-1] < 1e-3 * costs[0]
+    assert costs[-1] == pytest.approx(result.fit.solver.cost, rel=1e-5, abs=1e-20)  # printed to 6 digits
 
 
 def test_a_noise_free_log_with_exact_rates_gives_back_the_true_parameters(tmp_path_factory):

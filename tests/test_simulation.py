@@ -4,6 +4,7 @@ another formulation's inverse dynamics, the 6RSS core's normal forces, the energ
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -380,3 +381,17 @@ def test_sensor_estimate_and_noisy_pd():
     assert e[:, :2].max() < 1.5e-3 and np.degrees(e[:, 2:].max()) < 1.5
     clean = simulate(Plant(m), ModelBasedController("pd", m, ref, gains), ref, 1000.0)
     assert np.abs(sim.tau - clean.tau).max() > 1e-4  # N m: the noise reached the torques
+
+
+def test_simulate_tells_the_time_simulated_and_the_real_time_factor():
+    """compute's progress is told, during the loop, how much of the task is simulated and how fast (the loop's
+    wall-clock time, kernels prepared before it), in increasing order."""
+    from chewbot.simulation.run import SimulateOptions, compute
+
+    messages = []
+    compute(SimulateOptions(controller="pd", overrides={"task.cycles": 1, "task.rest_s": 0.2}),
+            progress=lambda msg, done=None, total=None, stage=None: messages.append(msg))
+    found = [re.search(r"^simulation \(pd, 1000 Hz\): (\S+) of 1 s simulated, (\S+) x real time$", m) for m in messages]
+    simulated = [float(f.group(1)) for f in found if f]
+    assert len(simulated) == 3 and simulated == sorted(simulated) and simulated[-1] < 1.0  # every 250 of 1001 ticks
+    assert all(float(f.group(2)) > 0 for f in found if f)

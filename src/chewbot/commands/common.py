@@ -249,7 +249,9 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     """A progress bar that names the current step (nothing with --quiet, nor where standard error is not a
     terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None, stage=None)`` starts
     a step: with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by
-    one step of ``total`` (the number of steps, if known; otherwise it pulses). ``delay``: the bar appears only once
+    one step of ``total`` (the number of steps, if known; otherwise it pulses), except where the message begins with
+    the same words before its first colon as the one before (``least squares: evaluation 12, cost ...`` after
+    ``least squares: 11 parameters``): that updates the step's description, the step goes on. ``delay``: the bar appears only once
     the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
     arrived that a library swallowed (:func:`check_interrupted`), and a step that names its ``stage`` is where
     the test hook may pause (:func:`pause_for_tests`)."""
@@ -268,20 +270,21 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                    console=_console(), transient=True)
     task = bar.add_task(label, total=total)
-    start, shown, started = time.monotonic(), False, False
+    start, shown, started, previous = time.monotonic(), False, False, None
 
     def step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
-        nonlocal shown, started
+        nonlocal shown, started, previous
         check_interrupted()
         if stage:
             pause_for_tests(stage)
         if total is not None:
             bar.update(task, total=total)
+        head = msg.split(":", 1)[0]
         if done is not None:
             bar.update(task, description=f"{label}: {msg}", completed=done)
         else:
-            bar.update(task, description=f"{label}: {msg}", advance=1 if started else 0)
-        started = True
+            bar.update(task, description=f"{label}: {msg}", advance=1 if started and head != previous else 0)
+        started, previous = True, head
         if not shown and time.monotonic() - start >= delay:
             bar.start()
             shown = True

@@ -246,10 +246,14 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
                 full[idx] = phi_free
                 x, dx = x_of_phi(full)
                 cache[key] = (full, x, dx[:, idx], problem.evaluate_at(x, jacobian=True))
+                if progress:
+                    cost = 0.5 * float(np.sum(cache[key][3].r ** 2))
+                    progress(f"least squares: {idx.size} of {free_idx.size} parameters, evaluation {problem.evaluations}, "
+                             f"cost {cost:.6g} (N*m)^2")
             return cache[key]
 
         if progress:  # the first: the stage "fit"
-            progress(f"least squares ({idx.size} of {free_idx.size} parameters)", stage="fit" if solver is None else None)
+            progress(f"least squares: {idx.size} of {free_idx.size} parameters", stage="fit" if solver is None else None)
         solver = least_squares(lambda z: evaluated(z)[3].r.ravel(), np.clip(phi[idx], lo[idx], hi[idx]),
                                lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
                                x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,

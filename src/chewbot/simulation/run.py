@@ -177,10 +177,22 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
     options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
-    step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
-         stage="simulation")
+    label = f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})"
+    step(label, stage="simulation")
     t0 = time.perf_counter()
-    sim = simulate(plant, controller, reference, options.rate, sensor, check=check)
+    duration = reference.end - reference.start
+
+    loop_start = [t0]
+
+    def loop_progress(fraction: float) -> None:  # the time simulated and the real-time factor, from the loop's start
+        if fraction == 0:  # the kernels are ready: the loop starts
+            loop_start[0] = time.perf_counter()
+            return
+        simulated = fraction * duration
+        step(f"{label}: {simulated:.3g} of {duration:.3g} s simulated, "
+             f"{simulated / max(time.perf_counter() - loop_start[0], 1e-9):.2g} x real time")
+
+    sim = simulate(plant, controller, reference, options.rate, sensor, progress=loop_progress, check=check)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
