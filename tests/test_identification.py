@@ -262,3 +262,18 @@ def test_the_command_writes_a_model_that_check_model_and_run_accept(tmp_path):
     again = (tmp_path / "again.toml").read_text()
     assert len(re.findall(r"^# written by chewbot", again, re.M)) == 1
     assert runner.invoke(app, ["check-model", str(tmp_path / "again.toml")]).exit_code == 0
+
+
+def test_a_coefficient_at_its_bound_is_written_as_the_bound(tmp_path):
+    """A robot without HKP viscous friction: the estimate of c_H sits on its bound 0 and is written as 0, not as the
+    solver's last iterate a hair inside it (5.2e-43 was written before)."""
+    truth = {**TRUE, "friction.hkp_viscous_Ns_per_m": 0.0}
+    m = load_model("target", truth)
+    task = default_task(m, "left", ChewingParameters(cycles=2, rest_s=0.0, rate_hz=100.0))
+    kin = solve_kinematics(m, task, "euler-angles")
+    tau = inverse_dynamics(m, kin, "newton-euler", friction=True).tau
+    out = tmp_path / "identified.toml"
+    r = runner.invoke(app, ["identify", str(write_log(tmp_path / "log.csv", kin, tau)), "--model", "target", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    value = tomllib.loads(out.read_text())["friction"]["hkp_viscous_Ns_per_m"]
+    assert value == 0.0  # on the bound exactly (measured: the solver stops at its bound), never a denormal

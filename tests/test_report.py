@@ -313,3 +313,11 @@ def test_the_browser_check_fails_when_the_page_throws(run_folder, tmp_path):
     broken.write_text(html.replace("<head>", "<head><script>throw new Error('injected by the test');</script>", 1), encoding="utf-8")
     with pytest.raises(AssertionError, match="injected by the test"):
         _check_report_in_chromium(broken)
+
+
+def test_the_formulation_s_flags_read_as_words():
+    """The report's "Formulation" listing shows friction on/off and other flags yes/no, never Python's True/False."""
+    from chewbot.report.summary import solver_notes
+
+    assert solver_notes({"friction": False, "strict": True, "goal": "min-torque", "iterations": 3, "table": [1]}) == {
+        "friction": "off", "strict": "yes", "goal": "min-torque", "iterations": 3}

@@ -238,6 +238,8 @@ def test_ctrl_c_then_resume_on_a_separate_scheduler(spec_file, local_sweep, dask
         _, err = proc.communicate(timeout=WAIT_S)
         assert proc.returncode == EXIT_INTERRUPTED, err
         assert "Traceback" not in err
+        # the message says what stays and how to go on, not "no partial output left"
+        assert f"the chunks finished so far are kept in {out}" in err and "--resume continues" in err, err
         deadline = time.monotonic() + 30  # the workers exit as the cluster closes; time for a loaded machine
         while _process_group(proc.pid) and time.monotonic() < deadline:
             time.sleep(0.1)

@@ -101,10 +101,20 @@ def pause_for_tests(stage: str) -> None:
         time.sleep(0.02)
 
 
+_kept: str | None = None  # what a command keeps when a signal stops it (a sweep's chunks), set by the command
+
+
+def keep_on_interrupt(note: str) -> None:
+    """Say what an interruption leaves behind on purpose from now on (a sweep's finished chunks, for --resume): the
+    interrupted message names it instead of "no partial output left"."""
+    global _kept
+    _kept = note
+
+
 def interrupted_message(signum: int) -> str:
     """The one line printed when a signal ends a command."""
     what = "Ctrl-C" if signum == signal.SIGINT else "a request to terminate"
-    return f"interrupted: {signal.Signals(signum).name} ({what}); stopped, no partial output left"
+    return f"interrupted: {signal.Signals(signum).name} ({what}); stopped, {_kept or 'no partial output left'}"
 
 
 # --- what a command prints and how it ends ----------------------------------------------------------------------

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import typer
 
+from chewbot.kinematics.options import Side
+
 from chewbot.identification import MAX_RELATIVE_SE
 from chewbot.task import WINDOW_S
 
@@ -21,7 +23,7 @@ def identify(
     log: Path = typer.Argument(..., help="The robot log (CSV): t, theta1..6 (optional dtheta1..6, ddtheta1..6), tau1..6, optional Fx, Fy, Fz; units in brackets."),
     model: str = typer.Option("target", "--model", help="The start model: a built-in model (target, 6rss, ...) or a TOML parameter file."),
     out: Path = typer.Option(..., "--out", help="The model file to write (TOML); the table of estimates goes beside it, *.identification.csv."),
-    side: str = typer.Option("left", "--side", help="Molar where the logged bite force acts (left or right)."),
+    side: Side = typer.Option(Side.left, "--side", help="Molar where the logged bite force acts."),
     window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the Savitzky-Golay window that estimates the rates the log does not give."),
     fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.mass_g, mandible.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad); repeatable."),
     max_relative_se: float = typer.Option(MAX_RELATIVE_SE, "--max-relative-se", min=0.0, help="A parameter whose standard error exceeds this fraction of its magnitude is not identifiable from the log and is held at the start (the largest first, then the fit is repeated)."),
@@ -40,8 +42,7 @@ def identify(
 
       chewbot identify log.csv --model my_robot.toml --out my_robot_identified.toml --fix mandible.mass_g
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, console, errors_reported, fail, progress, stdout
-    from chewbot.errors import ChewbotError
+    from chewbot.commands.common import check_interrupted, console, errors_reported, progress, stdout
     from chewbot.identification.identifier import STEPS, identify as run_identify
     from chewbot.identification.log import read_log
     from chewbot.identification.output import model_text, table_text
@@ -49,8 +50,7 @@ def identify(
     from chewbot.model.params import load_model
 
     table = out.with_name(out.stem + ".identification.csv")
-    if side not in ("left", "right"):
-        fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+    side = side.value
     with errors_reported():
         m = load_model(model)
         inputs = [log, Path(m.source)]

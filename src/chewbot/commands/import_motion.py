@@ -12,6 +12,8 @@ from pathlib import Path
 
 import typer
 
+from chewbot.kinematics.options import Side
+
 DEFAULT_MAX_RESIDUAL = (1.0, 1.0)  # mm, deg
 
 
@@ -37,7 +39,7 @@ def import_motion(
     registration: Path = typer.Option(..., "--registration", help="TOML file: units, the markers in {M} (or rest = \"first\"), the tracker's placement, scales and fit weights (docs/recordings.md)."),
     out: Path = typer.Option(..., "--out", help="Task CSV to write (chewbot run --task reads it); the per-frame residuals go beside it, *.residuals.csv."),
     model: str = typer.Option("target", "--model", help="The robot: a built-in model (target, 6rss, ...) or a TOML parameter file."),
-    side: str = typer.Option("left", "--side", help="Molar where the bite force acts (left or right): recorded in the task's header; run the task with the same --side."),
+    side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts: recorded in the task's header; run the task with the same --side."),
     max_gap: float = typer.Option(0.1, "--max-gap", min=0.0, help="Longest gap (s) of a marker that is filled by a spline; longer ones are an error."),
     cutoff: str = typer.Option("6", "--cutoff", callback=_number_or("none", "--cutoff"), help="Zero-phase low-pass cutoff (Hz) of the marker paths, or 'none'."),
     rate: str = typer.Option("1000", "--rate", callback=_number_or("recording", "--rate"), help="Sampling rate (Hz) of the task, or 'recording' for the recording's own times."),
@@ -61,15 +63,14 @@ def import_motion(
 
       chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
-    from chewbot.errors import ChewbotError, FitError
+    from chewbot.commands.common import EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
+    from chewbot.errors import FitError
     from chewbot.files import WRITTEN_FILE, atomic_files, check_output
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
     from chewbot.task.csvio import task_table
 
     residuals = out.with_name(out.stem + ".residuals.csv")
-    if side not in ("left", "right"):
-        fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+    side = side.value
     options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
                             rate_hz=None if rate == "recording" else float(rate),
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,

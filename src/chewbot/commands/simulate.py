@@ -10,6 +10,8 @@ from pathlib import Path
 
 import typer
 
+from chewbot.kinematics.options import Side
+
 from chewbot.simulation import CONTROLLERS
 
 SIMULATE_STEPS = 8  # models and task, simulation, kinematics, checks, results.csv, figures, report (and the compile)
@@ -39,7 +41,7 @@ def simulate(
     compare: bool = typer.Option(False, "--compare", help="Run the three controllers on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     model: str = typer.Option("target", "--model", help="The controller's model: a built-in model or a TOML parameter file (also the plant's unless --plant)."),
-    side: str | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts (left or right). Default: left, or the side of the run whose results.csv is the --task."),
+    side: Side | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts. Default: left, or the side of the run whose results.csv is the --task."),
     method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of the model-based controllers (feedforward, computed-torque): hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles). Default: hessian."),
     goal: str | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: the distribution of the redundant torques (min-torque, min-coupler-force, min-hkp-force). Default: min-torque."),
     friction: str = typer.Option("off", "--friction", help="on|off: HKP and actuator friction in the plant (the model's coefficients); the controller's model has it only with --method newton-euler."),
@@ -86,7 +88,7 @@ def simulate(
     from chewbot.simulation.run import SimulateOptions, input_files
 
     gain_overrides = set_overrides(gain, "--gain")
-    options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
+    options = SimulateOptions(controller=controller, model=model, task=task, side=None if side is None else side.value, method=method, goal=goal, friction=friction,
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set, "--plant-set"),
                               bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides)

@@ -42,7 +42,9 @@ def sweep(
 
       chewbot sweep my_study.toml --out runs/study --scheduler tcp://10.0.0.5:8786
     """
-    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, errors_reported, fail, progress, stdout
+    import shlex
+
+    from chewbot.commands.common import EXIT_BAD_INPUT, check_interrupted, errors_reported, fail, keep_on_interrupt, progress, stdout
     from chewbot.errors import ChewbotError
     from chewbot.outputs.sweep import run_sweep
 
@@ -50,6 +52,8 @@ def sweep(
         fail(ChewbotError("--resume continues a sweep, --force starts it over: give one of them"), EXIT_BAD_INPUT)
     if scheduler is not None and workers is not None:
         fail(ChewbotError("--workers sizes the local cluster; with --scheduler the cluster has its own workers"), EXIT_BAD_INPUT)
+    again = ["chewbot", "sweep", str(spec), "--out", str(out), "--resume"] + (["--scheduler", scheduler] if scheduler else [])
+    keep_on_interrupt(f"the chunks finished so far are kept in {out} (nothing half-written): {shlex.join(again)} continues")
     with errors_reported():
         with progress(quiet, "sweep") as step, _bar(quiet) as bar:
             result = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume, force=force,

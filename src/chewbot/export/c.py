@@ -47,14 +47,30 @@ class Kernel:
 
 
 def _c_array(values: np.ndarray) -> str:
-    return "{" + ", ".join(repr(float(v)) for v in np.ravel(values, order="F")) + "}"
+    return "{" + (", ".join(repr(float(v)) for v in np.ravel(values, order="F")) or "0.0") + "}"
+
+
+def _example_values(k: Kernel) -> dict:
+    """The outputs chewbot computes in Python for the kernel's example sample, by name (CasADi matrices)."""
+    f = k.function
+    return f.call({name: ca.DM(np.asarray(v, dtype=float).reshape(f.size1_in(name), f.size2_in(name), order="F"))
+                   for name, v in k.example.items()})
+
+
+def _expected_outputs(k: Kernel) -> list[np.ndarray]:
+    """:func:`_example_values` as the C function writes them: the nonzeros of each output, in CasADi's order."""
+    values = _example_values(k)
+    return [np.array(values[k.function.name_out(j)].nonzeros(), dtype=float) for j in range(k.function.n_out())]
 
 
 def _example_program(prefix: str, kernels: list[Kernel]) -> str:
     lines = [
-        "/* Evaluates each exported kernel once on the sample listed in README.md and prints its outputs.",
+        "/* Evaluates each exported kernel once on the sample listed in README.md, prints its outputs and checks them",
+        "   against the values chewbot computed in Python for that sample (relative difference at most 1e-9 of the",
+        "   output's largest entry: the same graph compiled differs by rounding, ~1e-15; exit code 1 otherwise).",
         "   With an argument R, also calls each kernel R times and prints the mean time per call. */",
         "#define _POSIX_C_SOURCE 199309L",
+        "#include <math.h>",
         "#include <stdio.h>",
         "#include <stdlib.h>",
         "#include <time.h>",
@@ -87,11 +103,20 @@ def _example_program(prefix: str, kernels: list[Kernel]) -> str:
             f"    casadi_real w[{max(f.sz_w(), 1)}];",
             f"    if ({n}(arg, res, iw, w, 0)) {{ fprintf(stderr, \"{n} failed\\n\"); failed = 1; }}",
         ]
+        expected = _expected_outputs(k)
         for j in range(f.n_out()):
             lines += [
+                f"    const casadi_real expected{j}[{max(f.nnz_out(j), 1)}] = {_c_array(expected[j])};",
                 f'    printf("{n} {f.name_out(j)}");',
                 f"    for (int k = 0; k < {f.nnz_out(j)}; ++k) printf(\" %.17g\", out{j}[k]);",
                 '    printf("\\n");',
+                "    {",
+                "      double scale = 0.0, worst = 0.0;",
+                f"      for (int k = 0; k < {f.nnz_out(j)}; ++k) if (fabs(expected{j}[k]) > scale) scale = fabs(expected{j}[k]);",
+                f"      for (int k = 0; k < {f.nnz_out(j)}; ++k) if (fabs(out{j}[k] - expected{j}[k]) > worst) worst = fabs(out{j}[k] - expected{j}[k]);",
+                f'      if (worst > 1e-9 * (scale > 0.0 ? scale : 1.0)) {{ fprintf(stderr, "{n} {f.name_out(j)}: differs from chewbot\'s value by %.3g\\n", worst); failed = 1; }}',
+                f'      else printf("{n} {f.name_out(j)}: as chewbot computes it (largest difference %.3g)\\n", worst);',
+                "    }",
             ]
         lines += [
             "    if (repeats > 0) {",
@@ -134,7 +159,7 @@ def _readme(prefix: str, kernels: list[Kernel], model_name: str) -> str:
         out += ["", "Example sample:", ""]
         for i in range(f.n_in()):
             out.append(f"- `{f.name_in(i)}` = {np.array2string(np.ravel(k.example[f.name_in(i)], order='F'), precision=17, separator=', ', max_line_width=200)}")
-        values = f.call({name: ca.DM(np.asarray(v, dtype=float).reshape(f.size1_in(name), f.size2_in(name), order="F")) for name, v in k.example.items()})
+        values = _example_values(k)
         out += ["", "Expected outputs (chewbot, Python):", ""]
         for j in range(f.n_out()):
             arr = np.ravel(np.asarray(values[f.name_out(j)]), order="F")

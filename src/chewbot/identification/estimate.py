@@ -258,7 +258,12 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
                                lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
                                x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,
                                max_nfev=MAX_EVALUATIONS)
-        phi, x, _, ev = evaluated(solver.x)
+        # a parameter the solver left at a bound is given the bound itself: the trust region stops a hair inside it
+        # (a friction coefficient of 5e-43 where it is 0), which no file should carry
+        z = solver.x.copy()
+        z[solver.active_mask < 0] = lo[idx][solver.active_mask < 0]
+        z[solver.active_mask > 0] = hi[idx][solver.active_mask > 0]
+        phi, x, _, ev = evaluated(z)
         cache.clear()
         Jr = ev.J[:, idx] * ref[idx]
         C = covariance(Jr, ev.r, lags, rows_per_sample * int(problem.used.sum()))

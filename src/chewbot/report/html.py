@@ -243,7 +243,8 @@ def robot_figure(model: Model, view: RunView, side: str) -> dict:
         "legend": {"x": 0.0, "y": 0.98, "bgcolor": "rgba(255,255,255,0.7)", "font": {"size": 11}},
         "scene": {"domain": {"y": [0.1, 1.0]}, "xaxis": axis("X", 0), "yaxis": axis("Y", 1), "zaxis": axis("Z", 2), "aspectmode": "manual",
                   "aspectratio": {"x": span[0] / span.max(), "y": span[1] / span.max(), "z": span[2] / span.max()},
-                  "camera": {"eye": {"x": 1.05, "y": -1.0, "z": 0.55}, "up": {"x": 0, "y": 0, "z": 1}}},
+                  # the eye far enough that the axes and their titles stay inside the scene at every frame
+                  "camera": {"eye": {"x": 1.3, "y": -1.25, "z": 0.7}, "up": {"x": 0, "y": 0, "z": 1}}},
         "updatemenus": [{"type": "buttons", "direction": "left", "x": 0.02, "y": 0.02, "xanchor": "left", "yanchor": "bottom", "showactive": False,
                          "buttons": [{"label": "▶ play", "method": "animate", "args": [None, play]},
                                      {"label": "❚❚ pause", "method": "animate", "args": [[None], pause]}]}],

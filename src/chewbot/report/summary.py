@@ -235,8 +235,10 @@ def infeasible_samples(info: dict, t: np.ndarray, samples: np.ndarray | None = N
 
 
 def solver_notes(info: dict) -> dict[str, object]:
-    """The plain entries (text, numbers, flags) of a formulation's info, for a key/value listing."""
-    return {k: v for k, v in info.items() if isinstance(v, (str, int, float, bool))}
+    """The plain entries (text, numbers, flags) of a formulation's info, for a key/value listing; a flag in words
+    (``friction: on``, not Python's ``True``)."""
+    return {k: ({True: "on" if k == "friction" else "yes", False: "off" if k == "friction" else "no"}[v] if isinstance(v, bool) else v)
+            for k, v in info.items() if isinstance(v, (str, int, float, bool))}
 
 
 @dataclass(frozen=True)
