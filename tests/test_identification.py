@@ -277,3 +277,13 @@ def test_a_coefficient_at_its_bound_is_written_as_the_bound(tmp_path):
     assert r.exit_code == 0, r.output
     value = tomllib.loads(out.read_text())["friction"]["hkp_viscous_Ns_per_m"]
     assert value == 0.0  # on the bound exactly (measured: the solver stops at its bound), never a denormal
+
+
+def test_an_empty_or_missing_log_is_named_as_a_robot_log(tmp_path):
+    """The messages name what was expected (a robot log), not a task file."""
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    with pytest.raises(TaskError, match=r"empty.csv: empty file \(expected a robot log \(t, theta1..6, tau1..6\)"):
+        read_log(empty)
+    with pytest.raises(TaskError, match=r"absent.csv: no such file \(expected a robot log"):
+        read_log(tmp_path / "absent.csv")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import casadi as ca
 import numpy as np
@@ -20,6 +21,8 @@ from chewbot.model.vector import vector_digest
 from chewbot.model.params import apply_overrides, builtin_model_path, load_model, parse_override, read_parameter_file
 from chewbot.report.summary import home_pose
 from chewbot.task.default import ChewingParameters, default_task, parameters_with
+
+runner = CliRunner()
 
 SHORT = ChewingParameters(cycles=1, rest_s=0.1)  # one chewing cycle: 901 samples
 
@@ -204,3 +207,66 @@ def test_run_records_the_overrides(tmp_path):
     assert not (tmp_path / "bad").exists()
     check = runner.invoke(app, ["check-model", "target", "--set", "friction.hkp_coulomb=0.3"], env={"COLUMNS": "250"})
     assert check.exit_code == 0 and "friction.hkp_coulomb = 0.3" in check.output
+
+
+# --- nothing silently ignored ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("argument", ["task.force_z_N=nan", "task.force_z_N=inf", "friction.hkp_coulomb=-inf",
+                                      "chains.crank_length_mm[3]=NaN"])
+def test_a_value_that_is_not_finite_is_refused_naming_it(argument):
+    with pytest.raises(ParameterError, match=rf"--set {re.escape(argument)}: .* is not a finite number"):
+        parse_override(argument)
+    result = runner.invoke(app, ["run", "--set", argument, "--out", "unused"])
+    assert result.exit_code == EXIT_BAD_INPUT and "not a finite number" in result.output and "Traceback" not in result.output
+
+
+def test_nan_in_a_parameter_file_is_refused_naming_the_key(tmp_path):
+    path = tmp_path / "nan.toml"
+    path.write_text(builtin_model_path("target").read_text().replace("[limits]", "[limits]\ntheta_range_deg = [nan, 90.0]", 1))
+    with pytest.raises(ParameterError, match=r"nan.toml: key 'limits.theta_range_deg\[1\]': must be a number or \+/-inf, not nan"):
+        load_model(path)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--set", "friction.hkp_coulomb=0.2"], "--set friction.hkp_coulomb=0.2 changes nothing: the friction coefficients are used by the newton-euler method"),
+    (["--method", "newton-euler", "--friction", "off", "--set", "friction.actuator_coulomb=0.1"], "this run has --friction off"),
+    (["--set", "contact.preload_N=2"], "--set contact.preload_N=2 changes nothing: the preload is the smallest normal force of the unilateral contact"),
+])
+def test_an_override_the_run_does_not_use_is_refused_naming_what_uses_it(args, words, tmp_path):
+    """The README's old example (friction with the default, frictionless method) changed nothing; now it is exit 2."""
+    result = runner.invoke(app, ["run", *args, "--out", str(tmp_path / "x")], env={"COLUMNS": "300"})
+    assert result.exit_code == EXIT_BAD_INPUT and words in result.output, result.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_where_friction_is_used_the_override_changes_the_torques():
+    """The other side of the rule: with newton-euler and friction on, friction.hkp_coulomb changes tau."""
+    from chewbot.run.options import resolve
+    from chewbot.run.pipeline import compute
+
+    base = compute(resolve(method="newton-euler", overrides={"task.cycles": 1, "task.rest_s": 0.1}))
+    more = compute(resolve(method="newton-euler", overrides={"task.cycles": 1, "task.rest_s": 0.1, "friction.hkp_coulomb": 0.3}))
+    assert np.abs(more.table["tau1"] - base.table["tau1"]).max() > 1e-4
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--controller", "pd", "--method", "liang"], "--method applies to the model-based controllers"),
+    (["--controller", "pd", "--bite-unknown"], "--bite-unknown applies to the model-based controllers"),
+    (["--controller", "pd", "--gain", "computed_torque.damping=0.7"], "it is a gain of --controller computed-torque"),
+    (["--gain", "estimator.cutoff_Hz=100"], "the estimator runs only with sensor noise"),
+    (["--set", "friction.hkp_coulomb=0.2"], "used by the plant with --friction on"),
+    (["--gain", "pd.kp_Nm_per_rad=nan"], "--gain pd.kp_Nm_per_rad=nan: 'nan' is not a finite number"),
+])
+def test_simulate_refuses_what_its_controllers_do_not_use(args, words, tmp_path):
+    result = runner.invoke(app, ["simulate", *args, "--out", str(tmp_path / "x")], env={"COLUMNS": "300"})
+    assert result.exit_code == EXIT_BAD_INPUT and words in result.output, result.output
+
+
+def test_the_run_summary_names_the_method_it_used(tmp_path):
+    """--orientation euler-parameters switches the default method to newton-euler (with friction and its goal): the
+    summary says so."""
+    result = runner.invoke(app, ["run", "--orientation", "euler-parameters", "--set", "task.cycles=1", "--set", "task.rest_s=0.1",
+                                 "--no-figures", "--no-report", "--out", str(tmp_path / "ep")], env={"COLUMNS": "300"})
+    assert result.exit_code == 0, result.output
+    assert "used: method newton-euler (euler-parameters), goal min-torque, friction on, contact bilateral" in result.output
