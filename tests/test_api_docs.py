@@ -17,7 +17,7 @@ API = ROOT / "docs" / "api.md"
 DOCUMENTS = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]
 # A dotted name, with the parameter list that follows it in the same code span.
 NAME = re.compile(r"`((?:chewbot|model|task|kinematics|dynamics|analysis|simulation)(?:\.[A-Za-z_]\w*)+)(\([^`]*\))?`")
-DOTTED = re.compile(r"\bchewbot(?:\.[A-Za-z_]\w*)+")
+DOTTED = re.compile(r"(?<![.\w/-])chewbot(?:\.[A-Za-z_]\w*)+")  # not a file name such as task.csv.chewbot.json
 SUBPACKAGES = {"model", "task", "kinematics", "dynamics", "analysis", "simulation"}
 
 
