@@ -45,6 +45,7 @@ def import_motion(
     angle_scale: float | None = typer.Option(None, "--angle-scale", min=0.0, show_default=False, help="Factor on the rotation angle relative to the first frame (default: the registration's)."),
     max_residual: tuple[float, float] = typer.Option(DEFAULT_MAX_RESIDUAL, "--max-residual", help="MM DEG: a frame fails when the fitted pose is farther than MM (at the measure point) or DEG (rotation angle) from the recorded one."),
     max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),
+    min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of every chain in an admissible pose: a margin from the chains' dead points (the run's near-singular threshold by default)."),
     force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
 ) -> None:
@@ -73,7 +74,7 @@ def import_motion(
                             rate_hz=None if rate == "recording" else float(rate),
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
-                            force_file=None if force_file is None else str(force_file))
+                            min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file))
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
         for target in (out, residuals):  # before the work, not after it
@@ -109,7 +110,8 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
         args += ["--scale", str(o.scale)]
     if o.angle_scale is not None:
         args += ["--angle-scale", f"{o.angle_scale:g}"]
-    args += ["--max-residual", f"{o.max_position_mm:g}", f"{o.max_orientation_deg:g}", "--max-rigid", f"{o.max_rigid_mm:g}"]
+    args += ["--max-residual", f"{o.max_position_mm:g}", f"{o.max_orientation_deg:g}", "--max-rigid", f"{o.max_rigid_mm:g}",
+             "--min-transmission", f"{o.min_transmission_deg:g}"]
     if o.force_file is not None:
         args += ["--force-file", o.force_file]
     return args + (["--force"] if force else [])

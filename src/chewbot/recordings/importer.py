@@ -20,6 +20,7 @@ from chewbot.model.params import load_model
 from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
 from chewbot.recordings.formats import Recording, read_recording
 from chewbot.recordings.prepare import fill_gaps, low_pass, trim
+from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
 from chewbot.recordings.rigid import RigidFit, rigid_fit, scale_motion, to_base
@@ -49,6 +50,7 @@ class ImportOptions:
     max_orientation_deg: float = 1.0
     max_rigid_mm: float = 1.0
     force_file: str | None = None
+    min_transmission_deg: float = MIN_TRANSMISSION_DEG
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +129,8 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
 
     def attempt(factor: float):
         p, R = scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
-        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
+                           options.min_transmission_deg)
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= options.max_orientation_deg)
         return fit, within & rigid_ok
 
@@ -192,7 +195,8 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
     out of the workspace moved back onto it, the bite force, and a check by the kinematics."""
     t = output_times(rec.t, options.rate_hz)
     q, dq, ddq = spline_motion(rec.t, fit.q, t)
-    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
+                                                options.min_transmission_deg)
     if not ok.all():
         i = int(rows[~ok][0])
         raise RecordingError(f"{rec.source}: between the fitted frames, at t = {t[i]:.6g} s, the spline leaves the "

@@ -12,7 +12,8 @@ The pose error of a pose q against a recorded pose (p_rec, R_rec), with the meas
 
 and the residual r = [w_p e_p / mm; w_o phi / deg] (``position_weight_per_mm``, ``orientation_weight_per_deg``):
 the fit minimises abs(r)^2 over the admissible poses. Admissible: both condyles inside their sockets (target)
-and every chain reachable with a transmission angle whose sine is at least :data:`REACH_MARGIN` (so that
+and every chain reachable with a transmission angle of at least a margin (:data:`MIN_TRANSMISSION_DEG` unless the
+caller gives another; never below :data:`REACH_MARGIN` in sine, so that
 :func:`chewbot.kinematics.ik.inverse_kinematics` accepts it).
 
 Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first: ``z`` (N, n), ``target`` (N, 12)
@@ -21,13 +22,14 @@ Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
 from chewbot.compiled.cache import KERNELS, cached_graph, folded
 from chewbot.compiled.kernels import compiled, evaluate
+from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
@@ -46,6 +48,10 @@ CHUNK = 256
 # Sine of the transmission angle that an admissible pose keeps on every chain: twice the inverse kinematics'
 # singular tolerance, so that a pose on this boundary is still well inside what the kinematics accept.
 REACH_MARGIN = 2 * SINGULAR_TOLERANCE
+# The transmission angle an admissible pose keeps by default: the run's near-singular threshold, so that an imported
+# task runs without near-singular samples (a free search otherwise ends on the chains' dead points, where a crank's
+# speed is unbounded for a finite speed of the mandible).
+MIN_TRANSMISSION_DEG = NEAR_SINGULAR_DEG
 _SQP = {
     "qpsol": "qrqp", "convexify_strategy": "eigen-clip",  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
@@ -147,9 +153,13 @@ class FitFunctions:
             return z, lam
 
 
-def fit_functions(model: Model) -> FitFunctions:
-    """The fit's functions for ``model`` (target: X, Y, alpha, beta; 6RSS: X, Y, Z, alpha, beta, gamma)."""
-    return cached_graph(folded(model), ("recordings", "fit"), lambda: _build(model))
+def fit_functions(model: Model, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> FitFunctions:
+    """The fit's functions for ``model`` (target: X, Y, alpha, beta; 6RSS: X, Y, Z, alpha, beta, gamma), whose
+    admissible poses keep every transmission angle at or above ``min_transmission_deg``."""
+    fns = cached_graph(folded(model), ("recordings", "fit"), lambda: _build(model))
+    reach = np.array(["reach" in name for name in fns.constraint_names])
+    floor = max(np.sin(np.radians(min_transmission_deg)), REACH_MARGIN) ** 2
+    return replace(fns, lbg=np.where(reach, floor, fns.lbg))
 
 
 def _rotation_vector(A):
