@@ -85,6 +85,7 @@ class FitFunctions:
     _nlp: ca.Function
     _stationarity: ca.Function
     _sequential: ca.Function
+    _extreme: ca.Function
 
     @property
     def n(self) -> int:
@@ -151,6 +152,12 @@ class FitFunctions:
                 except RuntimeError:
                     pass
             return z, lam
+
+    def extreme(self, z0, direction, point) -> tuple[np.ndarray, bool]:
+        """The admissible pose z (n,) that carries ``point`` (3,) m in {M} farthest along ``direction`` (3,) in {S}
+        (interior point method, IPOPT, exact Hessian), from z0; and whether IPOPT reports success."""
+        sol = self._extreme(x0=z0, p=np.r_[direction, point], lbg=self.lbg, ubg=self.ubg)
+        return np.asarray(sol["x"]).ravel(), bool(self._extreme.stats()["success"])
 
 
 def fit_functions(model: Model, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> FitFunctions:
@@ -241,7 +248,12 @@ def _build(model: Model) -> FitFunctions:
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
     nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
                     {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
+    # the farthest a point of {M} reaches along a direction: minimise -d . (p + R b) in mm over the admissible poses
+    reach = ca.SX.sym("reach", 6)
+    extreme = ca.nlpsol(f"reach_nlp_{model.mechanism}", "ipopt",
+                        {"x": z, "p": reach, "f": -ca.dot(reach[:3], p + ca.mtimes(R, reach[3:])) / MM, "g": g},
+                        {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10, "bound_relax_factor": 0.0}})
     return FitFunctions(coords, scale, np.array(lbg), np.array(ubg), tuple(names), gauss_newton, errors, constraints,
                         ca.Function("fit_pose_z", [z], [p, R], ["z"], ["p", "R"]), nlp, stationarity,
-                        gauss_newton.mapaccum("fit_sequential", CHUNK))
+                        gauss_newton.mapaccum("fit_sequential", CHUNK), extreme)
 
