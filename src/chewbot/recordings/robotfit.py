@@ -86,6 +86,7 @@ class FitFunctions:
     _stationarity: ca.Function
     _sequential: ca.Function
     _extreme: ca.Function
+    _cost_gradient: ca.Function
 
     @property
     def n(self) -> int:
@@ -152,6 +153,12 @@ class FitFunctions:
                 except RuntimeError:
                     pass
             return z, lam
+
+    def cost_gradient(self, z, target, settings) -> np.ndarray:
+        """The gradient (N, 12) of 0.5 abs(r)^2 with respect to the recorded pose [p_rec; R_rec column by column]:
+        at a fitted pose, the derivative of the fit's optimal value (the constraints do not depend on the
+        recorded pose: Danskin's theorem)."""
+        return evaluate(self._cost_gradient, z, target, settings)[0]
 
     def extreme(self, z0, direction, point) -> tuple[np.ndarray, bool]:
         """The admissible pose z (n,) that carries ``point`` (3,) m in {M} farthest along ``direction`` (3,) in {S}
@@ -255,5 +262,77 @@ def _build(model: Model) -> FitFunctions:
                         {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10, "bound_relax_factor": 0.0}})
     return FitFunctions(coords, scale, np.array(lbg), np.array(ubg), tuple(names), gauss_newton, errors, constraints,
                         ca.Function("fit_pose_z", [z], [p, R], ["z"], ["p", "R"]), nlp, stationarity,
-                        gauss_newton.mapaccum("fit_sequential", CHUNK), extreme)
+                        gauss_newton.mapaccum("fit_sequential", CHUNK), extreme,
+                        ca.Function("fit_cost_gradient", [z, target, settings], [ca.gradient(f, target)]))
 
+
+
+# ------------------------------------------------------------------------------------------ registration search
+
+@dataclass(frozen=True, eq=False)
+class RegistrationFunctions:
+    """The graphs of the registration search (:mod:`chewbot.recordings.register`), for one model.
+
+    The unknowns x (12,): the rest pose of {M} (the fit's n coordinates z0 in mm and deg, then, on the target,
+    an offset of Z in mm and of gamma in deg off the robot's poses) and a correction of the markers' placement
+    B = (R_B, t_B), {M} in the tracker's frame at rest: R_B = R_B,start exp(dr) (dr in deg), t_B = t_B,start + dt
+    (mm). With the tracker's motion Y_k (Y_0 = I) and the scale s, frame k is at
+    p_k = p_0 + s R_0 R_B^T ((R_Y,k - I) t_B + p_Y,k), R_k = R_0 R_B^T exp(s phi_k) R_B, phi_k the rotation vector
+    of R_Y,k. Per frame [exp(s phi_k) (9); R_Y,k - I (9); p_Y,k (3)] (columns first), constants [R_B,start (9);
+    t_B,start (3) m; s].
+    """
+
+    n_x: int
+    _targets: ca.Function
+    _placement: ca.Function
+
+    def targets(self, x, frames, const) -> tuple[np.ndarray, np.ndarray]:
+        """The recorded poses (N, 12) as the fit takes them and their Jacobians (N, 12, 12) by x."""
+        t, J = evaluate(self._targets, frames, x, const)
+        return t, J
+
+    def placement(self, x, const) -> tuple[np.ndarray, np.ndarray]:
+        """[R_0 R_B^T (9, the tracker's rotation); t_B (3) m; R_B (9)] of x, and its Jacobian (21, 12) by x."""
+        v, J = evaluate(self._placement, x[None], const[None])
+        return v[0], J[0]
+
+
+def _expm(w):
+    """exp([w]x) by Rodrigues' formula, written as series in theta^2 near 0 (exact derivatives at w = 0)."""
+    t2 = ca.sumsqr(w)
+    a = ca.if_else(t2 < 1e-8, 1 - t2 / 6 + t2**2 / 120, ca.sin(ca.sqrt(t2)) / ca.sqrt(t2))
+    b = ca.if_else(t2 < 1e-8, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(ca.sqrt(t2))) / t2)
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * ca.mtimes(K, K)
+
+
+def registration_functions(model: Model) -> RegistrationFunctions:
+    """The registration search's graphs for ``model`` (built once per process)."""
+    return cached_graph(folded(model), ("recordings", "registration"), lambda: _build_registration(model))
+
+
+def _build_registration(model: Model) -> RegistrationFunctions:
+    s_model = symbolic(folded(model), "euler-angles")
+    coords = COORDINATES[(model.mechanism, "euler-angles")]
+    scale = np.array([MM if c in ("X", "Y", "Z") else DEG for c in coords])
+    n = len(coords)
+    x = ca.SX.sym("x", 12)
+    p0, R0 = ca.Function("reg_pose", [s_model.q], [s_model.p, s_model.R])(ca.DM(scale) * x[:n])
+    if n == 4:  # off the robot's poses: Z and gamma of the rest pose
+        p0 = p0 + ca.vertcat(0, 0, x[4] * MM)
+        c, s_ = ca.cos(x[5] * DEG), ca.sin(x[5] * DEG)
+        R0 = ca.mtimes(R0, ca.vertcat(ca.horzcat(c, -s_, 0), ca.horzcat(s_, c, 0), ca.horzcat(0, 0, 1)))
+    const = ca.SX.sym("const", 13)
+    R_B = ca.mtimes(ca.reshape(const[:9], 3, 3), _expm(x[6:9] * DEG))
+    t_B = const[9:12] + x[9:12] * MM
+    scale_s = const[12]
+    frame = ca.SX.sym("frame", 21)
+    Rs, D, pY = ca.reshape(frame[:9], 3, 3), ca.reshape(frame[9:18], 3, 3), frame[18:21]
+    A = ca.mtimes(R0, R_B.T)
+    p_k = p0 + scale_s * ca.mtimes(A, ca.mtimes(D, t_B) + pY)
+    R_k = ca.mtimes(ca.mtimes(A, Rs), R_B)
+    target = ca.vertcat(p_k, ca.reshape(R_k, 9, 1))
+    targets = ca.Function("reg_targets", [frame, x, const], [target, ca.jacobian(target, x)])
+    placed = ca.vertcat(ca.reshape(A, 9, 1), t_B, ca.reshape(R_B, 9, 1))
+    placement = ca.Function("reg_placement", [x, const], [placed, ca.jacobian(placed, x)])
+    return RegistrationFunctions(12, targets, placement)
