@@ -47,6 +47,8 @@ def import_motion(
     max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),
     min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of every chain in an admissible pose: a margin from the chains' dead points (the run's near-singular threshold by default)."),
     force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
+    fit_registration: bool = typer.Option(False, "--fit-registration", help="Search the registration (tracker placement, rest pose, markers' placement for rest = \"first\") from the file's as a start, for the largest share of the recording the robot reproduces within --max-residual; writes it beside the task, *.registration.toml, and uses the share as the scale."),
+    keep_spikes: bool = typer.Option(False, "--keep-spikes", help="Keep the frames of tracker spikes (by default frames whose rigid-body error or speed jump is an outlier are dropped and filled like gaps, and listed)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
 ) -> None:
     """Turn a jaw-tracking recording (markers on the mandible) into a task for the robot.
@@ -55,12 +57,16 @@ def import_motion(
     motion, finds the robot's nearest admissible pose in each frame, resamples it and writes the task and, beside
     it, the per-frame residuals; prints their maxima. Frames beyond --max-residual or --max-rigid, or with no
     admissible pose near them, are named and the command exits with 3 (the residuals are written, the task is not).
+    With --fit-registration the registration is searched first (docs/recordings.md): the share of the recording
+    the robot reproduces, what limits it and the registration found are printed and written.
 
     Examples:
 
       chewbot import-motion chewing.c3d --registration subject3.toml --out task.csv && chewbot run --task task.csv
 
       chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
+
+      chewbot import-motion examples/recordings/chewing.csv --registration examples/recordings/chewing.toml --fit-registration --out task.csv
     """
     from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
@@ -68,29 +74,46 @@ def import_motion(
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
+    found_toml = out.with_name(out.stem + ".registration.toml")
     if side not in ("left", "right"):
         fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+    if fit_registration and (scale is not None or angle_scale is not None):
+        fail(ChewbotError("--fit-registration finds the scale (the share): leave out --scale and --angle-scale"), EXIT_BAD_INPUT)
     options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
                             rate_hz=None if rate == "recording" else float(rate),
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
-                            min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file))
+                            min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file),
+                            fit_registration=fit_registration, keep_spikes=keep_spikes)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
-        for target in (out, residuals):  # before the work, not after it
+        for target in (out, residuals) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
             check_output(target, force, WRITTEN_FILE, inputs)
         with progress(False, "import-motion", total=STEPS) as step:
             result = run_import(recording, registration, options, progress=step)
         about = f"chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
-        files = [(residuals, result.residuals(), "residuals of " + about)]
+        summary = result.summary()
+        files = [(residuals, result.residuals(), "residuals of " + about + "".join("\n# " + line for line in summary))]
         if result.task is not None:
             files.insert(0, (out, _task_table(result.task), "a task, read it with chewbot run --task; from " + about))
+        if result.found is not None:
+            from chewbot.recordings.registration import registration_toml
+
+            text = registration_toml(result.registration, f"registration found by {about}\n" + "\n".join(summary[:2]))
+            files.append((found_toml, text, None))
         with atomic_files([path for path, _, _ in files], force, inputs) as temporaries:
             for (_, table, what), tmp in zip(files, temporaries):
-                table.to_csv(tmp, first_line=marker_line("#", what))
+                if what is None:
+                    Path(tmp).write_text(marker_line("#", "a registration, chewbot import-motion --registration reads it") + "\n" + table)
+                else:
+                    table.to_csv(tmp, first_line=marker_line("#", what))
     for note in result.notes:
         console.print(f"note: {note}", highlight=False, markup=False)
     _print_maxima(stdout, result)
+    for line in summary:
+        stdout.print(line, highlight=False, markup=False)
+    if result.found is not None:
+        stdout.print(f"wrote the registration found: {found_toml}", highlight=False, markup=False)
     if result.task is None:
         lines = result.failures()
         shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
@@ -114,6 +137,10 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
              "--min-transmission", f"{o.min_transmission_deg:g}"]
     if o.force_file is not None:
         args += ["--force-file", o.force_file]
+    if o.fit_registration:
+        args.append("--fit-registration")
+    if o.keep_spikes:
+        args.append("--keep-spikes")
     return args + (["--force"] if force else [])
 
 

@@ -106,6 +106,16 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     return _result(fns, z, admissible, outside, target, settings)
 
 
+def fitted_pose(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """p (N, 3) m and R (N, 3, 3) of fitted poses q (N, n) (m, rad; NaN rows give NaN)."""
+    fns = fit_functions(model)
+    ok = np.isfinite(q).all(axis=1)
+    p, R = np.full((len(q), 3), np.nan), np.full((len(q), 3, 3), np.nan)
+    if ok.any():
+        p[ok], R[ok] = fns.pose(q[ok] / fns.scale)
+    return p, R
+
+
 def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
                        orientation_weight_per_deg: float = 1.0, min_transmission_deg: float = MIN_TRANSMISSION_DEG):
     """Poses q (N, n) of ``model`` (m, rad) moved to the nearest admissible ones where they are not admissible.

@@ -18,12 +18,14 @@ from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model
 from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
+from chewbot.recordings.measures import Measures, measure
+from chewbot.recordings.register import FoundRegistration, fit_registration
 from chewbot.recordings.formats import Recording, read_recording
-from chewbot.recordings.prepare import fill_gaps, low_pass, trim
+from chewbot.recordings.prepare import fill_gaps, low_pass, spikes, trim
 from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
-from chewbot.recordings.rigid import RigidFit, rigid_fit, scale_motion, to_base
+from chewbot.recordings.rigid import RigidFit, kabsch, rigid_fit, scale_motion, to_base
 from chewbot.table import Table
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
@@ -51,6 +53,8 @@ class ImportOptions:
     max_rigid_mm: float = 1.0
     force_file: str | None = None
     min_transmission_deg: float = MIN_TRANSMISSION_DEG
+    fit_registration: bool = False
+    keep_spikes: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,6 +79,11 @@ class MotionImport:
     passed: np.ndarray
     task: Task | None
     notes: list[str] = field(default_factory=list)
+    found: FoundRegistration | None = None
+
+    def measures(self) -> Measures:
+        """What the robot reproduces of the recording (registered, at scale 1): :func:`measure`."""
+        return measure(self.model, self.rigid.p, self.rigid.R, self.fit, self.recording.t)
 
     def residuals(self) -> Table:
         """One row per frame: its number in the file, time, the markers' rigid-fit residual (RMS and largest),
@@ -91,14 +100,40 @@ class MotionImport:
         table.add("admissible", fit.admissible, "1", "1 where an admissible pose was found")
         table.add("leaves_workspace", fit.outside.any(axis=1), "1", "1 where the nearest pose without the constraints is not admissible")
         table.add("passed", self.passed, "1", "1 where every tolerance is met")
+        m = self.measures()
+        for name, values, unit, what in m.columns():
+            table.add(name, values, unit, what)
+        limiting = np.zeros(rec.n, dtype=int)
+        if self.found is not None:
+            limiting[self.found.limiting_frames] = 1
+        table.add("limits_share", limiting, "1", "1 where the frame fails just above the share (the frames that limit it)")
         return table
+
+    def summary(self) -> list[str]:
+        """The import's measures in lines: the share (with the registration search), what the robot reproduces of
+        the recorded rotation and incisal excursion, whether it is in step, what limits it."""
+        m, lines = self.measures(), []
+        if self.found is not None:
+            f = self.found
+            lines.append(f"share {f.share:.4f} (the largest uniform scale <= 1 of the registered recording at which every frame "
+                         f"is reached within --max-residual); weighted residual RMS {f.residual:.3g}; tracker turned "
+                         f"{f.tracker_change_deg:.3g} deg from the file's; {f.evaluations} evaluations, {f.seconds:.3g} s")
+            if f.share < 1:
+                times = self.recording.t[f.limiting_frames]
+                shown = ", ".join(f"{t:.3f}" for t in times[:8]) + (" ..." if times.size > 8 else "")
+                lines.append(f"limited by {f.limiting} in {f.limiting_frames.size} frame(s) at t = {shown} s")
+        elif self.factor is not None:
+            lines.append(f"share {self.factor:.4f} (--scale auto)")
+        lines.append(m.describe())
+        return lines
+
 
     def failures(self) -> list[str]:
         """The failing frames, as stretches of consecutive frames with the reasons."""
         return _failure_messages(self)
 
 
-STEPS = 4  # reading and preparing, rigid fit, fit to the robot, task (the progress callback's calls)
+STEPS = 5  # reading and preparing, registration, rigid fit, fit to the robot, task (the progress callback's calls)
 
 
 def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
@@ -113,6 +148,20 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     model = load_model(options.model)
     notes: list[str] = []
     rec = _prepare(read_recording(recording, reg.units), reg, options, notes)
+    if reg.landmarks is not None:
+        reg = _placed_by_landmarks(model, reg, rec)
+        notes.append(f"the markers placed on the mandible by the landmarks ({', '.join(reg.landmarks)})")
+    found = None
+    if options.fit_registration:
+        step("searching the registration")
+        found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.origin, reg.markers, reg.point,
+                                 (reg.position_weight_per_mm, reg.orientation_weight_per_deg),
+                                 (options.max_position_mm, options.max_orientation_deg), options.min_transmission_deg)
+        notes.extend(found.notes)
+        reg = replace(reg, markers=found.markers, rotation=found.rotation, origin=found.origin, scale=found.share,
+                      angle_scale=found.share, landmarks=None)
+    else:
+        step("registration as the file gives it")
     step("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if reg.markers is None:
@@ -146,7 +195,19 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     task = None
     if passed.all():
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
-    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes)
+    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found)
+
+
+def _placed_by_landmarks(model: Model, reg: Registration, rec: Recording) -> Registration:
+    """``rest = "first"`` with landmarks: the mandible's rest pose in the tracker's frame from the landmarks (each
+    on the model's point of its name, least squares), and the markers in {M} from it; the tracker's placement
+    then puts that rest pose in {S} (not necessarily home)."""
+    points = {"incisor": model.incisor, "molar_left": model.molar_left, "molar_right": model.molar_right,
+              "condyle_left": model.hkp.T_L, "condyle_right": model.hkp.T_R}
+    names = list(reg.landmarks)
+    R_B, t_B = (v[0] for v in kabsch(np.array([points[n] for n in names]), np.array([reg.landmarks[n] for n in names])[None]))
+    markers = {name: R_B.T @ (rec.positions[0, k] - t_B) for k, name in enumerate(rec.markers)}
+    return replace(reg, markers=markers)
 
 
 def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: list[str]) -> Recording:
@@ -164,6 +225,11 @@ def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: l
     rec, head, tail = trim(rec)
     if head or tail:
         notes.append(f"dropped {head} frame(s) at the start and {tail} at the end where a marker was not seen")
+    if not options.keep_spikes:
+        body = None if reg.markers is None else np.array([reg.markers[name] for name in rec.markers])
+        rec, spiked = spikes(rec, body, options.max_gap_s)
+        for i0, i1, why in spiked:
+            notes.append(f"tracker spike dropped and filled: {rec.where(i0)} to {rec.where(i1)} ({why})")
     rec, found = fill_gaps(rec, options.max_gap_s)
     if found:
         notes.append(f"filled {len(found)} gap(s) by splines (longest {max(g[3] for g in found):.4g} s, marker {max(found, key=lambda g: g[3])[0]})")

@@ -30,7 +30,8 @@ every transmission angle at least ``--min-transmission``). Found by bisection (:
    Bounds: the rest pose within each coordinate's reachable range (:mod:`chewbot.recordings.reach`), the
    tracker's rotation within :data:`MAX_TRACKER_DEG` of the file's (so that an opening stays an opening) and
    every marker within :data:`PLAUSIBLE_MM` of the model's incisor point (on the teeth, a bite fork or the chin),
-   both as quadratic penalties. Refined at s = 1, then, if the share falls short of 1, again at the share found;
+   both as quadratic penalties; and a small pull (:data:`PRIOR`) toward the file's tracker rotation, which decides
+   where residuals do not. Refined at s = 1, then, if the share falls short of 1, again at the share found;
    the registration with the larger share is kept, and of equal shares the smaller residual.
 
 **Identifiability.** On the target the HKPs put both condyles on one plane, p1 x + z + p2 = 0, which every
@@ -69,6 +70,11 @@ BISECTIONS = 12
 ITERATIONS = 60
 # Weight of the penalties (residual units per deg^2 beyond the tracker bound, per mm^2 beyond the markers' bound).
 PENALTY = 10.0
+# Weight of the tracker's rotation away from the file's (residual units per deg^2): where the residual does not
+# tell the placements apart (the plane's symmetries, a rotation about a hinge axis), the search keeps the one
+# nearest to what the lab measured. Small beside the residual's curvature in the identified directions (about 1
+# per deg^2): it moves them by 1e-4 of the file's error.
+PRIOR = 1e-8
 MM, DEG = 1e-3, np.pi / 180
 
 
@@ -177,7 +183,10 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         A, dA = _unflat(v[None, :9])[0], J[:9].reshape(3, 3, 12).transpose(1, 0, 2)
         t_b, dt = v[9:12], J[9:12]
         Rb, dRb = _unflat(v[None, 12:21])[0], J[12:21].reshape(3, 3, 12).transpose(1, 0, 2)
-        value, grad = 0.0, np.zeros(12)
+        # 2 (1 - cos theta) ~ theta^2 (rad^2), smooth at theta = 0
+        k = np.degrees(1.0) ** 2
+        value = PRIOR * k * (3.0 - np.trace(rotation.T @ A))
+        grad = -PRIOR * k * np.einsum("ij,ijk->k", rotation, dA)
         cos = np.clip((np.trace(rotation.T @ A) - 1) / 2, -1.0, 1.0)
         angle = np.degrees(np.arccos(cos))
         if angle > MAX_TRACKER_DEG:
@@ -237,7 +246,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
 
     def refine(x, s):
         step(f"refining the registration at scale {s:.4g}")
-        res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": ITERATIONS})
+        res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-9})
         return res.x
 
     candidates = []
