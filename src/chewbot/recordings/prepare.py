@@ -9,7 +9,8 @@ In this order (:func:`chewbot.recordings.importer.import_motion`):
    :data:`SPIKE_MIN_MM` and the median plus :data:`SPIKE_MADS` robust standard deviations, 1.4826 x the median
    absolute deviation), and stretches of at most ``max_gap`` between two jumps of the markers' speed that are
    outliers the same way (above :data:`SPIKE_MIN_SPEED_MM_S` and the median plus :data:`SPEED_MADS` robust
-   standard deviations: a jump out and back). Their frames are dropped and filled like gaps.
+   standard deviations) and cancel (a jump out and back: their sum below :data:`CANCEL` of the smaller; the steps
+   of a fast stroke add up instead). Their frames are dropped and filled like gaps.
 3. :func:`fill_gaps` fills each gap of each marker (frames where it was not seen) by a cubic spline through all
    the frames where that marker was seen (``scipy.interpolate.CubicSpline``, not-a-knot ends), if the gap lasts
    at most ``max_gap``; a longer gap is an error naming the marker and the times.
@@ -46,7 +47,9 @@ UNIFORM_TOLERANCE = 1e-3
 SPIKE_MIN_MM = 0.5
 SPIKE_MADS = 10.0
 SPIKE_MIN_SPEED_MM_S = 200.0
-SPEED_MADS = 20.0
+SPEED_MADS = 5.0
+# A jump out and a jump back: their sum is less than this share of the smaller (a fast stroke's steps add up).
+CANCEL = 0.5
 
 
 def missing(positions: np.ndarray) -> np.ndarray:
@@ -84,13 +87,20 @@ def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Rec
     found: list[tuple[int, int, str]] = []
     bad = np.zeros(rec.n, dtype=bool)
     if P.shape[1] >= 3:
-        d = rigid_fit(P[0] if body is None else body, P, rec.markers).max_mm
-        rigid = _outliers(d, SPIKE_MIN_MM, SPIKE_MADS)
+        seen = ~missing(P).any(axis=1)  # gaps are not spikes: they are filled next
+        d = np.full(rec.n, np.nan)
+        d[seen] = rigid_fit(P[0] if body is None else body, P[seen], rec.markers).max_mm
+        with np.errstate(invalid="ignore"):
+            rigid = _outliers(d, SPIKE_MIN_MM, SPIKE_MADS)
         bad |= rigid
-    speed = np.linalg.norm(np.diff(P, axis=0), axis=2).max(axis=1) / np.diff(rec.t) / 1e-3  # mm/s, (n-1,)
-    jumps = np.flatnonzero(_outliers(speed, SPIKE_MIN_SPEED_MM_S, SPEED_MADS))  # jump between frame j and j + 1
+    step = np.diff(P, axis=0)
+    speed = np.linalg.norm(step, axis=2).max(axis=1) / np.diff(rec.t) / 1e-3  # mm/s, (n-1,)
+    with np.errstate(invalid="ignore"):
+        jumps = np.flatnonzero(_outliers(speed, SPIKE_MIN_SPEED_MM_S, SPEED_MADS))  # jump between frame j and j + 1
     for a, b in zip(jumps[:-1], jumps[1:]):
-        if rec.t[b + 1] - rec.t[a + 1] <= max_gap * (1 + 1e-9):
+        out, back = step[a].sum(axis=0), step[b].sum(axis=0)  # a jump out and back cancels; a fast stroke adds up
+        cancels = np.linalg.norm(out + back) < CANCEL * min(np.linalg.norm(out), np.linalg.norm(back))
+        if cancels and rec.t[b + 1] - rec.t[a + 1] <= max_gap * (1 + 1e-9):
             bad[a + 1 : b + 1] = True
     edges = np.diff(np.r_[0, bad.astype(int), 0])
     for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
