@@ -205,3 +205,41 @@ def test_examples_are_what_their_generator_writes(tmp_path):
     subprocess.run([sys.executable, str(copy)], check=True, cwd=tmp_path)
     for name in ("chewing.csv", "opening.csv", "chewing.toml", "opening.toml"):
         assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
+
+
+def test_clip_keeps_the_full_motion_where_the_robot_can_follow_it(tmp_path):
+    """A motion of the robot's kind opening 34 deg (the workspace ends near 26 deg): with --clip the task is
+    written, the frames inside the workspace are reproduced exactly (errors below 1e-9 mm and deg, the task passing
+    through the recorded poses there), the others are clipped to the boundary with the limiting constraint named
+    (a column of the residuals and the note), and the task starts and ends at rest at home."""
+    m = model("target")
+    task = default_task(m, params=ChewingParameters(rate_hz=50.0, cycles=1, rest_s=0.2, beta_deg=34.0, X_mm=2.0))
+    p, R = pose(m, task.q)
+    TR, TO = Rotation.from_euler("xyz", [20.0, -10.0, 70.0], degrees=True).as_matrix(), np.array([0.1, -0.05, 0.2])
+    rec = write_csv(tmp_path / "rec.csv", task.t, (np.einsum("nij,kj->nki", R, BODY) + p[:, None, :] - TO) @ TR)
+    reg = write_registration(tmp_path / "reg.toml", TR, TO)
+    refused = import_motion(rec, reg, ImportOptions(cutoff_hz=None, rate_hz=None))
+    assert refused.task is None
+    result = import_motion(rec, reg, ImportOptions(cutoff_hz=None, rate_hz=None, clip=True))
+    inside = ~result.fit.outside.any(axis=1)
+    assert 0 < (~inside).sum() < len(inside) // 2
+    assert np.nanmax(result.fit.position_error_mm[inside]) < 1e-9 and np.nanmax(result.fit.orientation_error_deg[inside]) < 1e-9
+    assert np.all(result.fit.position_error_mm[~inside] > 1e-6)
+    table = result.residuals()
+    named = [c for c in table.columns if c.startswith("outside_") and np.asarray(table[c]).any()]
+    note = next(n for n in result.notes if "limited by" in n)
+    assert named and all(c[len("outside_"):].replace("_", " ") in note for c in named)  # each named, in both
+    # and independently: where the recorded pose breaks a socket bound or a transmission angle of 10 deg
+    from chewbot.kinematics.ik import transmission
+    with np.errstate(invalid="ignore"):
+        sin_mu = np.nan_to_num(transmission(m, p, R), nan=-1.0)
+    x_balls = np.column_stack([(p + R @ T)[:, 0] for T in (m.hkp.T_L, m.hkp.T_R)])
+    broken = (sin_mu < np.sin(np.radians(10.0))).any(axis=1) | (x_balls > m.hkp.x_range[1]).any(axis=1)
+    assert np.array_equal(broken, ~inside), (np.flatnonzero(broken), np.flatnonzero(~inside))
+    assert np.asarray(table["clipped"]).sum() == (~result.passed).sum() > 0
+    played = result.task
+    assert np.abs(played.q[0]).max() == 0 and np.abs(played.q[-1]).max() == 0
+    assert np.abs(played.dq[0]).max() < 1e-12 and np.abs(played.dq[-1]).max() < 1e-12
+    start = np.flatnonzero(np.isclose(played.t, 1.2))[0]  # 0.2 s hold + 1 s ramp, then the recording's frames
+    frames = start + np.arange(len(task.t))
+    assert np.abs(played.q[frames][inside] - task.q[inside]).max() < 1e-9

@@ -17,7 +17,7 @@ from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model
-from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
+from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
 from chewbot.recordings.measures import Measures, measure
 from chewbot.recordings.register import FoundRegistration, fit_registration
 from chewbot.recordings.formats import Recording, read_recording
@@ -31,6 +31,13 @@ from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
 BISECTIONS = 14
+# --clip: the task starts at home, held HOLD_S, moves to the recording's first pose in RAMP_S (a quintic blend:
+# zero rate and acceleration at both ends of the blend), plays the recording, and returns the same way.
+RAMP_S = 1.0
+HOLD_S = 0.2
+# --clip: between two frames the clipped motion's incisor moves at most this many times the largest step of the
+# recorded (registered, scaled) motion's incisor between two frames; a larger step is a jump, an error.
+JUMP_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -55,6 +62,7 @@ class ImportOptions:
     min_transmission_deg: float = MIN_TRANSMISSION_DEG
     fit_registration: bool = False
     keep_spikes: bool = False
+    clip: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +107,10 @@ class MotionImport:
         table.add("orientation_error", fit.orientation_error_deg, "deg", "rotation angle between the fitted and the recorded orientation")
         table.add("admissible", fit.admissible, "1", "1 where an admissible pose was found")
         table.add("leaves_workspace", fit.outside.any(axis=1), "1", "1 where the nearest pose without the constraints is not admissible")
+        for j, name in enumerate(fit.constraint_names):
+            table.add("outside_" + name.replace(" ", "_"), fit.outside[:, j], "1", f"1 where the recorded pose breaks: {name}")
         table.add("passed", self.passed, "1", "1 where every tolerance is met")
+        table.add("clipped", (~self.passed) & (self.task is not None), "1", "1 where --clip put the nearest admissible pose in the task")
         m = self.measures()
         for name, values, unit, what in m.columns():
             table.add(name, values, unit, what)
@@ -193,7 +204,11 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         scale, angle_scale = factor * scale, factor * angle_scale
     step("resampling and checking the task")
     task = None
-    if passed.all():
+    if passed.all() or (options.clip and fit.admissible.all() and rigid_ok.all()):
+        if options.clip and not passed.all():
+            p, R = scale_motion(rigid.p, rigid.R, scale, angle_scale)
+            _check_jumps(model, rec, p, R, fit)
+            notes.append(_clip_note(rec, fit, passed))
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
     return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found)
 
@@ -255,12 +270,57 @@ def _largest_factor(attempt):
     return lo, lo_fit, lo_passed
 
 
+def _check_jumps(model: Model, rec: Recording, p: np.ndarray, R: np.ndarray, fit: RobotFit) -> None:
+    """--clip: the clipped motion's incisor steps between frames within :data:`JUMP_FACTOR` of the recorded one's."""
+    p_fit, R_fit = fitted_pose(model, fit.q)
+    recorded = np.linalg.norm(np.diff(p + R @ model.incisor, axis=0), axis=1)
+    clipped = np.linalg.norm(np.diff(p_fit + R_fit @ model.incisor, axis=0), axis=1)
+    bound = JUMP_FACTOR * recorded.max()
+    if (clipped > bound).any():
+        i = int(np.argmax(clipped))
+        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / 1e-3:.3g} mm between {rec.where(i)} "
+                             f"and the next frame, more than {JUMP_FACTOR:g} x the recording's largest step "
+                             f"({recorded.max() / 1e-3:.3g} mm): the nearest admissible poses switch branches there")
+
+
+def _clip_note(rec: Recording, fit: RobotFit, passed: np.ndarray) -> str:
+    clipped = ~passed
+    edges = np.diff(np.r_[0, clipped.astype(int), 0])
+    stretches = [(a, b - 1) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    names = [n for n, b in zip(fit.constraint_names, fit.outside[clipped].any(axis=0)) if b]
+    shown = "; ".join(f"t = {rec.t[a]:.3f} to {rec.t[b]:.3f} s" for a, b in stretches[:6]) + (" ..." if len(stretches) > 6 else "")
+    return (f"--clip: {clipped.sum()} frame(s) in {len(stretches)} stretch(es) clipped to the nearest admissible pose ({shown}), "
+            f"by up to {np.nanmax(fit.position_error_mm[clipped]):.3g} mm and {np.nanmax(fit.orientation_error_deg[clipped]):.3g} deg; "
+            f"limited by {', '.join(names) if names else 'the residual tolerance'}")
+
+
+def _ramped(rec: Recording, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Frames (times from 0, poses) from home at rest to the recording and back (:data:`RAMP_S`, :data:`HOLD_S`),
+    and the time at which the recording's first frame is played."""
+    dt = float(np.median(np.diff(rec.t)))
+    hold, ramp = int(round(HOLD_S / dt)), int(round(RAMP_S / dt))
+    u = np.arange(1, ramp) / ramp
+    blend = (u**3 * (10 - 15 * u + 6 * u**2))[:, None]
+    home = np.zeros(q.shape[1])
+    before = np.vstack([np.tile(home, (hold + 1, 1)), home + blend * (q[0] - home)])
+    after = np.vstack([q[-1] + blend * (home - q[-1]), np.tile(home, (hold + 1, 1))])
+    t = np.r_[rec.t[0] - dt * np.arange(len(before), 0, -1), rec.t, rec.t[-1] + dt * np.arange(1, len(after) + 1)]
+    return t - t[0], np.vstack([before, q, after]), len(before) * dt
+
+
 def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, options: ImportOptions, source: Path,
           notes: list[str]) -> Task:
     """The task: the fitted coordinates resampled (spline rates), samples between frames that a spline carries
-    out of the workspace moved back onto it, the bite force, and a check by the kinematics."""
-    t = output_times(rec.t, options.rate_hz)
-    q, dq, ddq = spline_motion(rec.t, fit.q, t)
+    out of the workspace moved back onto it, the bite force, and a check by the kinematics. With --clip it starts
+    and ends at rest at home (:func:`_ramped`)."""
+    frames_t, frames_q, shift = rec.t, fit.q, 0.0
+    if options.clip:
+        frames_t, frames_q, start = _ramped(rec, fit.q)
+        shift = rec.t[0] - start
+        notes.append(f"--clip: the task holds home {HOLD_S:g} s, ramps to the recording's first pose in {RAMP_S:g} s (quintic), "
+                     f"plays it from t = {start:.4g} s, and returns the same way")
+    t = output_times(frames_t, options.rate_hz)
+    q, dq, ddq = spline_motion(frames_t, frames_q, t, at_rest=options.clip)
     moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
                                                 options.min_transmission_deg)
     if not ok.all():
@@ -270,13 +330,13 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
     if rows.size:  # the rates then come from a spline through the samples as they are now
         notes.append(f"moved {rows.size} resampled sample(s) back into the workspace, where the spline overshot its "
                      f"boundary between frames (at most {worst})")
-        q, dq, ddq = spline_motion(t, moved, t)
+        q, dq, ddq = spline_motion(t, moved, t, at_rest=options.clip)
+    force = np.zeros((len(t), 3))
+    inside = (t + shift >= rec.t[0] - 1e-9) & (t + shift <= rec.t[-1] + 1e-9)  # the recording's own times
     if options.force_file is not None:
-        force = force_at(*read_force_file(options.force_file), t, options.force_file)
+        force[inside] = force_at(*read_force_file(options.force_file), t[inside] + shift, options.force_file)
     elif rec.force is not None:
-        force = force_at(rec.t, rec.force, t, rec.source)
-    else:
-        force = np.zeros((len(t), 3))
+        force[inside] = force_at(rec.t, rec.force, t[inside] + shift, rec.source)
     coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
     task = Task(name=source.stem, t=t, coords=coords, q=q, dq=dq, ddq=ddq, force=force, side=options.side,
                 source=str(source), meta={"generator": "import-motion", "registration": reg.source})
