@@ -48,6 +48,7 @@ def import_motion(
     min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of every chain in an admissible pose: a margin from the chains' dead points (the run's near-singular threshold by default)."),
     force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
     fit_registration: bool = typer.Option(False, "--fit-registration", help="Search the registration (tracker placement, rest pose, markers' placement for rest = \"first\") from the file's as a start, for the largest share of the recording the robot reproduces within --max-residual; writes it beside the task, *.registration.toml, and uses the share as the scale."),
+    timing: str = typer.Option("recording", "--timing", help="'recording': the task keeps the recording's times; 'limits': re-timed as fast as the model's crank speed, acceleration and torque limits allow and never faster than recorded (time-optimal, TOPP-RA), starting and ending at rest; the time stretch per 0.5 s segment is printed."),
     clip: bool = typer.Option(False, "--clip", help="Write the task even where frames are beyond --max-residual: those are clipped to the nearest admissible pose (named in the residuals), and the task starts and ends at rest at home (0.2 s hold, 1 s quintic ramp)."),
     keep_spikes: bool = typer.Option(False, "--keep-spikes", help="Keep the frames of tracker spikes (by default frames whose rigid-body error or speed jump is an outlier are dropped and filled like gaps, and listed)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
@@ -78,6 +79,8 @@ def import_motion(
     found_toml = out.with_name(out.stem + ".registration.toml")
     if side not in ("left", "right"):
         fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
+    if timing not in ("recording", "limits"):
+        fail(ChewbotError(f"--timing must be recording or limits, not {timing!r}"), EXIT_BAD_INPUT)
     if fit_registration and (scale is not None or angle_scale is not None):
         fail(ChewbotError("--fit-registration finds the scale (the share): leave out --scale and --angle-scale"), EXIT_BAD_INPUT)
     options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
@@ -85,7 +88,8 @@ def import_motion(
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
                             min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file),
-                            fit_registration=fit_registration, keep_spikes=keep_spikes, clip=clip)
+                            fit_registration=fit_registration, keep_spikes=keep_spikes, clip=clip,
+                            timing=None if timing == "recording" else timing)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
         for target in (out, residuals) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
@@ -144,6 +148,8 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
         args.append("--keep-spikes")
     if o.clip:
         args.append("--clip")
+    if o.timing is not None:
+        args += ["--timing", o.timing]
     return args + (["--force"] if force else [])
 
 

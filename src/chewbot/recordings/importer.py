@@ -20,6 +20,7 @@ from chewbot.model.params import load_model
 from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
 from chewbot.recordings.measures import Measures, measure
 from chewbot.recordings.register import FoundRegistration, fit_registration
+from chewbot.recordings.retime import Retiming, retime
 from chewbot.recordings.formats import Recording, read_recording
 from chewbot.recordings.prepare import fill_gaps, low_pass, spikes, trim
 from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG
@@ -63,6 +64,7 @@ class ImportOptions:
     fit_registration: bool = False
     keep_spikes: bool = False
     clip: bool = False
+    timing: str | None = None  # None: the recording's times; "limits": re-timed within the motors' limits
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,6 +90,7 @@ class MotionImport:
     task: Task | None
     notes: list[str] = field(default_factory=list)
     found: FoundRegistration | None = None
+    retiming: Retiming | None = None
 
     def measures(self) -> Measures:
         """What the robot reproduces of the recording (registered, at scale 1): :func:`measure`."""
@@ -210,7 +213,23 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
             _check_jumps(model, rec, p, R, fit)
             notes.append(_clip_note(rec, fit, passed))
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
-    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found)
+    retiming = None
+    if task is not None and options.timing == "limits":
+        retiming = retime(model, task)
+        moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, reg.point, reg.position_weight_per_mm,
+                                                reg.orientation_weight_per_deg, options.min_transmission_deg)
+        # the path between its samples, evaluated at the new times, may cross a boundary it runs along by
+        # rounding (nanometres): those samples are put back on it, their rates kept
+        task = replace(retiming.task, q=moved) if ok.all() else retiming.task
+        slow = retiming.stretch > 1 + 1e-3
+        notes.append(f"--timing limits: {retiming.original_s:.4g} s re-timed to {retiming.duration_s:.4g} s; stretched segments "
+                     + (", ".join(f"{a:.3g}-{b:.3g} s x{k:.3g}" for (a, b), k in zip(retiming.segments[slow], retiming.stretch[slow]))
+                        or "none") + " (of the task's own time before re-timing)")
+        try:
+            solve_kinematics(model, task)
+        except KinematicsError as exc:
+            raise exc.located(f"{recording}: the re-timed task") from None
+    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming)
 
 
 def _placed_by_landmarks(model: Model, reg: Registration, rec: Recording) -> Registration:
