@@ -243,3 +243,52 @@ def test_clip_keeps_the_full_motion_where_the_robot_can_follow_it(tmp_path):
     start = np.flatnonzero(np.isclose(played.t, 1.2))[0]  # 0.2 s hold + 1 s ramp, then the recording's frames
     frames = start + np.arange(len(task.t))
     assert np.abs(played.q[frames][inside] - task.q[inside]).max() < 1e-9
+
+
+def test_retimed_motion_holds_every_limit_and_is_no_slower_than_needed(tmp_path):
+    """The default chewing motion played three times too fast (crank speeds 18 rad/s > 17, accelerations 720
+    rad/s^2 > 200): --timing limits writes a task that `chewbot run` passes (exit 0), never faster than recorded;
+    its duration is below that of the slowest-needed uniform slow-down (a feasible timing: speeds scale with 1/k,
+    accelerations and the motion's share of the torques with 1/k^2, from the run of the fast task), and it is
+    time-optimal in the sense a run can check: at all but 2 % of the samples (the switches between accelerating
+    and braking) a crank speed, acceleration or torque is within 2 % of its limit or the motion plays at the
+    recorded speed."""
+    m = model("target")
+    task = default_task(m, params=ChewingParameters(rate_hz=150.0, cycles=2, rest_s=0.3))
+    p, R = pose(m, task.q)
+    TR, TO = Rotation.from_euler("xyz", [20.0, -10.0, 70.0], degrees=True).as_matrix(), np.array([0.1, -0.05, 0.2])
+    fast = task.t / 3
+    rec = write_csv(tmp_path / "rec.csv", fast, (np.einsum("nij,kj->nki", R, BODY) + p[:, None, :] - TO) @ TR)
+    reg = write_registration(tmp_path / "reg.toml", TR, TO)
+    base = ["import-motion", rec, "--registration", reg, "--cutoff", "none"]
+    assert runner.invoke(app, base + ["--out", str(tmp_path / "fast.csv")]).exit_code == 0
+    assert runner.invoke(app, ["run", "--task", str(tmp_path / "fast.csv"), "--out", str(tmp_path / "run_fast")]).exit_code == 4
+    result = runner.invoke(app, base + ["--out", str(tmp_path / "slow.csv"), "--timing", "limits"])
+    assert result.exit_code == 0, result.output
+    assert runner.invoke(app, ["run", "--task", str(tmp_path / "slow.csv"), "--out", str(tmp_path / "run_slow")]).exit_code == 0
+
+    def columns(folder):
+        d = pd.read_csv(tmp_path / folder / "results.csv", comment="#")
+        pick = lambda prefix: d[[c for c in d.columns if c.split(" [")[0] in [f"{prefix}{i}" for i in range(1, 7)]]].to_numpy()
+        return d["t [s]"].to_numpy(), pick("dtheta"), pick("ddtheta"), pick("tau")
+
+    t_fast, v_fast, a_fast, _ = columns("run_fast")
+    t_slow, v_slow, a_slow, tau_slow = columns("run_slow")
+    lim = m.limits
+    k = max(1.0, np.abs(v_fast).max() / lim.speed, np.sqrt(np.abs(a_fast).max() / lim.acceleration))
+    duration, recorded = t_slow[-1] - t_slow[0], t_fast[-1] - t_fast[0]
+    assert recorded < duration <= k * recorded, (duration, k * recorded)
+    # the re-timed task's samples are the fast one's poses in order: its path speed is the ratio of their rates
+    slow_task = pd.read_csv(tmp_path / "slow.csv", comment="#")
+    fast_task = pd.read_csv(tmp_path / "fast.csv", comment="#")
+    names = ["X [m]", "Y [m]", "alpha [rad]", "beta [rad]"]
+    assert np.abs(slow_task[names].to_numpy() - fast_task[names].to_numpy()).max() < 1e-9
+    rates = ["dX [m/s]", "dY [m/s]", "dalpha [rad/s]", "dbeta [rad/s]"]
+    v_rec = np.linalg.norm(fast_task[rates].to_numpy() * [1e3, 1e3, 180 / np.pi, 180 / np.pi], axis=1)
+    v_new = np.linalg.norm(slow_task[rates].to_numpy() * [1e3, 1e3, 180 / np.pi, 180 / np.pi], axis=1)
+    moving = v_rec > 1e-3 * v_rec.max()
+    s_dot = v_new[moving] / v_rec[moving]
+    assert s_dot.max() <= 1 + 1e-6  # never faster than recorded
+    active = ((np.abs(v_slow).max(axis=1) >= 0.98 * lim.speed) | (np.abs(a_slow).max(axis=1) >= 0.98 * lim.acceleration)
+              | (np.abs(tau_slow).max(axis=1) >= 0.98 * lim.torque))[moving] | (s_dot >= 0.98)
+    assert active.mean() >= 0.98, active.mean()
