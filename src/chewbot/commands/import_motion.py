@@ -77,6 +77,7 @@ def import_motion(
 
     residuals = out.with_name(out.stem + ".residuals.csv")
     found_toml = out.with_name(out.stem + ".registration.toml")
+    figure = out.with_name(out.stem + ".incisor.svg")
     if side not in ("left", "right"):
         fail(ChewbotError(f"--side must be left or right, not {side!r}"), EXIT_BAD_INPUT)
     if timing not in ("recording", "limits"):
@@ -92,7 +93,7 @@ def import_motion(
                             timing=None if timing == "recording" else timing)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
-        for target in (out, residuals) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
+        for target in (out, residuals, figure) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
             check_output(target, force, WRITTEN_FILE, inputs)
         with progress(False, "import-motion", total=STEPS) as step:
             result = run_import(recording, registration, options, progress=step)
@@ -106,9 +107,17 @@ def import_motion(
 
             text = registration_toml(result.registration, f"registration found by {about}\n" + "\n".join(summary[:2]))
             files.append((found_toml, text, None))
+        from chewbot.report.recording_figures import incisor_paths_svg
+
+        m = result.measures()
+        files.append((figure, marker_line("<!--", "the incisor path of " + about) + "\n"
+                      + incisor_paths_svg(result.recording.t, m.recorded_incisor, m.reproduced_incisor,
+                                          f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path"), "<!--"))
         with atomic_files([path for path, _, _ in files], force, inputs) as temporaries:
             for (_, table, what), tmp in zip(files, temporaries):
-                if what is None:
+                if what == "<!--":
+                    Path(tmp).write_text(table)
+                elif what is None:
                     Path(tmp).write_text(marker_line("#", "a registration, chewbot import-motion --registration reads it") + "\n" + table)
                 else:
                     table.to_csv(tmp, first_line=marker_line("#", what))
@@ -124,7 +133,7 @@ def import_motion(
         shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
         fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
                        f"residuals in {residuals}:\n" + "\n".join(shown)), EXIT_UNREACHABLE)
-    stdout.print(f"wrote {out} ({result.task.n} samples) and {residuals}; run it with: "
+    stdout.print(f"wrote {out} ({result.task.n} samples), {residuals} and {figure}; run it with: "
                  f"chewbot run --task {shlex.quote(str(out))} --model {shlex.quote(model)} --side {side}", highlight=False, markup=False)
 
 

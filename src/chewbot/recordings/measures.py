@@ -48,6 +48,8 @@ class Measures:
     reproduced_angle: np.ndarray
     recorded_excursion: np.ndarray
     reproduced_excursion: np.ndarray
+    recorded_incisor: np.ndarray  # (N, 3) m in {S}
+    reproduced_incisor: np.ndarray
 
     @property
     def rotation_share(self) -> float:
@@ -103,4 +105,4 @@ def measure(model: Model, p_rec: np.ndarray, R_rec: np.ndarray, fit: RobotFit, t
     fit_angle = _angle_deg(R_fit @ R_fit[first].T)
     rec_exc = np.linalg.norm(rec_pts[:, 0] - rec_pts[0, 0], axis=1) / MM
     fit_exc = np.linalg.norm(fit_pts[:, 0] - fit_pts[first, 0], axis=1) / MM
-    return Measures(dist[:, 0], dist.max(axis=1), rot_err, rec_angle, fit_angle, rec_exc, fit_exc)
+    return Measures(dist[:, 0], dist.max(axis=1), rot_err, rec_angle, fit_angle, rec_exc, fit_exc, rec_pts[:, 0], fit_pts[:, 0])
