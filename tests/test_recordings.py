@@ -459,6 +459,10 @@ def test_scale_auto_finds_the_largest_factor_that_passes(tmp_path):
     assert 0.2 < f < 1 and auto.passed.all() and auto.scale == f and auto.angle_scale == f
     above = import_motion(path, reg, replace(strict, scale=f + 2e-3, angle_scale=f + 2e-3))
     assert not above.passed.all()  # the factor is the largest to the bisection's resolution (6e-5)
+    # monotone: every factor below it passes too, frames and resampled task (a grid other than the search's)
+    for g in np.linspace(0.0, f, 8)[1:]:
+        below = import_motion(path, reg, replace(strict, scale=float(g), angle_scale=float(g)))
+        assert below.passed.all() and below.task is not None, g
 
 
 def test_registration_errors_name_the_file_and_key(tmp_path):

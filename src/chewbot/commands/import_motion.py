@@ -41,7 +41,7 @@ def import_motion(
     max_gap: float = typer.Option(0.1, "--max-gap", min=0.0, help="Longest gap (s) of a marker that is filled by a spline; longer ones are an error."),
     cutoff: str = typer.Option("6", "--cutoff", callback=_number_or("none", "--cutoff"), help="Zero-phase low-pass cutoff (Hz) of the marker paths, or 'none'."),
     rate: str = typer.Option("1000", "--rate", callback=_number_or("recording", "--rate"), help="Sampling rate (Hz) of the task, or 'recording' for the recording's own times."),
-    scale: str | None = typer.Option(None, "--scale", callback=_number_or("auto", "--scale"), show_default=False, help="Factor on the displacement of O_M relative to the first frame (default: the registration's), or 'auto': the largest factor <= 1 on both scales at which every frame passes."),
+    scale: str | None = typer.Option(None, "--scale", callback=_number_or("auto", "--scale"), show_default=False, help="Factor on the displacement of O_M relative to the first frame (default: the registration's), or 'auto': the largest factor <= 1 on both scales at which every frame and the resampled task pass, at it and at every factor j/16 below it."),
     angle_scale: float | None = typer.Option(None, "--angle-scale", min=0.0, show_default=False, help="Factor on the rotation angle relative to the first frame (default: the registration's)."),
     max_residual: tuple[float, float] = typer.Option(DEFAULT_MAX_RESIDUAL, "--max-residual", help="MM DEG: a frame fails when the fitted pose is farther than MM (at the measure point) or DEG (rotation angle) from the recorded one."),
     max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),

@@ -32,6 +32,8 @@ from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
 BISECTIONS = 14
+# --scale auto: factors j / SCAN scanned from below first (a power of 2).
+SCAN = 16
 # --clip: the task starts at home, held HOLD_S, moves to the recording's first pose in RAMP_S (a quintic blend:
 # zero rate and acceleration at both ends of the blend), plays the recording, and returns the same way.
 RAMP_S = 1.0
@@ -203,7 +205,14 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     if options.scale == "auto" and not rigid_ok.all():
         notes.append("--scale auto: no factor was searched, frames where a marker moves relative to the others fail at every scale")
     elif options.scale == "auto":
-        factor, fit, passed = (1.0, fit, passed) if passed.all() else _largest_factor(attempt)
+        def builds(fit_f) -> bool:
+            try:
+                _task(model, rec, reg, fit_f, options, Path(recording), [])
+                return True
+            except (RecordingError, KinematicsError):
+                return False
+
+        factor, fit, passed = (1.0, fit, passed) if passed.all() and builds(fit) else _largest_factor(attempt, builds)
         scale, angle_scale = factor * scale, factor * angle_scale
     step("resampling and checking the task")
     task = None
@@ -272,17 +281,31 @@ def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: l
     return rec
 
 
-def _largest_factor(attempt):
-    """The largest factor in [0, 1] at which every frame passes, by bisection (the first frame held still, factor
-    0, must pass)."""
-    lo_fit, lo_passed = attempt(0.0)
-    if not lo_passed.all():
+def _largest_factor(attempt, builds):
+    """The largest factor f in [0, 1] such that every frame passes at f and at every factor of the grid
+    j / :data:`SCAN` below it, and the resampled task at f builds (``builds(fit)``: the kinematics accept it).
+
+    The frames' verdict need not be monotone in f near the workspace's edge (a frame's nearest admissible pose
+    may cross a tolerance and come back): the scan from below stops at the first grid factor that fails, and the
+    bisection (:data:`BISECTIONS` steps in all) runs between it and the grid factor before, on the predicate
+    "every frame passes and the task builds" at f and at the interval's lower end, which holds by construction.
+    """
+    lo, lo_fit, lo_passed = 0.0, *attempt(0.0)
+    if not lo_passed.all() or not builds(lo_fit):
         return 0.0, lo_fit, lo_passed
-    lo, hi = 0.0, 1.0
-    for _ in range(BISECTIONS):
+    hi = 1.0
+    for j in range(1, SCAN + 1):
+        fit, passed = attempt(j / SCAN)
+        if not (passed.all() and builds(fit)):
+            hi = j / SCAN
+            break
+        lo, lo_fit, lo_passed = j / SCAN, fit, passed
+    else:
+        return 1.0, lo_fit, lo_passed
+    for _ in range(BISECTIONS - int(np.log2(SCAN))):
         mid = 0.5 * (lo + hi)
         fit, passed = attempt(mid)
-        if passed.all():
+        if passed.all() and builds(fit):
             lo, lo_fit, lo_passed = mid, fit, passed
         else:
             hi = mid
