@@ -215,10 +215,37 @@ def test_warnings_do_not_fail_a_run_and_methods_without_bearing_forces_are_not_e
 
 def test_limits_of_a_model_without_crank_range_or_speed_are_not_evaluated():
     m = model("target")
-    assert np.isinf(m.limits.theta_range).all() and np.isinf(m.limits.speed)  # keys left out: unbounded
-    strict = dataclasses.replace(m.limits, theta_range=np.radians([-1.0, 1.0]), speed=0.5)
+    assert np.isinf(m.limits.theta_range).all()  # key left out: unbounded
     result = compute(RunOptions(method="hessian"))
+    open_ended = dataclasses.replace(m.limits, speed=np.inf, acceleration=np.inf)
+    got = {c.name: c for c in RunChecks(open_ended, True).checks}
+    for name in ("crank-range", "speed-limit", "acceleration-limit"):
+        got[name].update(0, result.table)
+        assert got[name].result().samples is None and "sets no" in got[name].result().message
+    strict = dataclasses.replace(m.limits, theta_range=np.radians([-1.0, 1.0]), speed=0.5, acceleration=20.0)
     got = {c.name: c for c in RunChecks(strict, True).checks}
-    for name in ("crank-range", "speed-limit"):
+    for name in ("crank-range", "speed-limit", "acceleration-limit"):
         got[name].update(0, result.table)
         assert got[name].result().samples > 0 and got[name].result().fails_run
+
+
+def test_speed_and_acceleration_limits_count_the_samples_beyond_them_and_warn_on_a_simulated_motion():
+    """The built-in limits (17 rad/s, 200 rad/s^2, assumed) hold on the default task; lowered below its peaks they
+    fail exactly the samples whose largest abs(theta_dot_i), abs(theta_ddot_i) exceed them (counted here from the
+    columns), and on a simulated plant's motion (planned=False) the same samples are a warning."""
+    m = model("target")
+    assert (m.limits.speed, m.limits.acceleration) == (17.0, 200.0)
+    table = compute(RunOptions(method="hessian")).table
+    results = {c.name: c for c in run_checks(m, {n: table[n] for n in table.columns})}
+    assert results["speed-limit"].passed and results["acceleration-limit"].passed
+    dd = np.abs(np.column_stack([table[f"ddtheta{i}"] for i in range(1, 7)])).max(axis=1)
+    d = np.abs(np.column_stack([table[f"dtheta{i}"] for i in range(1, 7)])).max(axis=1)
+    assert results["acceleration-limit"].worst["value"] == pytest.approx(dd.max())
+    low = dataclasses.replace(m.limits, speed=0.5 * d.max(), acceleration=0.5 * dd.max())
+    for planned in (True, False):
+        got = {c.name: c for c in RunChecks(low, True, planned=planned).checks}
+        for name, peak in (("speed-limit", d), ("acceleration-limit", dd)):
+            got[name].update(0, table)
+            r = got[name].result()
+            assert r.samples == int(np.sum(peak > 0.5 * peak.max() * (1 + 1e-6)))  # the limits' relative tolerance
+            assert r.fails_run == planned and r.severity == ("failure" if planned else "warning")

@@ -35,7 +35,7 @@ def test_vector_holds_the_files_numbers_in_si(name):
     assert p.shape == (N_P,) and not p.flags.writeable
     for b in BLOCKS:
         got = p[block_slice(b.name)]
-        if b.key is None or b.key.startswith(("limits.theta_range", "limits.speed", "contact.")):
+        if b.key is None or b.key.startswith(("limits.theta_range", "contact.")):
             continue
         want = _file_value(raw, b.key).ravel() * b.scale
         tol = 2e-4 if b.name == "R_C0" else 1e-15  # R_C0: the nearest rotation to a matrix printed to 4 digits
@@ -44,7 +44,7 @@ def test_vector_holds_the_files_numbers_in_si(name):
     assert set(p[block_slice("branch")]) <= {-1.0, 1.0}
     # the optional keys the built-in files leave out: unbounded, no preload
     assert p[block_slice("limits.theta_range")].tolist() == [-np.inf, np.inf]
-    assert p[parameter_index("limits.speed")] == np.inf and p[parameter_index("contact.preload")] == 0.0
+    assert p[parameter_index("contact.preload")] == 0.0
 
 
 def test_names_and_indices():

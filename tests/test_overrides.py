@@ -51,7 +51,8 @@ def test_overrides_equal_the_file_edited_by_hand(tmp_path):
         ("  [54.11, -59.47, -30.91],", f"  [{float(S0_new[0])!r}, {float(S0_new[1])!r}, {float(S0_new[2])!r}],"),
         ("T_L_mm = [-2.5, 72.0, 15.965]", f"T_L_mm = [-3.0, 72.0, {z!r}]"),
         ("T_R_mm = [-2.5, -72.0, 15.965]", f"T_R_mm = [-3.0, -72.0, {z!r}]"),
-        ("radial_load_N = 250.0    # assumed\n", "radial_load_N = 250.0    # assumed\ntheta_range_deg = [-80.0, inf]\n\n[contact]\npreload_N = 1.5\n"),
+        ("radial_load_N = 250.0    # assumed\n", "radial_load_N = 250.0    # assumed\ntheta_range_deg = [-80.0, inf]\n"),
+        ("unilateral (docs/contact.md).\n", "unilateral (docs/contact.md).\n\n[contact]\npreload_N = 1.5\n"),
     ):
         assert text.count(old) == 1, old
         text = text.replace(old, new)
@@ -141,7 +142,7 @@ def test_other_derived_values():
     assert np.array_equal(load_model("target", {"cranks.inertia_g_mm2[1]": 4000.0}).crank_mass, base.crank_mass)  # a key of its own
     bounded = load_model("target", {"limits.theta_range_deg[2]": 80.0, "limits.speed_rad_per_s": 12.0})
     assert bounded.limits.theta_range[0] == -math.inf and bounded.limits.theta_range[1] == pytest.approx(np.radians(80))
-    assert bounded.limits.speed == 12.0 and base.limits.speed == math.inf
+    assert bounded.limits.speed == 12.0 and base.limits.speed == 17.0
 
 
 def test_applying_overrides_builds_no_graph(monkeypatch):

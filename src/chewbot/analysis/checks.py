@@ -8,11 +8,17 @@ Every run checks every sample and records the verdicts in run.json under ``"chec
 | ``power-limit`` | abs(tau_i theta_dot_i) > ``limits.power_W`` | tau1..6, dtheta1..6 | failure |
 | ``bearing-load`` | abs(axial) or radial force at a crank bearing G_i over ``limits.axial_load_N``, ``limits.radial_load_N`` | FG1_axial .. FG6_radial (newton-euler) | failure |
 | ``crank-range`` | theta_i outside ``limits.theta_range_deg`` (no key: not checked) | theta1..6 | failure |
-| ``speed-limit`` | abs(theta_dot_i) > ``limits.speed_rad_per_s`` (no key: not checked) | dtheta1..6 | failure |
+| ``speed-limit`` | abs(theta_dot_i) > ``limits.speed_rad_per_s`` (no key: not checked) | dtheta1..6 | failure of a planned motion, warning of a simulated one |
+| ``acceleration-limit`` | abs(theta_ddot_i) > ``limits.acceleration_rad_per_s2`` (no key: not checked) | ddtheta1..6 | failure of a planned motion, warning of a simulated one |
 | ``distribution-infeasible`` | the distribution found no torques within the limits (and, unilateral, N >= the preload) | the formulation's ``info["infeasible"]`` | failure |
 | ``contact-pull`` | N_L or N_R < 0: the plane pulls the condyle (unilateral: below ``contact.preload_N``) | N_L, N_R | failure only under the unilateral contact model |
 | ``near-singular`` | a transmission angle below :data:`NEAR_SINGULAR_DEG` or the chains' Jacobian's kappa below :data:`KAPPA_MIN` | mu1..6, kappa_J | warning |
 | ``bite-force`` | abs(F_B) > :data:`BITE_FORCE_BOUND_N` | Fx, Fy, Fz | warning |
+
+The crank speed and acceleration limits bound what a motion may ask of the motors: a task (``chewbot run``, an
+imported recording) that exceeds them fails. A simulated plant's motion is not asked for: it follows from the
+torques, which the simulation already saturates at ``limits.torque_Nm``, and its transients (PD's first
+milliseconds, a plant driven out of its workspace) are reported there as warnings (``planned=False``).
 
 A check whose columns the run does not have (bearing loads with the Hessian method, the crank range of a model
 without one) is not evaluated: ``samples`` is null and the message says why.
@@ -75,13 +81,15 @@ class CheckResult:
 
 @dataclass(frozen=True)
 class CheckContext:
-    """What the checks know beyond the columns: the model's limits, the mechanism, the contact model and the
-    smallest normal force it admits (``contact.preload_N``, unilateral only)."""
+    """What the checks know beyond the columns: the model's limits, the mechanism, the contact model, the
+    smallest normal force it admits (``contact.preload_N``, unilateral only) and whether the motion was planned
+    (a task) or simulated (the speed and acceleration limits then warn)."""
 
     limits: Limits
     has_hkp: bool
     contact: str = "bilateral"
     preload: float = 0.0
+    planned: bool = True  # the motion is a task asked of the robot (False: a simulated plant's response)
 
     def __post_init__(self):
         check_contact(self.contact)
@@ -222,9 +230,21 @@ class PowerLimit(JointLimit):
     prefixes, label, field, key = ("tau", "dtheta"), "power of actuator ", "power", "limits.power_W"
 
 
-class SpeedLimit(JointLimit):
+class MotionLimit(JointLimit):
+    """A limit on the cranks' motion: a failure of a planned motion, a warning of a simulated one."""
+
+    def severity(self):
+        return "failure" if self.ctx.planned else "warning"
+
+
+class SpeedLimit(MotionLimit):
     name, unit, what = "speed-limit", "rad/s", "abs(theta_dot_i)"
     prefixes, label, field, key = ("dtheta",), "dtheta", "speed", "limits.speed_rad_per_s"
+
+
+class AccelerationLimit(MotionLimit):
+    name, unit, what = "acceleration-limit", "rad/s^2", "abs(theta_ddot_i)"
+    prefixes, label, field, key = ("ddtheta",), "ddtheta", "acceleration", "limits.acceleration_rad_per_s2"
 
 
 class BearingLoad(Check):
@@ -396,19 +416,19 @@ class BiteForce(Check):
         return Measure(size, size > BITE_FORCE_BOUND_N, size, lambda k: "abs(F_B)")
 
 
-CHECKS = (TorqueLimit, PowerLimit, BearingLoad, CrankRange, SpeedLimit, DistributionInfeasible, ContactPull, NearSingular, BiteForce)
+CHECKS = (TorqueLimit, PowerLimit, BearingLoad, CrankRange, SpeedLimit, AccelerationLimit, DistributionInfeasible, ContactPull, NearSingular, BiteForce)
 
 
 class RunChecks:
     """All the checks of a run, updated chunk by chunk: ``update(offset, columns, info)`` then ``results()``."""
 
-    def __init__(self, limits: Limits, has_hkp: bool, contact: str = "bilateral", preload: float = 0.0):
-        ctx = CheckContext(limits, has_hkp, contact, preload)
+    def __init__(self, limits: Limits, has_hkp: bool, contact: str = "bilateral", preload: float = 0.0, planned: bool = True):
+        ctx = CheckContext(limits, has_hkp, contact, preload, planned)
         self.checks = [cls(ctx) for cls in CHECKS]
 
     @classmethod
-    def for_model(cls, model: Model, contact: str = "bilateral") -> RunChecks:
-        return cls(model.limits, model.has_hkp, contact, model.contact.preload)
+    def for_model(cls, model: Model, contact: str = "bilateral", planned: bool = True) -> RunChecks:
+        return cls(model.limits, model.has_hkp, contact, model.contact.preload, planned)
 
     def update(self, offset: int, columns: Mapping, info: Mapping | None = None) -> None:
         """Add the chunk starting at sample ``offset``: ``columns`` by name (with ``t``), ``info`` the formulation's."""
@@ -419,9 +439,10 @@ class RunChecks:
         return [check.result() for check in self.checks]
 
 
-def run_checks(model: Model, columns: Mapping, info: Mapping | None = None, contact: str = "bilateral") -> list[CheckResult]:
-    """Every check on a whole run at once: one chunk."""
-    checks = RunChecks.for_model(model, contact)
+def run_checks(model: Model, columns: Mapping, info: Mapping | None = None, contact: str = "bilateral",
+               planned: bool = True) -> list[CheckResult]:
+    """Every check on a whole run at once: one chunk (``planned`` False: a simulated plant's motion)."""
+    checks = RunChecks.for_model(model, contact, planned)
     checks.update(0, columns, info)
     return checks.results()
 

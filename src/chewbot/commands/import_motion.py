@@ -43,11 +43,16 @@ def import_motion(
     max_gap: float = typer.Option(0.1, "--max-gap", min=0.0, help="Longest gap (s) of a marker that is filled by a spline; longer ones are an error."),
     cutoff: str = typer.Option("6", "--cutoff", callback=_number_or("none", "--cutoff"), help="Zero-phase low-pass cutoff (Hz) of the marker paths, or 'none'."),
     rate: str = typer.Option("1000", "--rate", callback=_number_or("recording", "--rate"), help="Sampling rate (Hz) of the task, or 'recording' for the recording's own times."),
-    scale: str | None = typer.Option(None, "--scale", callback=_number_or("auto", "--scale"), show_default=False, help="Factor on the displacement of O_M relative to the first frame (default: the registration's), or 'auto': the largest factor <= 1 on both scales at which every frame passes."),
+    scale: str | None = typer.Option(None, "--scale", callback=_number_or("auto", "--scale"), show_default=False, help="Factor on the displacement of O_M relative to the first frame (default: the registration's), or 'auto': the largest factor <= 1 on both scales at which every frame and the resampled task pass, at it and at every factor j/16 below it."),
     angle_scale: float | None = typer.Option(None, "--angle-scale", min=0.0, show_default=False, help="Factor on the rotation angle relative to the first frame (default: the registration's)."),
     max_residual: tuple[float, float] = typer.Option(DEFAULT_MAX_RESIDUAL, "--max-residual", help="MM DEG: a frame fails when the fitted pose is farther than MM (at the measure point) or DEG (rotation angle) from the recorded one."),
     max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),
+    min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of every chain in an admissible pose: a margin from the chains' dead points (the run's near-singular threshold by default)."),
     force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
+    fit_registration: bool = typer.Option(False, "--fit-registration", help="Search the registration (tracker placement, rest pose, markers' placement for rest = \"first\") from the file's as a start, for the largest share of the recording the robot reproduces within --max-residual; writes it beside the task, *.registration.toml, and uses the share as the scale."),
+    timing: str = typer.Option("recording", "--timing", help="'recording': the task keeps the recording's times; 'limits': re-timed as fast as the model's crank speed, acceleration and torque limits allow and never faster than recorded (time-optimal, TOPP-RA), starting and ending at rest; the time stretch per 0.5 s segment is printed."),
+    clip: bool = typer.Option(False, "--clip", help="Write the task even where frames are beyond --max-residual: those are clipped to the nearest admissible pose (named in the residuals), and the task starts and ends at rest at home (0.2 s hold, 1 s quintic ramp)."),
+    keep_spikes: bool = typer.Option(False, "--keep-spikes", help="Keep the frames of tracker spikes (by default frames whose rigid-body error or speed jump is an outlier are dropped and filled like gaps, and listed)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
 ) -> None:
     """Turn a jaw-tracking recording (markers on the mandible) into a task for the robot.
@@ -56,48 +61,79 @@ def import_motion(
     motion, finds the robot's nearest admissible pose in each frame, resamples it and writes the task and, beside
     it, the per-frame residuals; prints their maxima. Frames beyond --max-residual or --max-rigid, or with no
     admissible pose near them, are named and the command exits with 3 (the residuals are written, the task is not).
+    With --fit-registration the registration is searched first (docs/recordings.md): the share of the recording
+    the robot reproduces, what limits it and the registration found are printed and written.
 
     Examples:
 
       chewbot import-motion chewing.c3d --registration subject3.toml --out task.csv && chewbot run --task task.csv
 
       chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
+
+      chewbot import-motion examples/recordings/chewing.csv --registration examples/recordings/chewing.toml --fit-registration --out task.csv
     """
-    from chewbot.commands.common import EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
-    from chewbot.errors import FitError
+    from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
+    from chewbot.errors import ChewbotError, FitError
     from chewbot.files import WRITTEN_FILE, atomic_files, check_output
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
     from chewbot.task.csvio import task_table
 
     residuals = out.with_name(out.stem + ".residuals.csv")
     side = side.value
+    found_toml = out.with_name(out.stem + ".registration.toml")
+    figure = out.with_name(out.stem + ".incisor.svg")
+    if timing not in ("recording", "limits"):
+        fail(ChewbotError(f"--timing must be recording or limits, not {timing!r}"), EXIT_BAD_INPUT)
+    if fit_registration and (scale is not None or angle_scale is not None):
+        fail(ChewbotError("--fit-registration finds the scale (the share): leave out --scale and --angle-scale"), EXIT_BAD_INPUT)
     options = ImportOptions(model=model, side=side, max_gap_s=max_gap, cutoff_hz=None if cutoff == "none" else float(cutoff),
                             rate_hz=None if rate == "recording" else float(rate),
                             scale=scale if scale in (None, "auto") else float(scale), angle_scale=angle_scale,
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
-                            force_file=None if force_file is None else str(force_file))
+                            min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file),
+                            fit_registration=fit_registration, keep_spikes=keep_spikes, clip=clip,
+                            timing=None if timing == "recording" else timing)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
-        for target in (out, residuals):  # before the work, not after it
+        for target in (out, residuals, figure) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
             check_output(target, force, WRITTEN_FILE, inputs)
         with progress(False, "import-motion", total=STEPS) as step:
             result = run_import(recording, registration, options, progress=step)
         about = f"chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
-        files = [(residuals, result.residuals(), "residuals of " + about)]
+        summary = result.summary()
+        files = [(residuals, result.residuals(), {"about": "residuals of " + about, "summary": summary})]
         if result.task is not None:
             files.insert(0, (out, task_table(result.task), "a task, read it with chewbot run --task; from " + about))
+        if result.found is not None:
+            from chewbot.recordings.registration import registration_toml
+
+            text = registration_toml(result.registration, f"registration found by {about}\n" + "\n".join(summary[:2]))
+            files.append((found_toml, text, "a registration, chewbot import-motion --registration reads it; found by " + about))
+        from chewbot.report.recording_figures import incisor_paths_svg
+
+        m = result.measures()
+        files.append((figure, incisor_paths_svg(result.recording.t, m.recorded_incisor, m.reproduced_incisor,
+                                                f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path"),
+                      "the incisor path of " + about))
         with atomic_files([path for path, _, _ in files], force, inputs, about={path: what for path, _, what in files}) as temporaries:
-            for (_, table, _), tmp in zip(files, temporaries):
-                table.to_csv(tmp)
+            for (_, content, _), tmp in zip(files, temporaries):
+                if isinstance(content, str):
+                    Path(tmp).write_text(content, encoding="utf-8")
+                else:
+                    content.to_csv(tmp)
     for note in result.notes:
         console.print(f"note: {note}", highlight=False, markup=False)
     _print_maxima(stdout, result)
+    for line in summary:
+        stdout.print(line, highlight=False, markup=False)
+    if result.found is not None:
+        stdout.print(f"wrote the registration found: {found_toml}", highlight=False, markup=False)
     if result.task is None:
         lines = result.failures()
         shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
         fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
                        f"residuals in {residuals}:\n" + "\n".join(shown)), EXIT_UNREACHABLE)
-    stdout.print(f"wrote {out} ({result.task.n} samples) and {residuals}; run it with: "
+    stdout.print(f"wrote {out} ({result.task.n} samples), {residuals} and {figure}; run it with: "
                  f"chewbot run --task {shlex.quote(str(out))} --model {shlex.quote(model)} --side {side}", highlight=False, markup=False)
 
 
@@ -111,9 +147,18 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
         args += ["--scale", str(o.scale)]
     if o.angle_scale is not None:
         args += ["--angle-scale", f"{o.angle_scale:g}"]
-    args += ["--max-residual", f"{o.max_position_mm:g}", f"{o.max_orientation_deg:g}", "--max-rigid", f"{o.max_rigid_mm:g}"]
+    args += ["--max-residual", f"{o.max_position_mm:g}", f"{o.max_orientation_deg:g}", "--max-rigid", f"{o.max_rigid_mm:g}",
+             "--min-transmission", f"{o.min_transmission_deg:g}"]
     if o.force_file is not None:
         args += ["--force-file", o.force_file]
+    if o.fit_registration:
+        args.append("--fit-registration")
+    if o.keep_spikes:
+        args.append("--keep-spikes")
+    if o.clip:
+        args.append("--clip")
+    if o.timing is not None:
+        args += ["--timing", o.timing]
     return args + (["--force"] if force else [])
 
 

@@ -36,13 +36,16 @@ def models() -> None:
 def check_model(
     model: str = typer.Argument(..., help="A TOML parameter file, or the name of a built-in model."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP.replace(" or of the default task (task.force_z_N=-100)", "")),
+    min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of an admissible pose in the reachable ranges (as chewbot import-motion's option)."),
 ) -> None:
     """Validate a parameter file and print what follows from it.
 
     Prints the lengths and masses of the chains (couplers: density x area x length), the total moving mass,
     the home pose (theta_i and their largest absolute value, transmission angles), the condyles at home and
-    whether they lie on their planes inside the sockets, and the values the file marks as assumed; warns when the
-    home pose is near a singularity (a transmission angle or kappa of the chains' Jacobian below its threshold).
+    whether they lie on their planes inside the sockets, what the robot can play from home (the range of each
+    coordinate moved alone, the farthest the incisor point moves along each axis of {S}, each with the constraint
+    that ends it; admissible: condyles in their sockets, every transmission angle >= --min-transmission), and the
+    values the file marks as assumed; warns when the home pose is near a singularity (a transmission angle or kappa of the chains' Jacobian below its threshold).
     Exit code 2 names the file and the key of the first problem; 3 means the home pose is out of reach.
 
     Examples:
@@ -64,6 +67,7 @@ def check_model(
         m = load_model(model, overrides)
         home = home_pose(m)
         stdout.print(_model_report(m, home))
+        stdout.print(_reach_report(m, min_transmission))
     for i, mu in enumerate(home["mu_deg"]):
         if mu < NEAR_SINGULAR_DEG:
             console.print(f"[yellow]warning:[/] chain {i + 1} is near-singular at the home pose: transmission angle "
@@ -71,6 +75,25 @@ def check_model(
     if home["kappa"] < KAPPA_MIN:
         console.print(f"[yellow]warning:[/] the home pose is near a singularity: kappa of the chains' Jacobian "
                       f"{home['kappa']:.3g} < {KAPPA_MIN:g} (docs/conventions.md)", highlight=False)
+
+
+def _reach_report(m, min_transmission: float):
+    """The reachable ranges from home (:func:`chewbot.recordings.reach.reach`) as a table."""
+    from rich.table import Table as RichTable
+
+    from chewbot.recordings.reach import reach
+
+    r = reach(m, min_transmission)
+    table = RichTable(title=escape(f"reachable from home (condyles in their sockets, transmission angles >= {min_transmission:g} deg)"),
+                      title_justify="left")
+    for col in ("coordinate or incisor direction", "low", "high", "limited by (low | high)"):
+        table.add_column(escape(col))
+    for name, (lo, hi) in r.coordinates.items():
+        u = r.units[name]
+        table.add_row(escape(f"{name} [{u}] (alone)"), f"{lo:.3f}", f"{hi:.3f}", f"{r.limiting[name + ' low']} | {r.limiting[name + ' high']}")
+    for label, distance in r.incisor.items():
+        table.add_row(escape(f"incisor I {label} [mm]"), "", f"{distance:.2f}", r.limiting[f"incisor {label}"])
+    return table
 
 
 def _model_report(m, home: dict):

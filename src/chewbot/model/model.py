@@ -84,8 +84,8 @@ class Friction:
 
 @dataclass(frozen=True, eq=False)
 class Limits:
-    """Actuator limits (seed 001, Sect. 4.5), SI units; ``theta_range`` and ``speed`` are unbounded
-    (-inf, inf and inf) unless the parameter file gives them."""
+    """Actuator limits (seed 001, Sect. 4.5), SI units; ``theta_range``, ``speed`` and ``acceleration`` are
+    unbounded (-inf, inf and inf) unless the parameter file gives them."""
 
     torque: float  # N m
     power: float  # W
@@ -93,6 +93,7 @@ class Limits:
     radial_load: float  # N, across the shaft, at G_i
     theta_range: np.ndarray = field(default_factory=lambda: np.array([-np.inf, np.inf]))  # rad, crank angle [low, high]
     speed: float = np.inf  # rad/s, crank speed abs(theta_dot)
+    acceleration: float = np.inf  # rad/s^2, crank acceleration abs(theta_ddot)
 
     def __post_init__(self):
         _freeze(self)

@@ -141,9 +141,10 @@ class LimitsSection(_Strict):
     power_W: float = Field(gt=0)
     axial_load_N: float = Field(gt=0)
     radial_load_N: float = Field(gt=0)
-    # optional: the crank angle range and speed limit; unbounded when absent
+    # optional: the crank angle range, speed and acceleration limits; unbounded when absent
     theta_range_deg: Annotated[list[MaybeInfinite], Field(min_length=2, max_length=2)] = [-math.inf, math.inf]
     speed_rad_per_s: MaybeInfinite = Field(default=math.inf, gt=0)
+    acceleration_rad_per_s2: MaybeInfinite = Field(default=math.inf, gt=0)
 
     @field_validator("theta_range_deg")
     @classmethod
@@ -377,7 +378,8 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
             actuator_viscous=fr.actuator_viscous_Nms_per_rad,
         ),
         limits=Limits(torque=lim.torque_Nm, power=lim.power_W, axial_load=lim.axial_load_N, radial_load=lim.radial_load_N,
-                      theta_range=np.radians(lim.theta_range_deg), speed=lim.speed_rad_per_s),
+                      theta_range=np.radians(lim.theta_range_deg), speed=lim.speed_rad_per_s,
+                      acceleration=lim.acceleration_rad_per_s2),
         contact=Contact(preload=f.contact.preload_N),
         overrides=dict(overrides or {}),
     )

@@ -77,7 +77,8 @@ BLOCKS: tuple[Block, ...] = (
     Block("limits.axial_load", (), "N", "limits.axial_load_N", 1.0, "bearing load along the shaft at G_i"),
     Block("limits.radial_load", (), "N", "limits.radial_load_N", 1.0, "bearing load across the shaft at G_i"),
     Block("limits.theta_range", (2,), "rad", "limits.theta_range_deg", np.pi / 180, "crank angle range [low, high] (default unbounded)"),
-    Block("limits.speed", (), "rad/s", "limits.speed_rad_per_s", 1.0, "crank speed limit (default unbounded)"),
+    Block("limits.speed", (), "rad/s", "limits.speed_rad_per_s", 1.0, "crank speed limit"),
+    Block("limits.acceleration", (), "rad/s^2", "limits.acceleration_rad_per_s2", 1.0, "crank acceleration limit"),
     Block("contact.preload", (), "N", "contact.preload_N", 1.0, "smallest normal force of a unilateral HKP contact"),
 )
 

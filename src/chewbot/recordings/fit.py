@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chewbot.model import Model
-from chewbot.recordings.robotfit import DEG, FitFunctions, fit_functions
+from chewbot.recordings.robotfit import DEG, MIN_TRANSMISSION_DEG, FitFunctions, fit_functions
 from chewbot.rotation import euler_angles_from_matrix
 
 # A frame has converged when the last Gauss-Newton step is below this (mm and deg: 1e-12 m, 2e-11 rad).
@@ -81,9 +81,10 @@ def own_coordinates(fns: FitFunctions, p: np.ndarray, R: np.ndarray) -> np.ndarr
 
 
 def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
-                 orientation_weight_per_deg: float = 1.0) -> RobotFit:
-    """The admissible poses of ``model`` nearest to the recorded ones (``p`` (N, 3) m, ``R`` (N, 3, 3) in {S})."""
-    fns = fit_functions(model)
+                 orientation_weight_per_deg: float = 1.0, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> RobotFit:
+    """The admissible poses of ``model`` nearest to the recorded ones (``p`` (N, 3) m, ``R`` (N, 3, 3) in {S}),
+    every transmission angle at least ``min_transmission_deg``."""
+    fns = fit_functions(model, min_transmission_deg)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
     own = own_coordinates(fns, p, R)
@@ -105,14 +106,24 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     return _result(fns, z, admissible, outside, target, settings)
 
 
+def fitted_pose(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """p (N, 3) m and R (N, 3, 3) of fitted poses q (N, n) (m, rad; NaN rows give NaN)."""
+    fns = fit_functions(model)
+    ok = np.isfinite(q).all(axis=1)
+    p, R = np.full((len(q), 3), np.nan), np.full((len(q), 3, 3), np.nan)
+    if ok.any():
+        p[ok], R[ok] = fns.pose(q[ok] / fns.scale)
+    return p, R
+
+
 def nearest_admissible(model: Model, q: np.ndarray, point=None, position_weight_per_mm: float = 1.0,
-                       orientation_weight_per_deg: float = 1.0):
+                       orientation_weight_per_deg: float = 1.0, min_transmission_deg: float = MIN_TRANSMISSION_DEG):
     """Poses q (N, n) of ``model`` (m, rad) moved to the nearest admissible ones where they are not admissible.
 
     Returns the poses (the others unchanged), the rows that were moved, whether each of those is admissible now,
     and a description of the largest violation that was removed (None if nothing moved).
     """
-    fns = fit_functions(model)
+    fns = fit_functions(model, min_transmission_deg)
     g = fns.constraints(q / fns.scale)
     excess = np.maximum(fns.lbg - g, g - fns.ubg)
     rows = np.flatnonzero((excess > BOUND_TOL).any(axis=1))

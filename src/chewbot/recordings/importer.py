@@ -17,17 +17,30 @@ from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model
-from chewbot.recordings.fit import RobotFit, fit_to_robot, nearest_admissible
+from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
+from chewbot.recordings.measures import Measures, measure
+from chewbot.recordings.register import FoundRegistration, fit_registration
+from chewbot.recordings.retime import Retiming, retime
 from chewbot.recordings.formats import Recording, read_recording
-from chewbot.recordings.prepare import fill_gaps, low_pass, trim
+from chewbot.recordings.prepare import fill_gaps, low_pass, spikes, trim
+from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
-from chewbot.recordings.rigid import RigidFit, rigid_fit, scale_motion, to_base
+from chewbot.recordings.rigid import RigidFit, kabsch, rigid_fit, scale_motion, to_base
 from chewbot.table import Table
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
 BISECTIONS = 14
+# --scale auto: factors j / SCAN scanned from below first (a power of 2).
+SCAN = 16
+# --clip: the task starts at home, held HOLD_S, moves to the recording's first pose in RAMP_S (a quintic blend:
+# zero rate and acceleration at both ends of the blend), plays the recording, and returns the same way.
+RAMP_S = 1.0
+HOLD_S = 0.2
+# --clip: between two frames the clipped motion's incisor moves at most this many times the largest step of the
+# recorded (registered, scaled) motion's incisor between two frames; a larger step is a jump, an error.
+JUMP_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -49,6 +62,11 @@ class ImportOptions:
     max_orientation_deg: float = 1.0
     max_rigid_mm: float = 1.0
     force_file: str | None = None
+    min_transmission_deg: float = MIN_TRANSMISSION_DEG
+    fit_registration: bool = False
+    keep_spikes: bool = False
+    clip: bool = False
+    timing: str | None = None  # None: the recording's times; "limits": re-timed within the motors' limits
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,6 +91,12 @@ class MotionImport:
     passed: np.ndarray
     task: Task | None
     notes: list[str] = field(default_factory=list)
+    found: FoundRegistration | None = None
+    retiming: Retiming | None = None
+
+    def measures(self) -> Measures:
+        """What the robot reproduces of the recording (registered, at scale 1): :func:`measure`."""
+        return measure(self.model, self.rigid.p, self.rigid.R, self.fit, self.recording.t)
 
     def residuals(self) -> Table:
         """One row per frame: its number in the file, time, the markers' rigid-fit residual (RMS and largest),
@@ -88,15 +112,44 @@ class MotionImport:
         table.add("orientation_error", fit.orientation_error_deg, "deg", "rotation angle between the fitted and the recorded orientation")
         table.add("admissible", fit.admissible, "1", "1 where an admissible pose was found")
         table.add("leaves_workspace", fit.outside.any(axis=1), "1", "1 where the nearest pose without the constraints is not admissible")
+        for j, name in enumerate(fit.constraint_names):
+            table.add("outside_" + name.replace(" ", "_"), fit.outside[:, j], "1", f"1 where the recorded pose breaks: {name}")
         table.add("passed", self.passed, "1", "1 where every tolerance is met")
+        table.add("clipped", (~self.passed) & (self.task is not None), "1", "1 where --clip put the nearest admissible pose in the task")
+        m = self.measures()
+        for name, values, unit, what in m.columns():
+            table.add(name, values, unit, what)
+        limiting = np.zeros(rec.n, dtype=int)
+        if self.found is not None:
+            limiting[self.found.limiting_frames] = 1
+        table.add("limits_share", limiting, "1", "1 where the frame fails just above the share (the frames that limit it)")
         return table
+
+    def summary(self) -> list[str]:
+        """The import's measures in lines: the share (with the registration search), what the robot reproduces of
+        the recorded rotation and incisal excursion, whether it is in step, what limits it."""
+        m, lines = self.measures(), []
+        if self.found is not None:
+            f = self.found
+            lines.append(f"share {f.share:.4f} (the largest uniform scale <= 1 of the registered recording at which every frame "
+                         f"is reached within --max-residual); weighted residual RMS {f.residual:.3g}; tracker turned "
+                         f"{f.tracker_change_deg:.3g} deg from the file's; {f.evaluations} evaluations, {f.seconds:.3g} s")
+            if f.share < 1:
+                times = self.recording.t[f.limiting_frames]
+                shown = ", ".join(f"{t:.3f}" for t in times[:8]) + (" ..." if times.size > 8 else "")
+                lines.append(f"limited by {f.limiting} in {f.limiting_frames.size} frame(s) at t = {shown} s")
+        elif self.factor is not None:
+            lines.append(f"share {self.factor:.4f} (--scale auto)")
+        lines.append(m.describe())
+        return lines
+
 
     def failures(self) -> list[str]:
         """The failing frames, as stretches of consecutive frames with the reasons."""
         return _failure_messages(self)
 
 
-STEPS = 4  # reading and preparing, rigid fit, fit to the robot, task (the progress callback's calls)
+STEPS = 5  # reading and preparing, registration, rigid fit, fit to the robot, task (the progress callback's calls)
 
 
 def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
@@ -111,6 +164,20 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     model = load_model(options.model)
     notes: list[str] = []
     rec = _prepare(read_recording(recording, reg.units), reg, options, notes)
+    if reg.landmarks is not None:
+        reg = _placed_by_landmarks(model, reg, rec)
+        notes.append(f"the markers placed on the mandible by the landmarks ({', '.join(reg.landmarks)})")
+    found = None
+    if options.fit_registration:
+        step("searching the registration")
+        found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.origin, reg.markers, reg.point,
+                                 (reg.position_weight_per_mm, reg.orientation_weight_per_deg),
+                                 (options.max_position_mm, options.max_orientation_deg), options.min_transmission_deg)
+        notes.extend(found.notes)
+        reg = replace(reg, markers=found.markers, rotation=found.rotation, origin=found.origin, scale=found.share,
+                      angle_scale=found.share, landmarks=None)
+    else:
+        step("registration as the file gives it")
     step("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if reg.markers is None:
@@ -127,7 +194,8 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
 
     def attempt(factor: float):
         p, R = scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
-        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
+                           options.min_transmission_deg)
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= options.max_orientation_deg)
         return fit, within & rigid_ok
 
@@ -137,13 +205,52 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     if options.scale == "auto" and not rigid_ok.all():
         notes.append("--scale auto: no factor was searched, frames where a marker moves relative to the others fail at every scale")
     elif options.scale == "auto":
-        factor, fit, passed = (1.0, fit, passed) if passed.all() else _largest_factor(attempt)
+        def builds(fit_f) -> bool:
+            try:
+                _task(model, rec, reg, fit_f, options, Path(recording), [])
+                return True
+            except (RecordingError, KinematicsError):
+                return False
+
+        factor, fit, passed = (1.0, fit, passed) if passed.all() and builds(fit) else _largest_factor(attempt, builds)
         scale, angle_scale = factor * scale, factor * angle_scale
     step("resampling and checking the task")
     task = None
-    if passed.all():
+    if passed.all() or (options.clip and fit.admissible.all() and rigid_ok.all()):
+        if options.clip and not passed.all():
+            p, R = scale_motion(rigid.p, rigid.R, scale, angle_scale)
+            _check_jumps(model, rec, p, R, fit)
+            notes.append(_clip_note(rec, fit, passed))
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
-    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes)
+    retiming = None
+    if task is not None and options.timing == "limits":
+        retiming = retime(model, task)
+        moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, reg.point, reg.position_weight_per_mm,
+                                                reg.orientation_weight_per_deg, options.min_transmission_deg)
+        # the path between its samples, evaluated at the new times, may cross a boundary it runs along by
+        # rounding (nanometres): those samples are put back on it, their rates kept
+        task = replace(retiming.task, q=moved) if ok.all() else retiming.task
+        slow = retiming.stretch > 1 + 1e-3
+        notes.append(f"--timing limits: {retiming.original_s:.4g} s re-timed to {retiming.duration_s:.4g} s; stretched segments "
+                     + (", ".join(f"{a:.3g}-{b:.3g} s x{k:.3g}" for (a, b), k in zip(retiming.segments[slow], retiming.stretch[slow]))
+                        or "none") + " (of the task's own time before re-timing)")
+        try:
+            solve_kinematics(model, task)
+        except KinematicsError as exc:
+            raise exc.located(f"{recording}: the re-timed task") from None
+    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming)
+
+
+def _placed_by_landmarks(model: Model, reg: Registration, rec: Recording) -> Registration:
+    """``rest = "first"`` with landmarks: the mandible's rest pose in the tracker's frame from the landmarks (each
+    on the model's point of its name, least squares), and the markers in {M} from it; the tracker's placement
+    then puts that rest pose in {S} (not necessarily home)."""
+    points = {"incisor": model.incisor, "molar_left": model.molar_left, "molar_right": model.molar_right,
+              "condyle_left": model.hkp.T_L, "condyle_right": model.hkp.T_R}
+    names = list(reg.landmarks)
+    R_B, t_B = (v[0] for v in kabsch(np.array([points[n] for n in names]), np.array([reg.landmarks[n] for n in names])[None]))
+    markers = {name: R_B.T @ (rec.positions[0, k] - t_B) for k, name in enumerate(rec.markers)}
+    return replace(reg, markers=markers)
 
 
 def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: list[str]) -> Recording:
@@ -161,6 +268,11 @@ def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: l
     rec, head, tail = trim(rec)
     if head or tail:
         notes.append(f"dropped {head} frame(s) at the start and {tail} at the end where a marker was not seen")
+    if not options.keep_spikes:
+        body = None if reg.markers is None else np.array([reg.markers[name] for name in rec.markers])
+        rec, spiked = spikes(rec, body, options.max_gap_s)
+        for i0, i1, why in spiked:
+            notes.append(f"tracker spike dropped and filled: {rec.where(i0)} to {rec.where(i1)} ({why})")
     rec, found = fill_gaps(rec, options.max_gap_s)
     if found:
         notes.append(f"filled {len(found)} gap(s) by splines (longest {max(g[3] for g in found):.4g} s, marker {max(found, key=lambda g: g[3])[0]})")
@@ -169,30 +281,90 @@ def _prepare(rec: Recording, reg: Registration, options: ImportOptions, notes: l
     return rec
 
 
-def _largest_factor(attempt):
-    """The largest factor in [0, 1] at which every frame passes, by bisection (the first frame held still, factor
-    0, must pass)."""
-    lo_fit, lo_passed = attempt(0.0)
-    if not lo_passed.all():
+def _largest_factor(attempt, builds):
+    """The largest factor f in [0, 1] such that every frame passes at f and at every factor of the grid
+    j / :data:`SCAN` below it, and the resampled task at f builds (``builds(fit)``: the kinematics accept it).
+
+    The frames' verdict need not be monotone in f near the workspace's edge (a frame's nearest admissible pose
+    may cross a tolerance and come back): the scan from below stops at the first grid factor that fails, and the
+    bisection (:data:`BISECTIONS` steps in all) runs between it and the grid factor before, on the predicate
+    "every frame passes and the task builds" at f and at the interval's lower end, which holds by construction.
+    """
+    lo, lo_fit, lo_passed = 0.0, *attempt(0.0)
+    if not lo_passed.all() or not builds(lo_fit):
         return 0.0, lo_fit, lo_passed
-    lo, hi = 0.0, 1.0
-    for _ in range(BISECTIONS):
+    hi = 1.0
+    for j in range(1, SCAN + 1):
+        fit, passed = attempt(j / SCAN)
+        if not (passed.all() and builds(fit)):
+            hi = j / SCAN
+            break
+        lo, lo_fit, lo_passed = j / SCAN, fit, passed
+    else:
+        return 1.0, lo_fit, lo_passed
+    for _ in range(BISECTIONS - int(np.log2(SCAN))):
         mid = 0.5 * (lo + hi)
         fit, passed = attempt(mid)
-        if passed.all():
+        if passed.all() and builds(fit):
             lo, lo_fit, lo_passed = mid, fit, passed
         else:
             hi = mid
     return lo, lo_fit, lo_passed
 
 
+def _check_jumps(model: Model, rec: Recording, p: np.ndarray, R: np.ndarray, fit: RobotFit) -> None:
+    """--clip: the clipped motion's incisor steps between frames within :data:`JUMP_FACTOR` of the recorded one's."""
+    p_fit, R_fit = fitted_pose(model, fit.q)
+    recorded = np.linalg.norm(np.diff(p + R @ model.incisor, axis=0), axis=1)
+    clipped = np.linalg.norm(np.diff(p_fit + R_fit @ model.incisor, axis=0), axis=1)
+    bound = JUMP_FACTOR * recorded.max()
+    if (clipped > bound).any():
+        i = int(np.argmax(clipped))
+        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / 1e-3:.3g} mm between {rec.where(i)} "
+                             f"and the next frame, more than {JUMP_FACTOR:g} x the recording's largest step "
+                             f"({recorded.max() / 1e-3:.3g} mm): the nearest admissible poses switch branches there")
+
+
+def _clip_note(rec: Recording, fit: RobotFit, passed: np.ndarray) -> str:
+    clipped = ~passed
+    edges = np.diff(np.r_[0, clipped.astype(int), 0])
+    stretches = [(a, b - 1) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    names = [n for n, b in zip(fit.constraint_names, fit.outside[clipped].any(axis=0)) if b]
+    shown = "; ".join(f"t = {rec.t[a]:.3f} to {rec.t[b]:.3f} s" for a, b in stretches[:6]) + (" ..." if len(stretches) > 6 else "")
+    return (f"--clip: {clipped.sum()} frame(s) in {len(stretches)} stretch(es) clipped to the nearest admissible pose ({shown}), "
+            f"by up to {np.nanmax(fit.position_error_mm[clipped]):.3g} mm and {np.nanmax(fit.orientation_error_deg[clipped]):.3g} deg; "
+            f"limited by {', '.join(names) if names else 'the residual tolerance'}")
+
+
+def _ramped(rec: Recording, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Frames (times from 0, poses) from home at rest to the recording and back (:data:`RAMP_S`, :data:`HOLD_S`),
+    and the time at which the recording's first frame is played."""
+    dt = float(np.median(np.diff(rec.t)))
+    hold, ramp = int(round(HOLD_S / dt)), int(round(RAMP_S / dt))
+    u = np.arange(1, ramp) / ramp
+    blend = (u**3 * (10 - 15 * u + 6 * u**2))[:, None]
+    home = np.zeros(q.shape[1])
+    before = np.vstack([np.tile(home, (hold + 1, 1)), home + blend * (q[0] - home)])
+    after = np.vstack([q[-1] + blend * (home - q[-1]), np.tile(home, (hold + 1, 1))])
+    t = np.r_[rec.t[0] - dt * np.arange(len(before), 0, -1), rec.t, rec.t[-1] + dt * np.arange(1, len(after) + 1)]
+    return t - t[0], np.vstack([before, q, after]), len(before) * dt
+
+
 def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, options: ImportOptions, source: Path,
           notes: list[str]) -> Task:
     """The task: the fitted coordinates resampled (spline rates), samples between frames that a spline carries
-    out of the workspace moved back onto it, the bite force, and a check by the kinematics."""
-    t = output_times(rec.t, options.rate_hz)
-    q, dq, ddq = spline_motion(rec.t, fit.q, t)
-    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg)
+    out of the workspace moved back onto it, the bite force, and a check by the kinematics. With --clip it starts
+    and ends at rest at home (:func:`_ramped`)."""
+    frames_t, frames_q, shift = rec.t, fit.q, 0.0
+    if options.clip:
+        frames_t, frames_q, start = _ramped(rec, fit.q)
+        shift = rec.t[0] - start
+        notes.append(f"--clip: the task holds home {HOLD_S:g} s, ramps to the recording's first pose in {RAMP_S:g} s (quintic), "
+                     f"plays it from t = {start:.4g} s, and returns the same way")
+    t = output_times(frames_t, options.rate_hz)
+    q, dq, ddq = spline_motion(frames_t, frames_q, t, at_rest=options.clip)
+    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
+                                                options.min_transmission_deg)
     if not ok.all():
         i = int(rows[~ok][0])
         raise RecordingError(f"{rec.source}: between the fitted frames, at t = {t[i]:.6g} s, the spline leaves the "
@@ -200,13 +372,13 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
     if rows.size:  # the rates then come from a spline through the samples as they are now
         notes.append(f"moved {rows.size} resampled sample(s) back into the workspace, where the spline overshot its "
                      f"boundary between frames (at most {worst})")
-        q, dq, ddq = spline_motion(t, moved, t)
+        q, dq, ddq = spline_motion(t, moved, t, at_rest=options.clip)
+    force = np.zeros((len(t), 3))
+    inside = (t + shift >= rec.t[0] - 1e-9) & (t + shift <= rec.t[-1] + 1e-9)  # the recording's own times
     if options.force_file is not None:
-        force = force_at(*read_force_file(options.force_file), t, options.force_file)
+        force[inside] = force_at(*read_force_file(options.force_file), t[inside] + shift, options.force_file)
     elif rec.force is not None:
-        force = force_at(rec.t, rec.force, t, rec.source)
-    else:
-        force = np.zeros((len(t), 3))
+        force[inside] = force_at(rec.t, rec.force, t[inside] + shift, rec.source)
     coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
     task = Task(name=source.stem, t=t, coords=coords, q=q, dq=dq, ddq=ddq, force=force, side=options.side,
                 source=str(source), meta={"generator": "import-motion", "registration": reg.source})

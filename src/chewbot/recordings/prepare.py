@@ -4,10 +4,17 @@ In this order (:func:`chewbot.recordings.importer.import_motion`):
 
 1. :func:`trim` drops the frames at the start and the end where a marker is missing: there is nothing on one
    side to interpolate from.
-2. :func:`fill_gaps` fills each gap of each marker (frames where it was not seen) by a cubic spline through all
+2. :func:`spikes` finds tracker artefacts (unless ``--keep-spikes``): frames where the markers stop being one
+   rigid body (the largest distance of a marker from the rigid body fitted to all, an outlier: above
+   :data:`SPIKE_MIN_MM` and the median plus :data:`SPIKE_MADS` robust standard deviations, 1.4826 x the median
+   absolute deviation), and stretches of at most ``max_gap`` between two jumps of the markers' speed that are
+   outliers the same way (above :data:`SPIKE_MIN_SPEED_MM_S` and the median plus :data:`SPEED_MADS` robust
+   standard deviations) and cancel (a jump out and back: their sum below :data:`CANCEL` of the smaller; the steps
+   of a fast stroke add up instead). Their frames are dropped and filled like gaps.
+3. :func:`fill_gaps` fills each gap of each marker (frames where it was not seen) by a cubic spline through all
    the frames where that marker was seen (``scipy.interpolate.CubicSpline``, not-a-knot ends), if the gap lasts
    at most ``max_gap``; a longer gap is an error naming the marker and the times.
-3. :func:`low_pass` filters every marker coordinate with a Butterworth low-pass of order 2 run forward and
+4. :func:`low_pass` filters every marker coordinate with a Butterworth low-pass of order 2 run forward and
    backward (``scipy.signal.sosfiltfilt``): zero phase, so the filtered path is not delayed against the bite
    force or the other markers, and an overall response of order 4. Order 2 twice is the usual choice for jaw
    and limb motion (Winter, Biomechanics and Motor Control of Human Movement): steep enough to remove tracker
@@ -33,6 +40,16 @@ FILTER_ORDER = 2
 TWO_PASS_CORRECTION = (np.sqrt(2) - 1) ** (1 / (2 * FILTER_ORDER))
 # Time steps may differ from their median by this fraction and still count as uniform (files print times rounded).
 UNIFORM_TOLERANCE = 1e-3
+# Spikes: a frame breaks the rigid body by at least this (mm) and by this many robust standard deviations above
+# the median; a jump of the speed is at least this (mm/s) and that many robust standard deviations above the
+# median. The rigid-body error of a sound recording is the tracker's noise (0.05-0.2 mm); chewing moves markers
+# at up to about 150 mm/s, a spike of a few millimetres in one frame at 50-100 Hz at hundreds of mm/s.
+SPIKE_MIN_MM = 0.5
+SPIKE_MADS = 10.0
+SPIKE_MIN_SPEED_MM_S = 200.0
+SPEED_MADS = 5.0
+# A jump out and a jump back: their sum is less than this share of the smaller (a fast stroke's steps add up).
+CANCEL = 0.5
 
 
 def missing(positions: np.ndarray) -> np.ndarray:
@@ -52,6 +69,55 @@ def trim(rec: Recording) -> tuple[Recording, int, int]:
         raise RecordingError(f"{rec.source}: no frame sees every marker")
     first, last = int(complete[0]), int(complete[-1])
     return rec.frames(first, last + 1), first, rec.n - 1 - last
+
+
+def _outliers(x: np.ndarray, floor: float, mads: float) -> np.ndarray:
+    """x above ``floor`` and the median plus ``mads`` robust standard deviations (1.4826 MAD)."""
+    med = np.nanmedian(x)
+    sigma = 1.4826 * np.nanmedian(np.abs(x - med))
+    return x > max(floor, med + mads * sigma)
+
+
+def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Recording, list[tuple[int, int, str]]]:
+    """The recording with the frames of tracker spikes dropped (NaN, to be filled like gaps) and the spikes:
+    (first frame, last frame, why) each. ``body`` (K, 3) m: the markers in {M} (None: their first frame)."""
+    from chewbot.recordings.rigid import rigid_fit
+
+    P = rec.positions
+    found: list[tuple[int, int, str]] = []
+    bad = np.zeros(rec.n, dtype=bool)
+    if P.shape[1] >= 3:
+        seen = ~missing(P).any(axis=1)  # gaps are not spikes: they are filled next
+        d = np.full(rec.n, np.nan)
+        d[seen] = rigid_fit(P[0] if body is None else body, P[seen], rec.markers).max_mm
+        with np.errstate(invalid="ignore"):
+            rigid = _outliers(d, SPIKE_MIN_MM, SPIKE_MADS)
+        bad |= rigid
+    step = np.diff(P, axis=0)
+    speed = np.linalg.norm(step, axis=2).max(axis=1) / np.diff(rec.t) / 1e-3  # mm/s, (n-1,)
+    with np.errstate(invalid="ignore"):
+        jumps = np.flatnonzero(_outliers(speed, SPIKE_MIN_SPEED_MM_S, SPEED_MADS))  # jump between frame j and j + 1
+    for a, b in zip(jumps[:-1], jumps[1:]):
+        out, back = step[a].sum(axis=0), step[b].sum(axis=0)  # a jump out and back cancels; a fast stroke adds up
+        cancels = np.linalg.norm(out + back) < CANCEL * min(np.linalg.norm(out), np.linalg.norm(back))
+        if cancels and rec.t[b + 1] - rec.t[a + 1] <= max_gap * (1 + 1e-9):
+            bad[a + 1 : b + 1] = True
+    edges = np.diff(np.r_[0, bad.astype(int), 0])
+    for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
+        if i0 == 0 or i1 == rec.n - 1:
+            continue  # nothing to interpolate from on one side: left as it is
+        why = []
+        if P.shape[1] >= 3 and rigid[i0 : i1 + 1].any():
+            why.append(f"the markers break the rigid body by up to {d[i0:i1 + 1].max():.3g} mm")
+        if not why:
+            why.append(f"the markers jump at up to {speed[max(i0 - 1, 0):i1 + 1].max():.4g} mm/s")
+        found.append((int(i0), int(i1), "; ".join(why)))
+    if not found:
+        return rec, found
+    positions = P.copy()
+    for i0, i1, _ in found:
+        positions[i0 : i1 + 1] = np.nan
+    return replace(rec, positions=positions), found
 
 
 def gaps(rec: Recording) -> list[tuple[str, int, int, float]]:

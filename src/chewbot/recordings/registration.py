@@ -56,12 +56,25 @@ class FitSection(_Strict):
     point_mm: Vec3 | None = None
 
 
+# Landmarks a lab may digitise at the rest frame, each mapped to the model's point of the same name.
+LANDMARKS = ("incisor", "molar_left", "molar_right", "condyle_left", "condyle_right")
+
+
+class LandmarksSection(_Strict):
+    incisor: Vec3 | None = None
+    molar_left: Vec3 | None = None
+    molar_right: Vec3 | None = None
+    condyle_left: Vec3 | None = None
+    condyle_right: Vec3 | None = None
+
+
 class RegistrationFile(_Strict):
     """The TOML file as written."""
 
     units: str
     markers: dict[str, Vec3] | None = None
     rest: Literal["first"] | None = None
+    landmarks: LandmarksSection | None = None
     tracker: TrackerSection = TrackerSection()
     scale: float = Field(1.0, gt=0)
     angle_scale: float = Field(1.0, gt=0)
@@ -79,7 +92,9 @@ class RegistrationFile(_Strict):
 class Registration:
     """A validated registration, SI: ``markers`` {name: position in {M} (m)} or None for ``rest = "first"``;
     ``rotation`` (3, 3) and ``origin`` (3,) m with p_S = rotation p_T + origin; ``point`` (3,) m in {M} or None
-    (the model's incisal point); weights per mm and per degree."""
+    (the model's incisal point); weights per mm and per degree; ``landmarks``: digitised points of the mandible
+    at the rest frame in the tracker's frame (m), by the name of the model's point they are (:data:`LANDMARKS`),
+    or None."""
 
     source: str
     units: str
@@ -91,6 +106,7 @@ class Registration:
     position_weight_per_mm: float
     orientation_weight_per_deg: float
     point: np.ndarray | None
+    landmarks: dict[str, np.ndarray] | None = None  # name: position (m) in the tracker's frame at the rest frame
 
 
 def load_registration(path: str | Path) -> Registration:
@@ -121,6 +137,14 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
         fail("markers" if f.markers is None else "rest", "give either a [markers] table (each marker's position in {M}) "
              "or rest = \"first\" (the first frame defines the markers and is the home pose), not both or neither")
     unit = length_factor(f.units, f"{source}: key 'units'")
+    landmarks = None
+    if f.landmarks is not None:
+        landmarks = {name: np.array(v) * unit for name, v in f.landmarks.model_dump().items() if v is not None}
+        if f.rest is None:
+            fail("landmarks", "landmarks are digitised at the rest frame, the first of the recording: use them with rest = \"first\"")
+        if len(landmarks) < 3 or collinear(np.array(list(landmarks.values()))):
+            fail("landmarks", f"{len(landmarks)} landmark(s) ({', '.join(landmarks) or 'none'}); the mandible's rest pose needs "
+                 f"at least 3 not on one line, of {', '.join(LANDMARKS)}")
     markers = None
     if f.markers is not None:
         if len(f.markers) < 3:
@@ -136,10 +160,28 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     u, _, vt = np.linalg.svd(rotation)  # nearest rotation: the rows are typically rounded
     return Registration(source, f.units, markers, u @ vt, np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
                         f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3)
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3, landmarks)
 
 
 def collinear(points: np.ndarray) -> bool:
     """True when the points (K, 3) lie on one line (or nearly: :data:`COLLINEAR_TOLERANCE`)."""
     sv = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
     return len(sv) < 2 or sv[1] <= COLLINEAR_TOLERANCE * sv[0]
+
+
+def registration_toml(reg: Registration, comment: str) -> str:
+    """A registration file (TOML, millimetres) holding ``reg``'s tracker, markers in {M}, scales and fit settings,
+    with ``comment`` (lines) above: what :func:`load_registration` reads back to the same registration."""
+
+    def vec(v) -> str:
+        return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}", "", "[markers]"]
+    lines += [f"{name} = {vec(np.asarray(p) / 1e-3)}" for name, p in (reg.markers or {}).items()]
+    lines += ["", "[tracker]", "rotation = [" + ",\n            ".join(vec(row) for row in reg.rotation) + "]",
+              f"origin = {vec(reg.origin / 1e-3)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
+              f"orientation_weight_per_deg = {float(reg.orientation_weight_per_deg)!r}"]
+    if reg.point is not None:
+        lines.append(f"point_mm = {vec(reg.point / 1e-3)}")
+    return "\n".join(lines) + "\n"

@@ -26,10 +26,11 @@ def output_times(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     return t[0] + np.arange(count) / rate_hz
 
 
-def spline_motion(t: np.ndarray, q: np.ndarray, t_out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spline_motion(t: np.ndarray, q: np.ndarray, t_out: np.ndarray, at_rest: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """q, dq, ddq (M, n) at ``t_out`` from the interpolating cubic spline through (t, q); at the frames
-    themselves q is returned as given (no rounding by the spline)."""
-    spline = CubicSpline(t, q, axis=0)
+    themselves q is returned as given (no rounding by the spline). ``at_rest``: zero rates at both ends (clamped
+    ends) instead of not-a-knot."""
+    spline = CubicSpline(t, q, axis=0, bc_type="clamped" if at_rest else "not-a-knot")
     values = spline(t_out)
     same = np.searchsorted(t, t_out).clip(0, len(t) - 1)
     at_frame = t[same] == t_out

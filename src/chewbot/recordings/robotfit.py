@@ -12,7 +12,8 @@ The pose error of a pose q against a recorded pose (p_rec, R_rec), with the meas
 
 and the residual r = [w_p e_p / mm; w_o phi / deg] (``position_weight_per_mm``, ``orientation_weight_per_deg``):
 the fit minimises abs(r)^2 over the admissible poses. Admissible: both condyles inside their sockets (target)
-and every chain reachable with a transmission angle whose sine is at least :data:`REACH_MARGIN` (so that
+and every chain reachable with a transmission angle of at least a margin (:data:`MIN_TRANSMISSION_DEG` unless the
+caller gives another; never below :data:`REACH_MARGIN` in sine, so that
 :func:`chewbot.kinematics.ik.inverse_kinematics` accepts it).
 
 Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first: ``z`` (N, n), ``target`` (N, 12)
@@ -21,13 +22,14 @@ Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
 from chewbot.compiled.cache import KERNELS, cached_graph, folded
 from chewbot.compiled.kernels import compiled, evaluate
+from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
@@ -46,6 +48,10 @@ CHUNK = 256
 # Sine of the transmission angle that an admissible pose keeps on every chain: twice the inverse kinematics'
 # singular tolerance, so that a pose on this boundary is still well inside what the kinematics accept.
 REACH_MARGIN = 2 * SINGULAR_TOLERANCE
+# The transmission angle an admissible pose keeps by default: the run's near-singular threshold, so that an imported
+# task runs without near-singular samples (a free search otherwise ends on the chains' dead points, where a crank's
+# speed is unbounded for a finite speed of the mandible).
+MIN_TRANSMISSION_DEG = NEAR_SINGULAR_DEG
 _SQP = {
     "qpsol": "qrqp", "convexify_strategy": "eigen-clip",  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
@@ -79,6 +85,8 @@ class FitFunctions:
     _nlp: ca.Function
     _stationarity: ca.Function
     _sequential: ca.Function
+    _extreme: ca.Function
+    _cost_gradient: ca.Function
 
     @property
     def n(self) -> int:
@@ -146,10 +154,26 @@ class FitFunctions:
                     pass
             return z, lam
 
+    def cost_gradient(self, z, target, settings) -> np.ndarray:
+        """The gradient (N, 12) of 0.5 abs(r)^2 with respect to the recorded pose [p_rec; R_rec column by column]:
+        at a fitted pose, the derivative of the fit's optimal value (the constraints do not depend on the
+        recorded pose: Danskin's theorem)."""
+        return evaluate(self._cost_gradient, z, target, settings)[0]
 
-def fit_functions(model: Model) -> FitFunctions:
-    """The fit's functions for ``model`` (target: X, Y, alpha, beta; 6RSS: X, Y, Z, alpha, beta, gamma)."""
-    return cached_graph(folded(model), ("recordings", "fit"), lambda: _build(model))
+    def extreme(self, z0, direction, point) -> tuple[np.ndarray, bool]:
+        """The admissible pose z (n,) that carries ``point`` (3,) m in {M} farthest along ``direction`` (3,) in {S}
+        (interior point method, IPOPT, exact Hessian), from z0; and whether IPOPT reports success."""
+        sol = self._extreme(x0=z0, p=np.r_[direction, point], lbg=self.lbg, ubg=self.ubg)
+        return np.asarray(sol["x"]).ravel(), bool(self._extreme.stats()["success"])
+
+
+def fit_functions(model: Model, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> FitFunctions:
+    """The fit's functions for ``model`` (target: X, Y, alpha, beta; 6RSS: X, Y, Z, alpha, beta, gamma), whose
+    admissible poses keep every transmission angle at or above ``min_transmission_deg``."""
+    fns = cached_graph(folded(model), ("recordings", "fit"), lambda: _build(model))
+    reach = np.array(["reach" in name for name in fns.constraint_names])
+    floor = max(np.sin(np.radians(min_transmission_deg)), REACH_MARGIN) ** 2
+    return replace(fns, lbg=np.where(reach, floor, fns.lbg))
 
 
 def _rotation_vector(A):
@@ -231,7 +255,84 @@ def _build(model: Model) -> FitFunctions:
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
     nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
                     {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
+    # the farthest a point of {M} reaches along a direction: minimise -d . (p + R b) in mm over the admissible poses
+    reach = ca.SX.sym("reach", 6)
+    extreme = ca.nlpsol(f"reach_nlp_{model.mechanism}", "ipopt",
+                        {"x": z, "p": reach, "f": -ca.dot(reach[:3], p + ca.mtimes(R, reach[3:])) / MM, "g": g},
+                        {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10, "bound_relax_factor": 0.0}})
     return FitFunctions(coords, scale, np.array(lbg), np.array(ubg), tuple(names), gauss_newton, errors, constraints,
                         ca.Function("fit_pose_z", [z], [p, R], ["z"], ["p", "R"]), nlp, stationarity,
-                        gauss_newton.mapaccum("fit_sequential", CHUNK))
+                        gauss_newton.mapaccum("fit_sequential", CHUNK), extreme,
+                        ca.Function("fit_cost_gradient", [z, target, settings], [ca.gradient(f, target)]))
 
+
+
+# ------------------------------------------------------------------------------------------ registration search
+
+@dataclass(frozen=True, eq=False)
+class RegistrationFunctions:
+    """The graphs of the registration search (:mod:`chewbot.recordings.register`), for one model.
+
+    The unknowns x (12,): the rest pose of {M} (the fit's n coordinates z0 in mm and deg, then, on the target,
+    an offset of Z in mm and of gamma in deg off the robot's poses) and a correction of the markers' placement
+    B = (R_B, t_B), {M} in the tracker's frame at rest: R_B = R_B,start exp(dr) (dr in deg), t_B = t_B,start + dt
+    (mm). With the tracker's motion Y_k (Y_0 = I) and the scale s, frame k is at
+    p_k = p_0 + s R_0 R_B^T ((R_Y,k - I) t_B + p_Y,k), R_k = R_0 R_B^T exp(s phi_k) R_B, phi_k the rotation vector
+    of R_Y,k. Per frame [exp(s phi_k) (9); R_Y,k - I (9); p_Y,k (3)] (columns first), constants [R_B,start (9);
+    t_B,start (3) m; s].
+    """
+
+    n_x: int
+    _targets: ca.Function
+    _placement: ca.Function
+
+    def targets(self, x, frames, const) -> tuple[np.ndarray, np.ndarray]:
+        """The recorded poses (N, 12) as the fit takes them and their Jacobians (N, 12, 12) by x."""
+        t, J = evaluate(self._targets, frames, x, const)
+        return t, J
+
+    def placement(self, x, const) -> tuple[np.ndarray, np.ndarray]:
+        """[R_0 R_B^T (9, the tracker's rotation); t_B (3) m; R_B (9)] of x, and its Jacobian (21, 12) by x."""
+        v, J = evaluate(self._placement, x[None], const[None])
+        return v[0], J[0]
+
+
+def _expm(w):
+    """exp([w]x) by Rodrigues' formula, written as series in theta^2 near 0 (exact derivatives at w = 0)."""
+    t2 = ca.sumsqr(w)
+    a = ca.if_else(t2 < 1e-8, 1 - t2 / 6 + t2**2 / 120, ca.sin(ca.sqrt(t2)) / ca.sqrt(t2))
+    b = ca.if_else(t2 < 1e-8, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(ca.sqrt(t2))) / t2)
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * ca.mtimes(K, K)
+
+
+def registration_functions(model: Model) -> RegistrationFunctions:
+    """The registration search's graphs for ``model`` (built once per process)."""
+    return cached_graph(folded(model), ("recordings", "registration"), lambda: _build_registration(model))
+
+
+def _build_registration(model: Model) -> RegistrationFunctions:
+    s_model = symbolic(folded(model), "euler-angles")
+    coords = COORDINATES[(model.mechanism, "euler-angles")]
+    scale = np.array([MM if c in ("X", "Y", "Z") else DEG for c in coords])
+    n = len(coords)
+    x = ca.SX.sym("x", 12)
+    p0, R0 = ca.Function("reg_pose", [s_model.q], [s_model.p, s_model.R])(ca.DM(scale) * x[:n])
+    if n == 4:  # off the robot's poses: Z and gamma of the rest pose
+        p0 = p0 + ca.vertcat(0, 0, x[4] * MM)
+        c, s_ = ca.cos(x[5] * DEG), ca.sin(x[5] * DEG)
+        R0 = ca.mtimes(R0, ca.vertcat(ca.horzcat(c, -s_, 0), ca.horzcat(s_, c, 0), ca.horzcat(0, 0, 1)))
+    const = ca.SX.sym("const", 13)
+    R_B = ca.mtimes(ca.reshape(const[:9], 3, 3), _expm(x[6:9] * DEG))
+    t_B = const[9:12] + x[9:12] * MM
+    scale_s = const[12]
+    frame = ca.SX.sym("frame", 21)
+    Rs, D, pY = ca.reshape(frame[:9], 3, 3), ca.reshape(frame[9:18], 3, 3), frame[18:21]
+    A = ca.mtimes(R0, R_B.T)
+    p_k = p0 + scale_s * ca.mtimes(A, ca.mtimes(D, t_B) + pY)
+    R_k = ca.mtimes(ca.mtimes(A, Rs), R_B)
+    target = ca.vertcat(p_k, ca.reshape(R_k, 9, 1))
+    targets = ca.Function("reg_targets", [frame, x, const], [target, ca.jacobian(target, x)])
+    placed = ca.vertcat(ca.reshape(A, 9, 1), t_B, ca.reshape(R_B, 9, 1))
+    placement = ca.Function("reg_placement", [x, const], [placed, ca.jacobian(placed, x)])
+    return RegistrationFunctions(12, targets, placement)

@@ -209,7 +209,7 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     step("validity checks")
     from chewbot.analysis.checks import run_checks
 
-    result.checks = run_checks(plant_model, table, None, options.contact)
+    result.checks = run_checks(plant_model, table, None, options.contact, planned=False)
     return result
 
 
