@@ -20,8 +20,10 @@ it does not depend on how the speed is blended at the turns.
 * springiness: D2 / D1, D_i the travel from the i-th bite's contact (the force first above :data:`CONTACT_FRACTION` of
   the hardness) to its deepest point: how much of its height the sample recovered in the pause (Bourne's distance,
   as a ratio of the first bite's);
-* resilience: the positive area of the first bite after its peak force over the area before it (a later measure of
-  the texture analysers, not Bourne's);
+* resilience: the positive area of the first bite's withdrawal over that of its compression, split at its deepest
+  point (a later measure of the texture analysers, not Bourne's; with an instantaneous turn the peak force is there,
+  with a blended turn the damping's share of the force fades before it, and a split at the peak force would move that
+  part of the compression's area to the withdrawal);
 * adhesiveness_mJ: the negative area of the first bite, the work of pulling the teeth off the sample;
 * gumminess_N = hardness x cohesiveness; chewiness_N = gumminess x springiness.
 """
@@ -158,8 +160,8 @@ def tpa_measures(t, g, F) -> dict:
     if not hardness > 0:
         raise TpaError("the sample was never compressed: no positive force in the first bite")
     A1, A2 = _work(pos, g, first), _work(pos, g, second)
-    before = first & (np.arange(t.size) <= peak)
-    after = first & (np.arange(t.size) >= peak)
+    before = first & (np.arange(t.size) <= m1)
+    after = first & (np.arange(t.size) >= m1)
     compressing = F[:m1 + 1]
     running = np.maximum.accumulate(compressing)
     threshold = CONTACT_FRACTION * hardness
