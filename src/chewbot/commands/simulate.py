@@ -51,6 +51,7 @@ def simulate(
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
     bite_unknown: bool = typer.Option(False, "--bite-unknown", help="The bite force acts on the plant but the controller's inverse dynamics does not know it."),
+    food: str | None = typer.Option(None, "--food", show_default=False, help="A food sample on the molar of the task's side: a built-in food (peanut, cheddar, gummy, bread, artisynth-bolus) or a TOML food file (docs/food.md). The bite force is then the food's force from the plant's state (results.csv: food_compression [m], food_force [N], food_broken [1]); the task must carry no bite force."),
     gains: Path | None = typer.Option(None, "--gains", help="TOML file of the controllers' gains (default: the built-in gains, docs/simulation.md)."),
     gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain: pd.kp_Nm_per_rad, pd.kd_Nms_per_rad, computed_torque.frequency_Hz, computed_torque.damping, estimator.cutoff_Hz (KEY[i] for the i-th entry); repeatable."),
     out: Path = typer.Option(Path("runs/simulation"), "--out", help="Results folder to write."),
@@ -77,6 +78,8 @@ def simulate(
       chewbot simulate --controller pd --friction on --noise 1e-4 --out runs/pd-noisy
 
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
+
+      chewbot simulate --food cheddar --task closing.csv --out runs/cheddar
     """
     from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
                                          resolved, set_overrides, stdout)
@@ -89,7 +92,8 @@ def simulate(
     options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set),
-                              bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides)
+                              bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides,
+                              food=food)
     with resolved():
         options = options.resolved()
     if noise > 0 and options.rate is None:

@@ -67,6 +67,7 @@ class SimulateOptions:
     bite_unknown: bool = False
     gains: str | None = None
     gain_overrides: dict[str, float] = field(default_factory=dict)
+    food: str | None = None
 
     @property
     def controller_friction(self) -> bool:
@@ -128,29 +129,60 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
     return model, plant, task_overrides
 
 
-def build(options: SimulateOptions):
+def build(options: SimulateOptions, task: Task | None = None):
     """The options resolved (:meth:`SimulateOptions.resolved`, with the side in effect) and the parts of a simulation:
     controller's model, plant model, task, reference, gains, the controller, the plant and the sensor (None without
-    noise)."""
+    noise). ``task``: a task built in memory instead of ``options.task`` (``chewbot tpa``)."""
     model, plant_model, task_overrides = load_models(options)
     options = options.resolved(model.has_hkp)
-    task = load_task(options.task, model, options.side, task_overrides)
+    if task is None:
+        task = load_task(options.task, model, options.side, task_overrides)
     options = replace(options, side=task.side)
     reference = Reference.from_task(model, task)
     gains = Gains.load(options.gains, model.mechanism, options.gain_overrides)
     controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
                                       options.controller_friction, not options.bite_unknown)
-    plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+    if options.food is None:
+        plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+    else:
+        plant = food_plant(options, plant_model, task, reference)
     sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
     return options, model, plant_model, task, reference, gains, controller, plant, sensor
 
 
-def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResult:
+def food_plant(options: SimulateOptions, plant_model: Model, task: Task, reference: Reference):
+    """The plant with ``options.food`` on the molar of the task's side; refuses a task that carries a bite force
+    (unless the controller takes it as its force reference), a task whose gap at its start is smaller than the
+    sample, and continuous control."""
+    from chewbot.food.law import load_food
+    from chewbot.simulation.food import FORCE_REFERENCE_CONTROLLERS, FoodPlant, start_gap
+
+    food = load_food(options.food)
+    if options.rate is None:
+        raise ChewbotError(f"--food {options.food}: the food's events are located between the ticks of a control rate; "
+                           "--rate continuous is not available with a food")
+    carries = np.flatnonzero(np.any(np.asarray(task.force) != 0, axis=1))
+    if carries.size and options.controller not in FORCE_REFERENCE_CONTROLLERS:
+        k = int(carries[0])
+        raise ChewbotError(f"--task {options.task}: it carries a bite force (first at sample {k}, t = {task.t[k]:.6g} s, "
+                           f"F = {np.round(task.force[k], 6).tolist()} N), but with --food {options.food} the bite force is "
+                           f"the {food.name}'s; give a task without one (Fx = Fy = Fz = 0), or use --controller "
+                           f"{' or '.join(FORCE_REFERENCE_CONTROLLERS)}, which reads its Fz as the force reference")
+    g0 = start_gap(plant_model, task.side, reference.q[0], reference.dq[0])
+    if g0 < food.height:
+        raise ChewbotError(f"--food {options.food}: the {food.name} (h0 = {food.height * 1e3:.4g} mm) does not fit at the "
+                           f"task's start: the gap at the {task.side} bite point is {g0 * 1e3:.4g} mm at sample 0 "
+                           f"(t = {task.t[0]:.6g} s); start the task with the teeth at least h0 apart")
+    return FoodPlant(plant_model, friction=options.friction == "on", side=task.side, food=food)
+
+
+def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
-    ``simulation``); ``check()`` is called in the loop and raises to stop it."""
+    ``simulation``); ``check()`` is called in the loop and raises to stop it; ``task`` a task built in memory
+    instead of ``options.task``."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
-    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
+    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options, task)
     step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
          stage="simulation")
     t0 = time.perf_counter()
@@ -167,6 +199,8 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     table = simulation_table(plant, sim, kin, motion.kinematic_columns)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
+    if sim.food is not None:
+        info["food"] = plant.info(sim.food)
     result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
     step("validity checks")
     from chewbot.analysis.checks import run_checks
@@ -213,6 +247,10 @@ def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_c
     table.add_block([f"FG{i + 1}_axial" for i in range(6)], axial, "N", "axial force at the crank bearing G_i (the plant's)")
     table.add_block([f"FG{i + 1}_radial" for i in range(6)], radial, "N", "radial force at the crank bearing G_i (the plant's)")
     table.add("residual", sim.residual, "N*m", "largest residual of the plant's equations of motion at the row's accelerations")
+    if sim.food is not None:
+        table.add("food_compression", sim.food["compression"], "m", "the food's compression max(0, h0 - g), g the bite point's gap along {S}'s z")
+        table.add("food_force", sim.food["force"], "N", "the food's normal force on the teeth (positive pushing them apart; Fz = -food_force)")
+        table.add("food_broken", sim.food["broken"], "1", "1 once the food has broken (its fracture strain reached)")
     drift = constraint_drift(model, kin)
     for name, values in drift.items():
         table.add(name, values, "m", DRIFT_DESCRIPTIONS[name])
@@ -301,7 +339,7 @@ def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, Si
 def input_files(options: SimulateOptions) -> list[Path]:
     """The files a simulation reads (task, parameter files, gains), which its output must not contain."""
     files = run_inputs(RunOptions(model=options.model, task=options.task))
-    files += [Path(p) for p in (options.plant, options.gains) if p is not None]
+    files += [Path(p) for p in (options.plant, options.gains, options.food) if p is not None]
     return [p for p in files if p.suffix.lower() in (".toml", ".csv")]
 
 

@@ -73,6 +73,7 @@ class Simulation:
     elapsed_s: float = 0.0
     cpu_s: float = 0.0
     info: dict = field(default_factory=dict)
+    food: dict | None = None  # the food's columns per row where the plant holds one (chewbot.simulation.food)
     observed: np.ndarray | None = None
 
     @property
@@ -128,6 +129,9 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     ``State.force`` and the rows' ``observed``.
     """
     if rate is None:
+        if getattr(plant, "food", None) is not None:
+            raise ValueError("a food in the plant needs a control rate: its events are located between the ticks, not "
+                             "inside a closed-loop step (--rate continuous)")
         if not isinstance(controller, ModelBasedController):
             raise ValueError("rate=None evaluates the controller inside the integrator: it needs a built-in controller")
         if sensor is not None:
@@ -168,9 +172,10 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     stopped, last = None, K - 1
     if rate is not None:  # the bite force at the stages of each tick's step, all at once
         stage_force = reference.force_at((times[:-1, None] + np.diff(times)[:, None] * C[None, :]).ravel()).reshape(K - 1, 3, 3)
+    internal = [None] * K  # the plant's own state per row (a food's)
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(K):
-        q[k], dq[k] = state.q, state.dq
+        q[k], dq[k], internal[k] = state.q, state.dq, state.food
         if rate is not None:
             seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq)
             if observer is not None:
@@ -198,9 +203,12 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
         tau_cmd[rows] = evaluate(native(controller.kernel_spec()), q[rows], dq[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
                                  controller.known_force(force[rows]), gains, B_c, p_c)[0]
     tau = np.clip(tau_cmd[rows], -limit, limit)
+    force_rows, food = plant.outputs(times[rows], q[rows], dq[rows], force[rows], internal[: last + 1])
+    force = np.array(force)
+    force[rows] = force_rows
     fwd: Forward = forward_dynamics(plant.model, q[rows], dq[rows], tau, force[rows], plant.side, plant.friction)
     return Simulation(times[rows], q[rows], dq[rows], tau, tau_cmd[rows], force[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
-                      fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu,
+                      fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu, food=food,
                       observed=None if observed is None else observed[rows])
 
 
