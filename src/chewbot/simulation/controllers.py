@@ -232,7 +232,8 @@ class Gains:
     ``imp_stiffness`` (3,) N/m, ``imp_damping`` (3,) N s/m of the molar point and ``imp_angle_stiffness`` (1,)
     N m/rad, ``imp_angle_damping`` (1,) N m s/rad of alpha (impedance); ``hy_frequency``, ``hy_damping`` (4,) of the
     hybrid controller's task-space position loop (x, y, z of the molar point, alpha), ``hy_force_frequency`` Hz and
-    ``hy_force_damping`` of its force loop, ``hy_threshold`` N, ``hy_stiffness_min``, ``hy_stiffness_max`` N/m;
+    ``hy_force_damping`` of its force loop, ``hy_threshold`` N, ``hy_stiffness_min``, ``hy_stiffness_max`` N/m,
+    ``hy_speed_limit`` m/s of the molar point along z under force control;
     ``observer_cutoff`` Hz of the force observer's low-pass. ``source``: the file they were read from; ``overrides``:
     the single values changed (``--gain``); ``defaulted``: keys the file left out (built-in values)."""
 
@@ -252,6 +253,7 @@ class Gains:
     hy_threshold: float = 0.2
     hy_stiffness_min: float = 100.0
     hy_stiffness_max: float = 1e5
+    hy_speed_limit: float = 0.05
     observer_cutoff: float = 200.0
     source: str = ""
     overrides: dict = field(default_factory=dict)
@@ -266,7 +268,8 @@ class Gains:
             "hybrid.frequency_Hz": ("hy_frequency", 4), "hybrid.damping": ("hy_damping", 4),
             "hybrid.force_frequency_Hz": ("hy_force_frequency", 0), "hybrid.force_damping": ("hy_force_damping", 0),
             "hybrid.threshold_N": ("hy_threshold", 0), "hybrid.stiffness_min_N_per_m": ("hy_stiffness_min", 0),
-            "hybrid.stiffness_max_N_per_m": ("hy_stiffness_max", 0), "observer.cutoff_Hz": ("observer_cutoff", 0)}
+            "hybrid.stiffness_max_N_per_m": ("hy_stiffness_max", 0), "hybrid.speed_limit_m_per_s": ("hy_speed_limit", 0),
+            "observer.cutoff_Hz": ("observer_cutoff", 0)}
 
     @classmethod
     def load(cls, path: str | Path | None = None, mechanism: str = "target", overrides: dict[str, float] | None = None) -> Gains:
@@ -477,7 +480,11 @@ class HybridController:
         a_z = [kv (f_ref_dot - k_hat z_dot) + kp (f_ref - f)] / k_hat,   kp = (2 pi f_F)^2, kv = 2 zeta_F (2 pi f_F),
 
     which for a food of stiffness k_hat (f_dot = k z_dot) makes the force error obey e'' + kv e' + kp e = 0 whatever
-    the stiffness. k_hat is estimated on line: the slope of the observed force against the molar point's z (passed
+    the stiffness. Written as a velocity loop, a_z = kv (z_dot_cmd - z_dot) with z_dot_cmd = (f_ref_dot + kp/kv
+    (f_ref - f)) / k_hat, the commanded speed is held within ``hybrid.speed_limit_m_per_s`` (a force the food
+    cannot give, or a soft food far from its force, would otherwise drive the teeth together at metres per second).
+    The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the
+    observer's lags the motion), the observed F_x, F_y, and the observed force under position control. k_hat is estimated on line: the slope of the observed force against the molar point's z (passed
     through the observer's low-pass, so that both lag alike) by least squares with exponential forgetting
     (:data:`STIFFNESS_MEMORY_S`), within ``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at
     the maximum (a stiffness overestimated by c slows the loop by c; underestimated, it makes it faster). The force
@@ -550,7 +557,10 @@ class HybridController:
             dt = 1e-3
             df_ref = -(self.reference.force_at([t + dt / 2])[0, 2] - self.reference.force_at([t - dt / 2])[0, 2]) / dt
             w_f = 2 * np.pi * g.hy_force_frequency
-            a_force = (2 * g.hy_force_damping * w_f * (df_ref - self._k * dy[2]) + w_f**2 * (f_ref - f)) / self._k
+            kv, kp = 2 * g.hy_force_damping * w_f, w_f**2
+            # the law written as a velocity loop, kv (z_dot_cmd - z_dot), with z_dot_cmd within the speed limit
+            dz_cmd = np.clip((df_ref + kp / kv * (f_ref - f)) / self._k, -g.hy_speed_limit, g.hy_speed_limit)
+            a_force = kv * (dz_cmd - dy[2])
         self.log.append((t, self._mode, self._k))
         known = np.array([state.force[0], state.force[1], -f_ref]) if self._mode else state.force
         return np.asarray(law(state.q, state.dq, q_ref, dq_ref, ddq_ref, known, gains, B, p, float(self._mode), a_force)[0]).ravel()

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from chewbot.compiled.kernels import native
-from chewbot.dynamics.bite_force import estimate_states
+from chewbot.dynamics.bite_force import residual_kernel, solve_states
 from chewbot.model import Model
 from chewbot.simulation.plant import state_function
 
@@ -41,11 +41,13 @@ class ForceObserver:
     _u: np.ndarray = field(default=None, init=False, repr=False)
     _raw: np.ndarray = field(default=None, init=False, repr=False)
     _state: object = field(default=None, init=False, repr=False)
+    _kernel: object = field(default=None, init=False, repr=False)
 
     def start(self, t: float, q, dq) -> None:
         self._t, self._q, self._dq = t, np.array(q, float), np.array(dq, float)
         self._u, self._raw = np.zeros(5), np.zeros(5)
         self._state = native(state_function(self.model.mechanism))
+        self._kernel = native(residual_kernel(self.model.mechanism))
 
     @property
     def estimate(self) -> np.ndarray:
@@ -65,9 +67,10 @@ class ForceObserver:
         if h > 0:
             qm, dqm, ddq = (q + self._q) / 2, (dq + self._dq) / 2, (dq - self._dq) / h
             theta = self._state(qm, dqm, self.model.vector())[0]
-            e = estimate_states(self.model, np.array([t]), np.asarray(theta).reshape(1, 6), qm[None], dqm[None], ddq[None],
-                                np.asarray(tau, float)[None], side=self.side, contact=self.contact, friction=self.friction)
-            self._raw = e.u[0]
+            u, _, _ = solve_states(self.model, np.asarray(theta).reshape(1, 6), qm[None], dqm[None], ddq[None],
+                                   np.asarray(tau, float)[None], side=self.side, contact=self.contact,
+                                   friction=self.friction, kernel=self._kernel)
+            self._raw = u[0]
             b = np.exp(-2 * np.pi * self.cutoff * h)
             self._u = b * self._u + (1 - b) * self._raw
         self._t, self._q, self._dq = t, q.copy(), dq.copy()

@@ -36,6 +36,7 @@ from chewbot.simulation.integrator import C
 from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage_times, step_kernel
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
+from chewbot.dynamics.bite_force import residual_kernel
 from chewbot.dynamics.newton_euler import n_unknowns
 
 DEFAULT_RATE = 1000.0  # Hz
@@ -150,6 +151,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     kernels = [plant_step_kernel(plant.mechanism), forward_kernel(plant.mechanism), plant_outputs_kernel(plant.mechanism)]
     if isinstance(controller, ModelBasedController):
         kernels.append(closed_loop_kernel(controller) if rate is None else controller.kernel_spec())
+    kernels += getattr(controller, "kernel_specs", lambda: [])() + ([residual_kernel(observer.model.mechanism)] if observer else [])
     prepare_kernels(kernels)
 
     K, n = len(times), n_coordinates(plant.mechanism)
