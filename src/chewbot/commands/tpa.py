@@ -21,7 +21,7 @@ TPA_STEPS = 8
 
 def tpa(
     food: str | None = typer.Option(None, "--food", show_default=False, help="The sample: a built-in food (peanut, cheddar, gummy, bread, artisynth-bolus) or a TOML food file (docs/food.md). Required without --log; with --log it only gives h0 for the force-displacement figure."),
-    compression: float = typer.Option(50.0, "--compression", help="How far each bite compresses the sample, in % of its height h0."),
+    compression: float = typer.Option(50.0, "--compression", help="How far each bite compresses the sample: a fraction of its height h0, in % (50: to h0/2)."),
     speed: float = typer.Option(2.0, "--speed", help="Speed of the molar point along z during the strokes (mm/s)."),
     pause: float = typer.Option(2.0, "--pause", help="Pause between the two bites (s), at the start gap h0 + 1 mm."),
     side: Side = typer.Option(Side.left, "--side", help="The molar the sample sits on (left or right)."),
