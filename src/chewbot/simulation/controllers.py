@@ -390,6 +390,13 @@ def _gain_value(value, size: int, where: str) -> np.ndarray | float:
 # ------------------------------------------------------------------------------------------- controller objects
 
 
+def controller_dynamics(method: str, goal: str | None, friction: bool, has_hkp: bool) -> tuple[str | None, bool]:
+    """A controller's goal and friction switch as a run resolves them (friction only where ``method`` takes it)."""
+    takes_friction = "friction" in formulation(method).options
+    d = resolve_dynamics(method, Orientation.euler_angles.value, goal, bool(friction) if takes_friction else None, has_hkp=has_hkp)
+    return d.goal, d.friction == Switch.on
+
+
 @dataclass
 class ModelBasedController:
     """A built-in controller (``kind``: feedforward, pd or computed-torque) on the controller's ``model``: it follows
@@ -415,10 +422,7 @@ class ModelBasedController:
             raise ValueError("the hybrid controller switches on the observed force: it is a HybridController")
         if self.kind == "impedance" and not self.model.has_hkp:
             raise ChewbotError("--controller impedance is for the target (the molar point's x, y, z and alpha)")
-        takes_friction = "friction" in formulation(self.method).options
-        d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, bool(self.friction) if takes_friction else None,
-                             has_hkp=self.model.has_hkp)
-        self.goal, self.friction = d.goal, d.friction == Switch.on
+        self.goal, self.friction = controller_dynamics(self.method, self.goal, self.friction, self.model.has_hkp)
 
     @property
     def mechanism(self) -> str:
@@ -489,7 +493,7 @@ class HybridController:
     (:data:`STIFFNESS_MEMORY_S`), within ``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at
     the maximum (a stiffness overestimated by c slows the loop by c; underestimated, it makes it faster). The force
     loop is left when the force reference is below the threshold, the observed force too, and the task's z
-    reference lies below the point (the task opens). The inverse dynamics knows the observed bite force."""
+    reference lies below the point (the task opens)."""
 
     model: Model
     reference: Reference
@@ -510,10 +514,7 @@ class HybridController:
     def __post_init__(self):
         if not self.model.has_hkp:
             raise ChewbotError("--controller hybrid is for the target (the molar point's x, y, z and alpha)")
-        takes_friction = "friction" in formulation(self.method).options
-        d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, bool(self.friction) if takes_friction else None,
-                             has_hkp=True)
-        self.goal, self.friction = d.goal, d.friction == Switch.on
+        self.goal, self.friction = controller_dynamics(self.method, self.goal, self.friction, True)
         self._k = self.gains.hy_stiffness_max
 
     @property

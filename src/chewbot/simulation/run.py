@@ -33,7 +33,7 @@ from chewbot.run.columns import POSE_UNITS
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.run.options import OptionError, RunOptions, Switch, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
-from chewbot.simulation import COMPARED
+from chewbot.simulation import COMPARED, CONTROLLERS
 from chewbot.simulation.controllers import Gains, HybridController, ModelBasedController
 from chewbot.simulation.observer import ForceObserver
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
