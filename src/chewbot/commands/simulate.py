@@ -142,6 +142,10 @@ def _print_summary(stdout, results: dict, out: Path, compare: bool) -> None:
         if stopped is not None:
             stdout.print(f"{label}: the robot left the workspace at t = {stopped['t']:.4g} s ({escape(stopped['reason'])}); "
                          "its motion ends at the last pose inside", highlight=False)
+        f = r.metrics.get("force")
+        if f and f["samples"]:
+            stdout.print(f"{label}: force tracking, the plant's Fz against the task's Fz where it is not zero: RMS {f['rms_N']:.4g} N "
+                         f"({f['rms_percent']:.3g} % of its peak {f['reference_peak_N']:.4g} N), peak {f['peak_N']:.4g} N", highlight=False)
         passed = sum(c.passed and c.samples is not None for c in r.checks)
         stdout.print(f"{label}: validity checks {passed} passed, {sum(not c.passed for c in r.checks)} failed, "
                      f"{sum(c.samples is None for c in r.checks)} not evaluated; largest drift of the constraints "
