@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import typer
 
-from chewbot.commands import bench, cache, export_c, identify, import_motion, models, report, run, simulate, study, sweep, track_incisor
+from chewbot.commands import bench, cache, estimate_force, export_c, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
 from chewbot.commands.common import stdout
 
 app = typer.Typer(
@@ -68,6 +68,8 @@ app.command("study")(study.study)
 app.command("track-incisor")(track_incisor.track_incisor)
 app.command("import-motion")(import_motion.import_motion)
 app.command("identify")(identify.identify)
+app.command("estimate-force")(estimate_force.estimate_force)
+app.command("tpa")(tpa.tpa)
 app.command("simulate")(simulate.simulate)
 app.command("sweep")(sweep.sweep)
 app.command("models")(models.models)

@@ -110,6 +110,7 @@ class PlantState:
     theta: np.ndarray
     dtheta: np.ndarray
     margin: float
+    food: object = None  # the food's own state (chewbot.simulation.food.FoodState) where the plant holds a food
 
 
 @dataclass
@@ -157,10 +158,23 @@ class Plant:
             state = self._interval(fn, s, state, h / n_steps, stage_data, 0)
         return state
 
+    def step_shared(self, s: np.ndarray, state: PlantState) -> np.ndarray:
+        """s of a step from ``state`` (a plant with a state of its own beyond q, dq adds it here)."""
+        return s
+
+    def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
+        """The state at the end of a converged step of h seconds from ``start`` (the plant's own state updated)."""
+        return end
+
+    def outputs(self, t: np.ndarray, q: np.ndarray, dq: np.ndarray, force: np.ndarray, states: list) -> tuple[np.ndarray, dict | None]:
+        """The bite force on the plant at the rows (the task's, given as ``force``) and the plant's own columns (None);
+        ``states`` the rows' :attr:`PlantState.food`."""
+        return force, None
+
     def _interval(self, fn, s, state: PlantState, h: float, stage_data, depth: int) -> PlantState:
-        q1, v1, z1, res, theta, dtheta, margin = fn(state.q, state.dq, state.z, stage_data(state.t, h), s, h)
+        q1, v1, z1, res, theta, dtheta, margin = fn(state.q, state.dq, state.z, stage_data(state.t, h), self.step_shared(s, state), h)
         if res[0] <= TOLERANCE or not margin[0] > 0:  # converged, or ended outside the workspace (the caller stops)
-            return PlantState(state.t + h, q1, v1, z1, theta, dtheta, float(margin[0]))
+            return self.ended(state, PlantState(state.t + h, q1, v1, z1, theta, dtheta, float(margin[0])), h)
         if depth >= MAX_SPLITS:
             raise SimulationError(f"the plant's equations of motion have no solution near t = {state.t:.6g} s (residual "
                                   f"{res[0]:.3g} N m after splitting the step {2 ** MAX_SPLITS} times); with friction this "

@@ -33,7 +33,9 @@ from chewbot.run.columns import POSE_UNITS
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.run.options import OptionError, RunOptions, Switch, refuse_unused, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
-from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
+from chewbot.simulation import COMPARED, CONTROLLERS
+from chewbot.simulation.controllers import Gains, HybridController, ModelBasedController
+from chewbot.simulation.observer import ForceObserver
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
 from chewbot.simulation.plant import Plant
 from chewbot.simulation.reference import Reference
@@ -67,6 +69,7 @@ class SimulateOptions:
     bite_unknown: bool = False
     gains: str | None = None
     gain_overrides: dict[str, float] = field(default_factory=dict)
+    food: str | None = None
 
     @property
     def controller_friction(self) -> bool:
@@ -154,29 +157,68 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
     return model, plant, task_overrides
 
 
-def build(options: SimulateOptions):
+def build(options: SimulateOptions, task: Task | None = None):
     """The options resolved (:meth:`SimulateOptions.resolved`, with the side in effect) and the parts of a simulation:
     controller's model, plant model, task, reference, gains, the controller, the plant and the sensor (None without
-    noise)."""
+    noise). ``task``: a task built in memory instead of ``options.task`` (``chewbot tpa``)."""
     model, plant_model, task_overrides = load_models(options)
     options = options.resolved(model.has_hkp)
-    task = load_task(options.task, model, options.side, task_overrides)
+    if task is None:
+        task = load_task(options.task, model, options.side, task_overrides)
     options = replace(options, side=task.side)
     reference = Reference.from_task(model, task)
     gains = Gains.load(options.gains, model.mechanism, options.gain_overrides)
-    controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
-                                      options.controller_friction, not options.bite_unknown)
-    plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+    if options.controller == "hybrid":
+        if options.food is None:
+            raise ChewbotError("--controller hybrid follows the task's Fz as a force reference by pressing on a food: give "
+                               "--food FOOD (without one the bite force is the task's, which no controller can change)")
+        if options.bite_unknown:
+            raise ChewbotError("--bite-unknown: the hybrid controller knows no bite force but the one its observer estimates")
+        controller = HybridController(model, reference, gains, options.method, options.goal, options.controller_friction)
+    else:
+        controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
+                                          options.controller_friction, not options.bite_unknown)
+    if options.food is None:
+        plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+    else:
+        plant = food_plant(options, plant_model, task, reference)
     sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
     return options, model, plant_model, task, reference, gains, controller, plant, sensor
 
 
-def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResult:
+def food_plant(options: SimulateOptions, plant_model: Model, task: Task, reference: Reference):
+    """The plant with ``options.food`` on the molar of the task's side; refuses a task that carries a bite force
+    (unless the controller takes it as its force reference), a task whose gap at its start is smaller than the
+    sample, and continuous control."""
+    from chewbot.food.law import load_food
+    from chewbot.simulation.food import FORCE_REFERENCE_CONTROLLERS, FoodPlant, start_gap
+
+    food = load_food(options.food)
+    if options.rate is None:
+        raise ChewbotError(f"--food {options.food}: the food's events are located between the ticks of a control rate; "
+                           "--rate continuous is not available with a food")
+    carries = np.flatnonzero(np.any(np.asarray(task.force) != 0, axis=1))
+    if carries.size and options.controller not in FORCE_REFERENCE_CONTROLLERS:
+        k = int(carries[0])
+        raise ChewbotError(f"--task {options.task}: it carries a bite force (first at sample {k}, t = {task.t[k]:.6g} s, "
+                           f"F = {np.round(task.force[k], 6).tolist()} N), but with --food {options.food} the bite force is "
+                           f"the {food.name}'s; give a task without one (Fx = Fy = Fz = 0), or use --controller "
+                           f"{' or '.join(FORCE_REFERENCE_CONTROLLERS)}, which reads its Fz as the force reference")
+    g0 = start_gap(plant_model, task.side, reference.q[0], reference.dq[0])
+    if g0 < food.height:
+        raise ChewbotError(f"--food {options.food}: the {food.name} (h0 = {food.height * 1e3:.4g} mm) does not fit at the "
+                           f"task's start: the gap at the {task.side} bite point is {g0 * 1e3:.4g} mm at sample 0 "
+                           f"(t = {task.t[0]:.6g} s); start the task with the teeth at least h0 apart")
+    return FoodPlant(plant_model, friction=options.friction == "on", side=task.side, food=food)
+
+
+def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
-    ``simulation``); ``check()`` is called in the loop and raises to stop it."""
+    ``simulation``); ``check()`` is called in the loop and raises to stop it; ``task`` a task built in memory
+    instead of ``options.task``."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
-    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
+    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options, task)
     label = f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})"
     step(label, stage="simulation")
     t0 = time.perf_counter()
@@ -192,7 +234,10 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
         step(f"{label}: {simulated:.3g} of {duration:.3g} s simulated, "
              f"{simulated / max(time.perf_counter() - loop_start[0], 1e-9):.2g} x real time")
 
-    sim = simulate(plant, controller, reference, options.rate, sensor, progress=loop_progress, check=check)
+    observer = None
+    if options.controller == "hybrid":
+        observer = ForceObserver(model, gains.observer_cutoff, task.side, options.controller_friction)
+    sim = simulate(plant, controller, reference, options.rate, sensor, progress=loop_progress, check=check, observer=observer)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -204,13 +249,38 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     kin = motion.kinematics
     table = simulation_table(plant, sim, kin, motion.kinematic_columns)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
+    if observer is not None:
+        metrics["force"] = add_force_control(table, sim, reference, controller)
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
+    if sim.food is not None:
+        info["food"] = plant.info(sim.food)
     result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
     step("validity checks")
     from chewbot.analysis.checks import run_checks
 
     result.checks = run_checks(plant_model, table, None, options.contact, planned=False)
     return result
+
+
+def add_force_control(table: Table, sim: Simulation, reference: Reference, controller: HybridController) -> dict:
+    """The force observer's and the hybrid controller's columns (the observed forces, the force reference, the
+    controller's mode and its food-stiffness estimate) and the force-tracking figures: RMS and peak of the plant's
+    Fz minus the task's Fz over the rows where the reference is not zero (N, and % of the reference's peak)."""
+    table.add_block([f"{name}_obs" for name in ("Fx", "Fy", "Fz", "N_L", "N_R")], sim.observed, "N",
+                    "the force observer's estimate (docs/bite_force.md): food force on the mandible, condyles' normal forces")
+    F_ref = reference.force_at(sim.t)[:, 2]
+    table.add("Fz_ref", F_ref, "N", "the hybrid controller's force reference: the task's Fz")
+    log = np.array(controller.log[: sim.n]) if controller.log else np.zeros((0, 3))
+    table.add("force_mode", log[:, 1], "1", "1 where z is force-controlled, 0 where position-controlled")
+    table.add("stiffness_estimate", log[:, 2], "N/m", "the hybrid controller's estimate of the food's stiffness along z")
+    active = F_ref != 0
+    if not active.any():
+        return {"rms_N": None, "peak_N": None, "rms_percent": None, "samples": 0}
+    e = sim.force[active, 2] - F_ref[active]
+    peak = float(np.abs(F_ref).max())
+    rms = float(np.sqrt(np.mean(e**2)))
+    return {"rms_N": rms, "peak_N": float(np.abs(e).max()), "rms_percent": 100 * rms / peak, "reference_peak_N": peak,
+            "samples": int(active.sum())}
 
 
 def coordinate_names(model: Model) -> tuple[str, ...]:
@@ -251,6 +321,10 @@ def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_c
     table.add_block([f"FG{i + 1}_axial" for i in range(6)], axial, "N", "axial force at the crank bearing G_i (the plant's)")
     table.add_block([f"FG{i + 1}_radial" for i in range(6)], radial, "N", "radial force at the crank bearing G_i (the plant's)")
     table.add("residual", sim.residual, "N*m", "largest residual of the plant's equations of motion at the row's accelerations")
+    if sim.food is not None:
+        table.add("food_compression", sim.food["compression"], "m", "the food's compression max(0, h0 - g), g the bite point's gap along {S}'s z")
+        table.add("food_force", sim.food["force"], "N", "the food's normal force on the teeth (positive pushing them apart; Fz = -food_force)")
+        table.add("food_broken", sim.food["broken"], "1", "1 once the food has broken (its fracture strain reached)")
     drift = constraint_drift(model, kin)
     for name, values in drift.items():
         table.add(name, values, "m", DRIFT_DESCRIPTIONS[name])
@@ -321,7 +395,10 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                         "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
             "controller": {"kind": controller.kind, "model": controller.model.name, "method": controller.method,
                            "goal": controller.goal, "friction": controller.friction, "bite_force_known": controller.bite_known,
-                           "gains": controller.gains.as_dict()},
+                           "gains": controller.gains.as_dict(),
+                           **({"force_observer": {"cutoff_Hz": controller.gains.observer_cutoff,
+                                                  "method": "the bite-force estimator at each tick (docs/bite_force.md)"}}
+                              if controller.kind == "hybrid" else {})},
             "plant": {"model": plant.model.name, "file": plant.model.source, "friction": plant.friction,
                       "contact": "bilateral: both contacts stay closed, N_L and N_R of either sign (contact-pull reports N < 0)"
                       if plant.model.has_hkp else None,
@@ -333,13 +410,13 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
 
 def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
+    return {kind: compute(replace(options, controller=kind), progress, check) for kind in COMPARED}
 
 
 def input_files(options: SimulateOptions) -> list[Path]:
     """The files a simulation reads (task, parameter files, gains), which its output must not contain."""
     files = run_inputs(RunOptions(model=options.model, task=options.task))
-    files += [Path(p) for p in (options.plant, options.gains) if p is not None]
+    files += [Path(p) for p in (options.plant, options.gains, options.food) if p is not None]
     return [p for p in files if p.suffix.lower() in (".toml", ".csv")]
 
 

@@ -1,0 +1,271 @@
+"""The bite force from the actuator torques: six equations, five unknowns, solved at every sample.
+
+Given the motion of the mandible (angles, rates and accelerations of every sample) and the six measured torques
+tau_m, the unknowns are u = (F_B, N) = (Fx, Fy, Fz, N_L, N_R): the food's force on the mandible at the molar B of
+``side`` (in {S}) and the normal forces of the two planes on the condyles (:mod:`chewbot.dynamics.contact`). The
+model is the Newton-Euler model of :mod:`chewbot.dynamics.newton_euler` with the model's friction (the one the
+plant of ``chewbot simulate`` integrates, with the same smoothing of sgn and abs), so the equations are
+
+    r(u) = tau_NE(q, q_dot, q_ddot, F_B, N) - tau_m = 0          (6 equations, 5 unknowns)
+
+and u is their least-squares solution, min |r(u)|^2. Without friction r is affine in u (one linear least-squares
+solve). With friction it is not: the HKP friction grows with |N_j| and the actuators' with |F_G,i|. As the
+distribution of the redundant torques does (:func:`chewbot.dynamics.newton_euler.start_sx`), the kink of |N_j| is
+handled by its sign pattern: on each pattern s of (N_L, N_R), |N_j| = s_j N_j and r is affine in u but for the
+smooth actuator term, so a few Gauss-Newton steps (:data:`PATTERN_STEPS`) reach that piece's minimiser. Of the
+pieces whose minimiser has the pattern's signs, the one of least |r| is kept, and :data:`POLISH_STEPS` damped
+Gauss-Newton steps on the smoothed model (the plant's) finish it. Patterns: (+, +), (+, -), (-, +), (-, -) and the
+kinks (0, +-), (+-, 0), (0, 0) (bilateral contact: N of either sign), or (+, +), (0, +), (+, 0), (0, 0) with
+N >= 0 (unilateral: the bounded least squares, the best over the faces of the bounds, as
+:mod:`chewbot.dynamics.distribution` solves its bounds). Every step runs on all samples at once (one compiled
+kernel call over the samples: no loop per sample); the derivatives are CasADi's exact ones.
+
+**Uncertainty.** Linearised at the answer, u has the covariance sigma^2 (G'G)^-1, G = dr/du (6 x 5, N m per N,
+i.e. m), where sigma is the torques' error (N m, the same on each actuator). sigma is pooled from the residuals
+of all samples: sigma^2 = sum_k |r_k|^2 / sum_k (6 - m_k), m_k the unknowns free at sample k (5, fewer where a
+unilateral bound holds). The standard errors are the square roots of the diagonal. The residual |r_k| (N m)
+measures what the model does not explain at sample k: noise, rate errors, model errors. A sample where G's
+condition number exceeds :data:`MAX_CONDITION` is named in the warnings: its forces are poorly determined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
+from chewbot.dynamics.newton_euler import DELTA_N, coefficients_kernel, forces_sx, n_unknowns
+from chewbot.dynamics.options import check_contact
+from chewbot.kinematics.motion import Kinematics
+from chewbot.model import Model
+from chewbot.model.symbolic import c_name, parameter_input
+from chewbot.table import Table
+
+ORIENTATION = "euler-angles"
+UNKNOWNS = ("Fx", "Fy", "Fz", "N_L", "N_R")
+# Gauss-Newton steps on each sign pattern (affine in u but for the actuators' smooth Coulomb term abs(F_G,i):
+# two steps reach the piece's minimiser to ~1e-12 N on the default task), and damped steps on the smoothed model.
+PATTERN_STEPS = 3
+POLISH_STEPS = 6
+HALVINGS = 6
+# A pattern's minimiser counts as having its signs down to this far on the wrong side (N): the smoothing of abs(N)
+# (DELTA_N) blurs the kink over that width anyway.
+SIGN_TOL = 10 * DELTA_N
+# Without friction the pieces are exact linear least squares: a face's minimiser counts as inside the bounds down to
+# rounding (N of tens of newtons carry ~1e-14 N).
+BOUND_TOL = 1e-9
+# Condition number of G (all unknowns in N, all equations in N m: no scaling needed) above which a sample is named:
+# a relative torque error e then moves the forces by up to MAX_CONDITION e relative to their size.
+MAX_CONDITION = 1e4
+BILATERAL_PATTERNS = ((1, 1), (1, -1), (-1, 1), (-1, -1), (0, 1), (0, -1), (1, 0), (-1, 0), (0, 0))
+UNILATERAL_PATTERNS = ((1, 1), (0, 1), (1, 0), (0, 0))
+
+
+def residual_kernel(mechanism: str) -> KernelSpec:
+    """Per-sample kernel (theta, q, dq, ddq, B, u, tau_m, signs, friction, p) -> r (6, N m), G = dr/du (6 x 5, m).
+
+    q and its rates in Euler angles; u = (Fx, Fy, Fz, N_L, N_R) (N); tau_m the measured torques (N m); ``signs``
+    (2): where s_j is +-1, abs(N_j) is s_j N_j (the sign pattern), where it is 0, N_j is held at 0 by the caller and
+    abs(N_j) is the smoothed one of the model; ``friction`` 0 or 1. The target only (the 6RSS has no N)."""
+    if mechanism != "target":
+        raise ValueError("the bite-force estimator is for the target robot (five unknowns from six torques)")
+    name = f"bite_force_{c_name(mechanism)}"
+
+    def build(params):
+        m = params
+        coefficients = coefficients_kernel(mechanism, ORIENTATION).graph(params)
+        extra, names = parameter_input(m)
+        theta, q, dq, ddq = (ca.SX.sym(nm, coefficients.size1_in(i)) for i, nm in enumerate(("theta", "q", "dq", "ddq")))
+        B, u, tau_m = ca.SX.sym("B", 3), ca.SX.sym("u", 5), ca.SX.sym("tau_m", 6)
+        signs, fl = ca.SX.sym("signs", 2), ca.SX.sym("friction")
+        N = u[3:5]
+        D = coefficients(theta, q, dq, ddq, u[0:3], B, *extra)[0]
+        smooth = ca.sqrt(N**2 + DELTA_N**2)
+        absN = ca.vertcat(*[ca.if_else(signs[j] != 0, signs[j] * N[j], smooth[j]) for j in range(n_unknowns(mechanism))])
+        r = forces_sx(m, D, N, fl, absN)["tau"] - tau_m
+        return ca.Function(name, [theta, q, dq, ddq, B, u, tau_m, signs, fl, *extra], [r, ca.jacobian(r, u)],
+                           ["theta", "q", "dq", "ddq", "B", "u", "tau_m", "signs", "friction", *names], ["r", "G"],
+                           {"cse": True})
+
+    return KernelSpec(name, build, (mechanism,), mechanism)
+
+
+@dataclass(frozen=True, eq=False)
+class ForceEstimate:
+    """The estimate along the samples (arrays samples first, SI).
+
+    ``t`` (n,) s; ``F_B`` (n, 3) N, the food's force on the mandible at the molar in {S}; ``N`` (n, 2) N, the normal
+    forces N_L, N_R of the planes on the condyles (> 0: pushing); ``se`` (n, 5) N, the standard errors of
+    (Fx, Fy, Fz, N_L, N_R); ``residual`` (n,) N m, abs(r) at the answer; ``sigma`` N m, the pooled torque error
+    (module docstring) and ``dof`` its degrees of freedom; ``condition`` (n,) the condition number of G;
+    ``ill_conditioned`` the samples above :data:`MAX_CONDITION`; ``warnings`` what a person should read;
+    ``info`` how it was solved (for a record)."""
+
+    t: np.ndarray
+    F_B: np.ndarray
+    N: np.ndarray
+    se: np.ndarray
+    residual: np.ndarray
+    sigma: float
+    dof: int
+    condition: np.ndarray
+    ill_conditioned: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.t.shape[0]
+
+    @property
+    def u(self) -> np.ndarray:
+        """(n, 5): Fx, Fy, Fz, N_L, N_R."""
+        return np.hstack([self.F_B, self.N])
+
+    def table(self) -> Table:
+        """FORCE.csv's columns: t, Fx, Fy, Fz, N_L, N_R, their standard errors sFx .. sN_R, the residual."""
+        table = Table()
+        table.add("t", self.t, "s", "time of the log's sample")
+        table.add_block(UNKNOWNS[:3], self.F_B, "N", "estimated force of the food on the mandible at the molar, {S}")
+        table.add_block(UNKNOWNS[3:], self.N, "N", "estimated normal force of the plane on the condyle (> 0: pushes)")
+        table.add_block([f"s{u}" for u in UNKNOWNS], self.se, "N", "standard error, sigma^2 (G'G)^-1 with the pooled sigma")
+        table.add("residual", self.residual, "N*m", "abs(tau_model - tau_measured) at the estimate")
+        return table
+
+
+def estimate(model: Model, kin: Kinematics, tau: np.ndarray, *, side: str | None = None, contact: str = "bilateral",
+             friction: bool = True, sigma: float | None = None) -> ForceEstimate:
+    """The bite force F_B and the normal forces N along the motion ``kin`` of ``model`` from the measured torques
+    ``tau`` (n, 6) N m (module docstring). ``side``: the molar where the food is (default: ``kin.side``);
+    ``contact``: ``bilateral`` (N of either sign) or ``unilateral`` (N >= 0); ``friction``: the model's friction
+    in the equations (off: the frictionless model); ``sigma``: the torques' standard deviation (N m) if known, else
+    pooled from the residuals."""
+    q, dq, ddq = kin.euler_angle_state()
+    return estimate_states(model, kin.t, kin.theta, q, dq, ddq, tau, side=side or kin.side, contact=contact,
+                           friction=friction, sigma=sigma)
+
+
+def estimate_states(model: Model, t, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
+                    friction: bool = True, sigma: float | None = None) -> ForceEstimate:
+    """:func:`estimate` on the states themselves: times ``t`` (n,), crank angles ``theta`` (n, 6), the independent
+    coordinates in Euler angles ``q`` (n, 4) and their rates ``dq``, ``ddq``, torques ``tau`` (n, 6)."""
+    u, free, (r, G) = solve_states(model, theta, q, dq, ddq, tau, side=side, contact=contact, friction=friction)
+    return summarise(t, u, r, G, free, sigma, info={"contact": contact, "friction": bool(friction), "side": side,
+                                                     "equations": "newton-euler"})
+
+
+def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
+                 friction: bool = True, kernel=None) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """The answer u (n, 5) of :func:`estimate_states`, which unknowns are free (n, 5), and (r, G) there, without
+    the statistics (what the force observer needs at each tick). ``kernel``: the compiled :func:`residual_kernel`
+    where the caller holds it."""
+    check_contact(contact)
+    if not model.has_hkp:
+        raise ValueError(f"{model.name}: the bite-force estimator needs the target robot (six torques, five unknowns); "
+                         "on the 6RSS the force has six components and the normal forces none")
+    tau = np.asarray(tau, dtype=float)
+    n = np.shape(q)[0]
+    if tau.shape != (n, 6):
+        raise ValueError(f"tau must be ({n}, 6), not {tau.shape}")
+    fn = kernel if kernel is not None else native(residual_kernel(model.mechanism))
+    B, p, fl = model.molar(side), model.vector(), 1.0 if friction else 0.0
+    u, free = solve(lambda u, signs: evaluate(fn, theta, q, dq, ddq, B, u, tau, signs, fl, p), n, contact, fl)
+    return u, free, tuple(evaluate(fn, theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p))
+
+
+def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, np.ndarray]:
+    """u (n, 5) minimising |r|^2 at every sample, and which unknowns are free (n, 5) (False: held at a bound).
+    ``residual(u, signs)`` -> r (n, 6), G (n, 6, 5) (module docstring)."""
+    r0, G0 = residual(np.zeros((n, 5)), np.zeros(2))
+    everything = np.ones(5, dtype=bool)
+    start = _lstsq(G0, -r0, everything)  # the friction-free answer: exact without friction, r being affine in u
+    if contact == "bilateral" and not friction:
+        return start, np.ones((n, 5), dtype=bool)
+    patterns = BILATERAL_PATTERNS if contact == "bilateral" else UNILATERAL_PATTERNS
+    best, best_cost, best_free = start.copy(), np.full(n, np.inf), np.ones((n, 5), dtype=bool)
+    for signs in patterns:
+        sign = np.array(signs, dtype=float)
+        free = np.concatenate([[True] * 3, sign != 0])
+        u = np.where(free, start, 0.0)
+        for _ in range(PATTERN_STEPS if friction else 1):
+            r, G = residual(u, sign)
+            u = u + _lstsq(G, -r, free)
+        r, _ = residual(u, sign)
+        cost = np.einsum("ij,ij->i", r, r)
+        # the piece's minimiser has the piece's signs (without friction: exactly, up to rounding)
+        ok = np.all(sign * u[:, 3:] >= -(SIGN_TOL if friction else BOUND_TOL), axis=1)
+        better = ok & (cost < best_cost)
+        best[better], best_cost[better], best_free[better] = u[better], cost[better], free
+    # a sample no piece claims (rounding at a kink): the friction-free answer, clipped to the bounds where unilateral
+    if contact == "unilateral":
+        best[:, 3:] = np.maximum(best[:, 3:], 0.0)
+    if friction:
+        if contact == "bilateral":  # the smoothed model is smooth through N = 0: every unknown free
+            best_free[:] = True
+        best = _polish(residual, best, best_free, contact)
+    return best, best_free
+
+
+def _polish(residual, u, free, contact):
+    """Damped Gauss-Newton on the smoothed model (signs 0), the held unknowns kept, all samples at once."""
+    zero = np.zeros(2)
+    r, G = residual(u, zero)
+    cost = np.einsum("ij,ij->i", r, r)
+    for _ in range(POLISH_STEPS):
+        step = np.zeros_like(u)
+        for pattern in np.unique(free, axis=0):
+            rows = np.all(free == pattern, axis=1)
+            step[rows] = _lstsq(G[rows], -r[rows], pattern)
+        alpha = np.ones(u.shape[0])
+        accepted = np.zeros(u.shape[0], bool)
+        for _ in range(HALVINGS):
+            trial = u + alpha[:, None] * step
+            if contact == "unilateral":
+                trial[:, 3:] = np.maximum(trial[:, 3:], 0.0)
+            rt, Gt = residual(trial, zero)
+            ct = np.einsum("ij,ij->i", rt, rt)
+            good = ~accepted & (ct <= cost)
+            u[good], r[good], G[good], cost[good] = trial[good], rt[good], Gt[good], ct[good]
+            accepted |= good
+            if accepted.all():
+                break
+            alpha[~accepted] /= 2
+    return u
+
+
+def _lstsq(G: np.ndarray, b: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Least-squares x (k, 5) of G x = b on the columns ``free`` (5,), zero elsewhere; batched, by QR."""
+    x = np.zeros((G.shape[0], 5))
+    if G.shape[0] == 0:
+        return x
+    Q, R = np.linalg.qr(G[:, :, free])
+    x[:, free] = np.linalg.solve(R, np.einsum("nki,nk->ni", Q, b)[..., None])[..., 0]
+    return x
+
+
+def summarise(t, u, r, G, free, sigma: float | None = None, info: dict | None = None) -> ForceEstimate:
+    """A :class:`ForceEstimate` of the answer u (n, 5) with its residuals r (n, 6) and G (n, 6, 5): the pooled sigma,
+    standard errors, condition numbers and warnings (module docstring)."""
+    n = u.shape[0]
+    dof = int(np.sum(6 - free.sum(axis=1)))
+    res2 = np.einsum("ij,ij->i", r, r)
+    pooled = float(np.sqrt(res2.sum() / dof)) if dof > 0 else float("nan")
+    s = pooled if sigma is None else float(sigma)
+    sv = np.linalg.svd(G, compute_uv=False) if n else np.zeros((0, 5))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        condition = sv[:, 0] / sv[:, -1]
+        cov = np.linalg.pinv(np.einsum("nki,nkj->nij", G, G)) if n else np.zeros((0, 5, 5))
+    se = s * np.sqrt(np.clip(np.einsum("nii->ni", cov), 0.0, None))
+    bad = np.flatnonzero(~(condition <= MAX_CONDITION))
+    warnings = []
+    if bad.size:
+        listed = ", ".join(f"{int(k)} (t = {t[k]:.6g} s)" for k in bad[:10])
+        warnings.append(f"{bad.size} sample(s) ill-conditioned (condition number of dtau/du above {MAX_CONDITION:g}): "
+                        f"{listed}{' ...' if bad.size > 10 else ''}; their forces are poorly determined")
+    info = dict(info or {})
+    info.update({"sigma_Nm": s, "sigma_source": "pooled residuals" if sigma is None else "given", "dof": dof,
+                 "pattern_steps": PATTERN_STEPS, "polish_steps": POLISH_STEPS, "max_condition": MAX_CONDITION})
+    return ForceEstimate(np.asarray(t, float), u[:, :3].copy(), u[:, 3:].copy(), se, np.sqrt(res2), s, dof, condition, bad,
+                         warnings, info)

@@ -1,0 +1,157 @@
+"""The food in the plant and the robot as a texture analyser, each held against a route of its own: the food laws in
+closed form (hardness, fracture force, cohesiveness, resilience), the energy balance of the whole robot (the
+actuators' work = the change of its energy + the work the food absorbs), the events against their guards, and the
+command line's refusals."""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT
+from chewbot.dynamics.energy import energies
+from chewbot.food.geometry import molar_path_task
+from chewbot.food.law import load_food
+from chewbot.food.tpa import protocol
+from chewbot.simulation.run import SimulateOptions, compute
+from chewbot.simulation.texture import TpaOptions, run_tpa
+
+from support import model
+
+runner = CliRunner()
+SPEED = 4.0  # mm/s: shorter tests than the default 2 mm/s, the same protocol
+H0_MM, D_MM, E_KPA = 6.0, 10.0, 20.0
+AREA = math.pi * (D_MM * 1e-3) ** 2 / 4
+
+
+def food_file(folder, **extra) -> str:
+    keys = {"name": "test cylinder", "shape": "cylinder", "height_mm": H0_MM, "diameter_mm": D_MM,
+            "young_modulus_kPa": E_KPA, "tooth_friction": 0.3, **extra}
+    path = folder / f"food_{abs(hash(tuple(sorted(extra.items()))))}.toml"
+    path.write_text("[food]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v}\n" for k, v in keys.items()))
+    return str(path)
+
+
+@functools.cache
+def _tpa(tmp: str, extra: tuple):
+    from pathlib import Path
+
+    return run_tpa(TpaOptions(food=food_file(Path(tmp), **dict(extra)), speed=SPEED, pause=0.5))
+
+
+@pytest.fixture(scope="module")
+def tpa(tmp_path_factory):
+    tmp = str(tmp_path_factory.mktemp("foods"))
+    return lambda **extra: _tpa(tmp, tuple(sorted(extra.items())))
+
+
+def test_linear_elastic_cylinder(tpa):
+    """Hardness = E A x the compression (50 %, as commanded: the stiff position control leaves a few um of error) to
+    0.5 % from the plant and 5 % from the torques; cohesiveness, springiness and resilience 1 within 1 % from both."""
+    r = tpa()
+    expected = E_KPA * 1e3 * AREA * 0.5
+    assert r.plant["hardness_N"] == pytest.approx(expected, rel=5e-3)
+    assert r.estimated["hardness_N"] == pytest.approx(expected, rel=5e-2)
+    for source in (r.plant, r.estimated):
+        for key in ("cohesiveness", "springiness", "resilience"):
+            assert source[key] == pytest.approx(1.0, abs=1e-2), key
+        assert source["fracturability_N"] is None
+    assert r.record()["tilt_at_deepest_deg"] < 5  # the laws' parallel teeth: a few degrees at 3 mm of gap
+
+
+def test_brittle_cylinder(tpa):
+    """Fracturability = E A x fracture strain (the law's fracture force) to 1 %; the cohesiveness is below 1 by the
+    areas of the law: A1 = k (df^2 / 2 + b (dm^2 - df^2) / 2 + b dm^2 / 2), A2 = b k dm^2, dm the deepest compression
+    reached (from tpa.json), to 1 %. The fracture is an event at its strain (1e-9 relative)."""
+    strain, b = 0.3, 0.2
+    r = tpa(fracture_strain=strain, stiffness_after_fracture=b)
+    k = E_KPA * 1e3 * AREA / (H0_MM * 1e-3)
+    df = strain * H0_MM * 1e-3
+    assert r.plant["fracturability_N"] == pytest.approx(k * df, rel=1e-2)
+    assert r.estimated["fracturability_N"] == pytest.approx(k * df, rel=5e-2)
+    dm = r.record()["deepest_compression_mm"] * 1e-3
+    A1 = 0.5 * df**2 + 0.5 * b * (dm**2 - df**2) + 0.5 * b * dm**2
+    assert r.plant["cohesiveness"] == pytest.approx(b * dm**2 / A1, rel=1e-2)
+    assert r.plant["cohesiveness"] < 0.6  # b dm^2 / A1 = 0.58 here
+    fracture = [e for e in r.record()["events"] if e["event"] == "fracture"]
+    assert len(fracture) == 1 and fracture[0]["delta_m"] == pytest.approx(df, rel=1e-9)
+    assert r.simulation.table["food_broken"][-1] == 1
+
+
+def test_kelvin_voigt_resilience(tpa):
+    """Hunt-Crossley damping on the linear cylinder, F = k delta (1 + 3/2 alpha d(delta)/dt): at the constant speed v
+    the withdrawal's work over the compression's is (1 - c) / (1 + c), c = 3/2 alpha v; to 1 % (the turns' blends move
+    it by about 2e-3, the tracking error less)."""
+    c = 0.2
+    alpha = c / (1.5 * SPEED * 1e-3)
+    r = tpa(damping_s_per_m=alpha)
+    assert r.plant["resilience"] == pytest.approx((1 - c) / (1 + c), rel=1e-2)
+
+
+def test_energy_the_food_absorbs_is_the_area_under_its_curve(tmp_path):
+    """Over a two-bite test of a damped, relaxing, sticky sample, the actuators' work (torques held between ticks:
+    sum tau_k (theta_k+1 - theta_k), exact) equals the robot's change of energy T + V (dynamics.energy, another
+    formulation) plus the area under the food's force-compression curve (trapezoids on the rows), to 1e-3 of that
+    area (the trapezoids across the contact's kinks, 1 ms apart)."""
+    m = model("target")
+    f = food_file(tmp_path, damping_s_per_m=20.0, relaxation_time_s=1.0, relaxation_modulus_kPa=15.0, adhesion_N=0.05)
+    p = protocol(H0_MM * 1e-3, 50, SPEED, 0.3)
+    t = p.times()
+    task = molar_path_task(m, "left", t, *p.path(t))
+    result = compute(SimulateOptions(food=f, gain_overrides={"computed_torque.frequency_Hz": 100.0}), task=task)
+    table, kin, sim = result.table, result.kinematics, result.simulation
+    work = float(np.sum(sim.tau[:-1] * np.diff(kin.theta, axis=0)))
+    T, V, _ = energies(m, kin)
+    change = (T[-1] + V[-1]) - (T[0] + V[0])
+    F, delta = table["food_force"], table["food_compression"]
+    area = float(np.sum(0.5 * (F[1:] + F[:-1]) * np.diff(delta)))
+    loading = float(np.sum((0.5 * (F[1:] + F[:-1]) * np.diff(delta))[np.diff(delta) > 0]))
+    assert area > 0.05 * loading  # the sample does absorb (dissipates) work
+    assert work == pytest.approx(change + area, abs=1e-3 * loading)
+    assert np.allclose(table["Fz"], -F, atol=1e-9) and np.min(F) < 0  # Fz is the food's force; it pulled (adhesion)
+
+
+# ---------------------------------------------------------------------------------------- the command line
+
+
+def test_simulate_food_refuses_a_task_with_a_bite_force_and_a_sample_that_does_not_fit(tmp_path):
+    r = runner.invoke(app, ["simulate", "--food", "cheddar", "--out", str(tmp_path / "a")])
+    assert r.exit_code == EXIT_BAD_INPUT and "carries a bite force" in r.output and "hybrid" in r.output
+    r = runner.invoke(app, ["simulate", "--food", "cheddar", "--set", "task.force_z_N=0", "--set", "task.force_x_N=0",
+                            "--set", "task.force_y_N=0", "--out", str(tmp_path / "b")])
+    assert r.exit_code == EXIT_BAD_INPUT and "mild cheddar cube" in r.output and "does not fit" in r.output
+    r = runner.invoke(app, ["simulate", "--food", str(tmp_path / "none.toml"), "--out", str(tmp_path / "c")])
+    assert r.exit_code == EXIT_BAD_INPUT and "none.toml" in r.output
+    assert not any(p.name.startswith(("a", "b", "c")) for p in tmp_path.iterdir())
+
+
+def test_tpa_refuses_a_sample_taller_than_the_workspace(tmp_path):
+    big = tmp_path / "big.toml"
+    big.write_text('[food]\nname = "tall"\nshape = "cylinder"\nheight_mm = 18.0\ndiameter_mm = 10.0\n'
+                   'young_modulus_kPa = 10.0\ntooth_friction = 0.1\n')
+    r = runner.invoke(app, ["tpa", "--food", str(big), "--out", str(tmp_path / "t")])
+    assert r.exit_code == EXIT_BAD_INPUT and "largest sample is 15.08 mm" in " ".join(r.output.split())
+
+
+def test_tpa_command_writes_its_folder(tmp_path):
+    r = runner.invoke(app, ["tpa", "--food", "bread", "--speed", "6", "--pause", "0.5", "--out", str(tmp_path / "tpa"), "-q"])
+    assert r.exit_code == 0, r.output
+    record = json.loads((tmp_path / "tpa" / "tpa.json").read_text())
+    for source in ("plant", "estimated"):
+        assert set(record[source]) >= {"hardness_N", "fracturability_N", "cohesiveness", "springiness", "resilience",
+                                       "adhesiveness_mJ", "gumminess_N", "chewiness_N"}
+    header = (tmp_path / "tpa" / "results.csv").read_text().splitlines()[0]
+    assert "food_compression [m]" in header and "food_force [N]" in header and "food_broken [1]" in header
+    for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html"):
+        assert (tmp_path / "tpa" / name).exists()
+    # the hardness lies between the equilibrium and the instantaneous modulus' force (damping on top)
+    bread = load_food("bread")
+    elastic = float(bread.elastic(0.5 * bread.height))
+    instantaneous = elastic * (1 + bread.relaxation_modulus / bread.young_modulus) * (1 + 1.5 * bread.damping * 6e-3)
+    assert elastic * 0.99 < record["plant"]["hardness_N"] < instantaneous
