@@ -48,7 +48,10 @@ class SimulateOptions:
     """Everything that defines a simulation (recorded in run.json). ``rate`` None: ``--rate continuous``;
     ``friction`` the plant's ("on"/"off"); ``overrides`` the controller's model and the default task (``--set``),
     ``plant_overrides`` the plant's only (``--plant-set``); ``noise_rad`` the standard deviation of the crank
-    encoders' noise (0: the controller sees the plant's state)."""
+    encoders' noise; ``sensor`` what the controller is given: "exact" (the plant's state) or "measured" (the estimate
+    from the crank angles, :class:`~chewbot.simulation.sensor.CrankSensor`; None: "measured" with noise or with
+    ``exported``, else "exact"); ``exported``: the controller is the exported C step (run through ctypes, the sensor
+    then "measured", the one path the C step has)."""
 
     controller: str = "computed-torque"
     model: str = "target"
@@ -67,6 +70,8 @@ class SimulateOptions:
     bite_unknown: bool = False
     gains: str | None = None
     gain_overrides: dict[str, float] = field(default_factory=dict)
+    sensor: str | None = None
+    exported: bool = False
 
     @property
     def controller_friction(self) -> bool:
@@ -87,7 +92,23 @@ class SimulateOptions:
                 raise OptionError(option, f"must be one of {', '.join(kind)}, not {value!r}")
         d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, None, self.contact, has_hkp=has_hkp,
                              model=self.model)
-        return replace(self, method=d.method, goal=d.goal, contact=d.contact)
+        sensor = self.sensor or ("measured" if self.noise_rad > 0 or self.exported else "exact")
+        if sensor not in SENSORS:
+            raise OptionError("sensor", f"must be one of {', '.join(SENSORS)}, not {sensor!r}")
+        if sensor == "exact" and self.noise_rad > 0:
+            raise OptionError("sensor", "exact gives the controller the plant's state: noise on the encoders needs --sensor measured")
+        if self.exported:
+            if sensor == "exact":
+                raise OptionError("sensor", "the exported step estimates its state from the measured angles: --exported needs "
+                                  "--sensor measured")
+            if self.controller not in ("pd", "computed-torque"):
+                raise OptionError("controller", f"--exported runs pd or computed-torque, not {self.controller}")
+            if self.rate is None:
+                raise OptionError("rate", "--exported runs the C step at the ticks of a control rate, not continuous")
+        if sensor == "measured" and self.rate is None:
+            raise OptionError(("noise", "sensor") if self.noise_rad > 0 else "sensor",
+                              "read the encoders at the ticks of a control rate, not with --rate continuous")
+        return replace(self, method=d.method, goal=d.goal, contact=d.contact, sensor=sensor)
 
 
 @dataclass
@@ -141,20 +162,29 @@ def build(options: SimulateOptions):
     controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
                                       options.controller_friction, not options.bite_unknown)
     plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
-    sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
+    sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.sensor == "measured" else None
     return options, model, plant_model, task, reference, gains, controller, plant, sensor
 
 
-def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResult:
+def compute(options: SimulateOptions, progress=None, check=None, exported=None) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
-    ``simulation``); ``check()`` is called in the loop and raises to stop it."""
+    ``simulation``); ``check()`` is called in the loop and raises to stop it. ``exported(controller, rate)``: with
+    ``options.exported``, makes the controller that runs the exported C step in place of the built-in ``controller``
+    (:class:`chewbot.export.controller.ExportedController`; the layer above passes it); its ``comparison()`` with the
+    Python controller goes into run.json."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
     options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options)
+    loop_controller = controller
+    if options.exported:
+        if exported is None:
+            raise ValueError("options.exported: pass exported(controller, rate), the exported step's controller")
+        step("compiling the exported controller step")
+        loop_controller = exported(controller, options.rate)
     step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
          stage="simulation")
     t0 = time.perf_counter()
-    sim = simulate(plant, controller, reference, options.rate, sensor, check=check)
+    sim = simulate(plant, loop_controller, reference, options.rate, sensor, check=check)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -167,6 +197,8 @@ def compute(options: SimulateOptions, progress=None, check=None) -> SimulateResu
     table = simulation_table(plant, sim, kin, motion.kinematic_columns)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
+    if loop_controller is not controller:
+        info["simulation"]["exported"] = loop_controller.comparison()
     result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
     step("validity checks")
     from chewbot.analysis.checks import run_checks
@@ -289,13 +321,16 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                       if plant.model.has_hkp else None,
                       "friction_smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
                                              "delta_F_G_N": DELTA_F_G}},
-            "sensor": None if sensor is None else {"noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
+            "sensor": None if sensor is None else {"measured": True, "noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
 def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
     return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
+
+
+SENSORS = ("exact", "measured")
 
 
 def input_files(options: SimulateOptions) -> list[Path]:

@@ -161,7 +161,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     for k in range(K):
         q[k], dq[k] = state.q, state.dq
         if rate is not None:
-            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq)
+            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq, state.theta)
             tau_cmd[k] = controller(times[k], seen)
             tau_k = np.clip(tau_cmd[k], -limit, limit)
             data = _held_data(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
