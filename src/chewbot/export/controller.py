@@ -1003,3 +1003,11 @@ class ExportedController:
         return {"library": str(self.library.lib._name), "ticks": len(c), "largest_difference_Nm": largest,
                 "largest_abs_tau_Nm": scale, "relative": largest / scale if scale else 0.0,
                 "status_bits_seen": [name for name, bit in STATUS_BITS.items() if statuses & bit]}
+
+
+def simulation_log(result) -> np.ndarray:
+    """The rows of example/log.csv from a simulation of the controller with the measured sensor path
+    (:class:`chewbot.simulation.run.SimulateResult`): t, the plant's crank angles (what the encoders read: noise-free),
+    the controller's commanded torques."""
+    sim = result.simulation
+    return np.column_stack([sim.t, result.kinematics.theta, sim.tau_cmd])
