@@ -478,9 +478,9 @@ unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measu
   chewbot_ctrl_outputs* o = &ctx->out;
   double theta[6], guess[NQ];
   unsigned status = 0;
-  int i, usable = 1;
+  int i, usable = 1, bad_time = 0;
   double dt = t - ctx->t_last;
-  if (!is_finite(t) || (ctx->started && !(dt >= 0.0))) { status |= CHEWBOT_CTRL_BAD_INPUT; dt = 0.0; }
+  if (!is_finite(t) || (ctx->started && !(dt >= 0.0))) { status |= CHEWBOT_CTRL_BAD_INPUT; bad_time = 1; dt = 0.0; }
   if (ctx->started && dt > ctx->config.watchdog_s) ctx->latched |= CHEWBOT_CTRL_WATCHDOG;
   o->dt = dt;
   /* the pose estimate: Gauss-Newton from the last one */
@@ -513,9 +513,11 @@ unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measu
   reference_at(ctx, t, o->q_ref, o->dq_ref, o->ddq_ref, o->force);
   law(ctx);
   if (!(o->ref_margin > 0.0)) {
+    double asked = o->ref_margin; /* reported: the margin of the reference asked for */
     status |= CHEWBOT_CTRL_REFERENCE_OUTSIDE;
     for (i = 0; i < NQ; ++i) { o->q_ref[i] = ctx->held_q_ref[i]; o->dq_ref[i] = 0.0; o->ddq_ref[i] = 0.0; }
     law(ctx);
+    o->ref_margin = asked;
   } else {
     for (i = 0; i < NQ; ++i) ctx->held_q_ref[i] = o->q_ref[i];
   }
@@ -550,7 +552,7 @@ unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measu
   }
   status |= ctx->latched;
   for (i = 0; i < 6; ++i) { tau_out[i] = o->tau[i]; ctx->tau_last[i] = o->tau[i]; }
-  if (!(status & CHEWBOT_CTRL_BAD_INPUT)) ctx->t_last = t;
+  if (!bad_time) ctx->t_last = t;
   ctx->started = 1;
   ctx->ticks += 1;
   if (status_out) *status_out = status;
@@ -945,6 +947,25 @@ class StepLibrary:
         self._theta[:] = theta
         status = self.lib.chewbot_ctrl_step(self.ctx, float(t), self._p_theta, self._p_tau, ctypes.byref(self._status))
         return self._tau.copy(), int(status)
+
+    def set_reference(self, q_ref, dq_ref, ddq_ref, force) -> None:
+        """The caller's reference for the next steps (chewbot_ctrl_set_reference)."""
+        arrays = [np.ascontiguousarray(a, float) for a in (q_ref, dq_ref, ddq_ref, force)]
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.lib.chewbot_ctrl_set_reference(self.ctx, *(a.ctypes.data_as(dp) for a in arrays))
+
+    def use_task(self) -> None:
+        self.lib.chewbot_ctrl_use_task(self.ctx)
+
+    def set_estop(self, on: bool) -> None:
+        self.lib.chewbot_ctrl_set_estop(self.ctx, ctypes.c_int(int(on)))
+
+    def clear_faults(self) -> None:
+        self.lib.chewbot_ctrl_clear_faults(self.ctx)
+
+    def home(self, theta_raw) -> None:
+        raw = np.ascontiguousarray(theta_raw, float)
+        self.lib.chewbot_ctrl_home(self.ctx, raw.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
 
     def __getattr__(self, name: str):
         fields = self.__dict__.get("fields", {})
