@@ -13,7 +13,9 @@ estimate made from the measured angles alone, with the controller's model (it do
   b = exp(-2 pi cutoff dt). It trades noise (a raw difference amplifies the angles' noise by sqrt(2)/dt) for a lag of
   about 1/(2 pi cutoff) seconds.
 
-The estimator starts from the simulation's initial state. Without noise the controller is given the plant's state.
+The estimator starts from the simulation's initial state. It is what the controller is given with noise, and with
+``--sensor measured`` (then noise-free): the path of the exported C step (:mod:`chewbot.export.controller`);
+otherwise the controller is given the plant's state.
 """
 
 from __future__ import annotations
