@@ -15,8 +15,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from test_recordings import chewing, pose, registration, seen, write_csv
-from support import model
+from test_recordings import chewing_recording, registration
 from typer.testing import CliRunner
 
 from chewbot.cli import app
@@ -119,11 +118,7 @@ def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
 def test_exported_on_an_imported_recording_from_the_command_line(tmp_path):
     """A recording (synthetic markers of one chewing cycle) imported with import-motion, then simulate --exported and
     simulate --sensor measured on it: results.csv's tau_cmd1..6 equal tick by tick."""
-    m = model("target")
-    t, q = chewing()
-    force = np.zeros((len(t), 3))
-    force[:, 2] = -30 * np.sin(np.pi * t / t[-1]) ** 2
-    rec = write_csv(tmp_path / "rec.csv", t, seen(*pose(m, q)), force=force)
+    rec = chewing_recording(tmp_path, 30.0)[0]
     task = tmp_path / "task.csv"
     assert runner.invoke(app, ["import-motion", rec, "--registration", registration(tmp_path), "--out", str(task)]).exit_code == 0
     folders = {}
