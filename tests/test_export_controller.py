@@ -300,3 +300,37 @@ def test_g1_with_friction_exported_equals_python_and_reports_active_limits():
     tau, status = lib.step(0.0, home(spec))
     assert status & STATUS_BITS["LIMIT_ACTIVE"] and status & STATUS_BITS["TORQUE_SATURATED"] and lib.limit_excess[0] > 0
     assert np.max(np.abs(tau)) == pytest.approx(spec.model.limits.torque, abs=0)
+
+
+def test_outputs_pose_error_and_normal_forces_by_other_routes(step, exported):
+    """Along the log of the export: the step's normal forces equal those of the plant's forward dynamics (another
+    implementation: Newton iterations on the equations of motion) under the law's torques at the step's estimate,
+    without friction (1e-9 of the largest); the pose's parasitic Z and gamma satisfy the sockets' plane equations
+    (1e-12 m); the tracking error is the reference less the estimate."""
+    from chewbot.simulation.forward import forward_dynamics
+
+    lib, spec = step
+    log = np.loadtxt(exported / "example/log.csv", delimiter=",", skiprows=1)
+    rows = range(0, len(log), 50)
+    lib.init(log[0, 0])
+    q, dq, tau, force, N, pose, error, q_ref = [], [], [], [], [], [], [], []
+    for k in range(len(log)):
+        lib.step(log[k, 0], log[k, 1:7])
+        if k in rows:
+            for store, value in ((q, lib.q), (dq, lib.dq), (tau, lib.tau_cmd), (force, lib.force), (N, lib.normal), (pose, lib.pose),
+                                 (error, lib.error), (q_ref, lib.q_ref)):
+                store.append(value.copy())
+    q, dq, tau, force, N, pose, error, q_ref = map(np.array, (q, dq, tau, force, N, pose, error, q_ref))
+    fwd = forward_dynamics(spec.model, q, dq, tau, force, spec.side, friction=False)
+    assert np.max(np.abs(N - fwd.N)) <= 1e-9 * np.max(np.abs(fwd.N)) and np.max(np.abs(fwd.N)) > 1.0  # N
+    from scipy.spatial.transform import Rotation
+
+    h = spec.model.hkp
+    R = Rotation.from_euler("XYZ", pose[:, 3:]).as_matrix()
+    for T in (h.T_L, h.T_R):
+        ball = pose[:, :3] + R @ T
+        assert np.max(np.abs(h.p1 * ball[:, 0] + ball[:, 2] + h.p2)) < 1e-12
+    assert np.array_equal(pose[:, [0, 1, 3, 4]], q)
+    assert np.array_equal(error, q_ref - q) and np.max(np.abs(error)) > 0
+    # the reference at the log's ticks is the task's (quintic Hermite at the samples: the samples themselves)
+    assert np.max(np.abs(q_ref - spec.q[list(rows)])) <= 1e-15 * np.max(np.abs(spec.q))
