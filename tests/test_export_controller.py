@@ -339,3 +339,25 @@ def test_outputs_pose_error_and_normal_forces_by_other_routes(step, exported):
     assert np.array_equal(error, q_ref - q) and np.max(np.abs(error)) > 0
     # the reference at the log's ticks is the task's (quintic Hermite at the samples: the samples themselves)
     assert np.max(np.abs(q_ref - spec.q[list(rows)])) <= 1e-15 * np.max(np.abs(spec.q))
+
+
+def test_export_refuses_a_log_of_a_failing_loop_and_takes_a_gains_file(tmp_path):
+    """PD with the default gains topples the robot on the measured state (docs/simulation.md): the export says so
+    (exit 2) instead of writing a log of a failing loop; --no-log exports it; a --gains file's values are the
+    library's defaults; an existing folder is not replaced without --force."""
+    out = tmp_path / "pd"
+    done = runner.invoke(app, ["export-controller", "--controller", "pd", "--out", str(out)])
+    assert done.exit_code == 2 and "leaves the workspace" in done.output and "--no-log" in done.output and not out.exists()
+    gains = tmp_path / "gains.toml"
+    gains.write_text("[pd]\nkp_Nm_per_rad = 2.0\nkd_Nms_per_rad = [0.005, 0.005, 0.006, 0.006, 0.007, 0.007]\n"
+                     "[computed_torque]\nfrequency_Hz = 30.0\ndamping = 1.0\n[estimator]\ncutoff_Hz = 200.0\n")
+    done = runner.invoke(app, ["export-controller", "--controller", "pd", "--gains", str(gains), "--no-log", "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    step_c = (out / "src/chewbot_ctrl.c").read_text()
+    assert "GAINS[CHEWBOT_CTRL_NG] = {2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 0.005, 0.005, 0.006, 0.006, 0.007, 0.007}" in step_c
+    assert "ctx->config.cutoff_hz = 200.0;" in step_c and not (out / "example/log.csv").exists()
+    again = runner.invoke(app, ["export-controller", "--controller", "pd", "--no-log", "--out", str(out)])
+    assert again.exit_code == 5
+    for bad, words in ((["--controller", "feedforward"], "pd or computed-torque"), (["--method", "euler"], "--method")):
+        done = runner.invoke(app, ["export-controller", *bad, "--no-log", "--out", str(tmp_path / "x")])
+        assert done.exit_code == 2 and words in done.output, done.output

@@ -69,7 +69,14 @@ def export_controller(
                 from chewbot.simulation.run import compute
 
                 step("simulating the controller for the example's log")
-                rows = simulation_log(compute(options))
+                simulated = compute(options)
+                rows = simulation_log(simulated)
+                stopped = simulated.metrics["stopped"]
+                if stopped is not None:
+                    raise ChewbotError(f"in simulation this controller leaves the workspace at t = {stopped['t']:.4g} s "
+                                       f"({stopped['reason']}): the example's log would record a failing loop. Give gains that "
+                                       "are stable on the measured state (--gains; docs/simulation.md gives slower PD gains for "
+                                       "the estimator), or export without the log (--no-log)")
             step("generating C")
             write(spec, out, force=force, inputs=input_files(options), log=rows)
     stdout.print(f"wrote {escape(str(out))} ({spec.kind}, {spec.method if spec.kind != 'pd' else 'PD'}, model {escape(built_model.name)}, "
