@@ -186,16 +186,33 @@ def test_fk_failure_holds_the_last_torques_then_zeroes_them(step):
     assert status == 0 and np.any(tau != 0)
 
 
-def test_near_singular_bit_follows_its_thresholds(step):
+def test_near_singular_near_a_cranks_dead_point(step):
+    """The crank angles of a pose moved sideways (Y) towards a chain's dead point, tick by tick: the estimate follows
+    them (converged), and the bit rises where the smallest transmission sine falls below 0.05 (Y = 11.000 mm: 0.0586,
+    11.025 mm: 0.030, from the kinematics' transmission output), the torques then held. The conditioning bit by its
+    threshold: no pose of the default task comes near a direct-kinematics singularity."""
+    from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
+
     lib, spec = step
+    kin = kinematics_kernel("target", "euler-angles").graph()
+
+    def angles(y):
+        out = kin(np.array([0.0, y, 0.0, 0.0]), np.zeros(4), np.zeros(4), spec.model.vector())
+        return np.asarray(out[KINEMATICS_OUTPUTS.index("theta")]).ravel(), float(np.min(np.asarray(out[KINEMATICS_OUTPUTS.index("transmission")])))
+
     lib.init(0.0)
-    lib.fields["conditioning_min"][0] = 1.0 + 1e-12  # nothing reaches 1: every pose counts as near-singular
-    _, status = lib.step(0.0, home(spec))
-    assert status & STATUS_BITS["NEAR_SINGULAR"] and status & STATUS_BITS["HOLDING"]
+    path = np.append(np.linspace(0.0, 0.011, 201), 0.011025)
+    for k, y in enumerate(path):
+        theta, transmission = angles(y)
+        tau, status = lib.step(0.001 * k, theta)
+        near = bool(status & STATUS_BITS["NEAR_SINGULAR"])
+        assert not status & STATUS_BITS["FK_NOT_CONVERGED"] and near == (transmission < 0.05), (y, transmission)
+        assert abs(lib.q[1] - (path[k - 1] if near else y)) < 1e-9  # near-singular: the estimate is not taken
+    assert status & STATUS_BITS["HOLDING"] and lib.transmission[0] == pytest.approx(transmission, rel=1e-6)
     lib.init(0.0)
-    lib.fields["transmission_min"][0] = 1.0 + 1e-12
+    lib.fields["conditioning_min"][0] = 1.0 + 1e-12  # the ratio of two means never exceeds 1
     _, status = lib.step(0.0, home(spec))
-    assert status & STATUS_BITS["NEAR_SINGULAR"]
+    assert status & STATUS_BITS["NEAR_SINGULAR"] and status & STATUS_BITS["HOLDING"] and 0 < lib.conditioning[0] <= 1
 
 
 def test_reference_outside_the_workspace_holds_the_last_one_inside(step):
