@@ -120,6 +120,15 @@ def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
     assert np.max(np.abs(b)) > 0.1  # N m: the torques are not trivially zero
 
 
+def test_exported_step_with_noisy_encoders_sees_what_the_python_controller_sees():
+    """With 1e-4 rad of encoder noise both controllers are fed the same noisy angles each tick: their torques agree
+    on the same ticks as without noise."""
+    c = compute(SimulateOptions(noise_rad=1e-4, seed=2, exported=True), exported=ExportedController)
+    same_run = c.info["simulation"]["exported"]
+    assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE
+    assert c.info["simulation"]["sensor"]["noise_rad"] == 1e-4 and c.metrics["stopped"] is None
+
+
 def test_exported_on_an_imported_recording_from_the_command_line(tmp_path):
     """A recording (synthetic markers of one chewing cycle) imported with import-motion, then simulate --exported and
     simulate --sensor measured on it: results.csv's tau_cmd1..6 equal tick by tick."""
@@ -178,7 +187,7 @@ def test_fk_failure_holds_the_last_torques_then_zeroes_them(step):
     wrong[2] += 1.0  # rad: crank 3 turned a radian against the others: no pose closes the six chains
     tau1, status = lib.step(0.001, wrong)
     assert status & STATUS_BITS["FK_NOT_CONVERGED"] and status & STATUS_BITS["HOLDING"]
-    assert lib.fk_residual[0] > 1e-6 and np.array_equal(tau1, tau0) and np.all(np.abs(lib.q) < 1e-12)  # estimate kept
+    assert lib.fk_residual[0] > 1e-2 and np.array_equal(tau1, tau0) and np.all(np.abs(lib.q) < 1e-12)  # estimate kept
     for k in range(2, 12):
         tau, status = lib.step(0.001 * k, wrong)
     assert np.all(tau == 0) and status & STATUS_BITS["HOLDING"]  # past max_hold_ticks (10)
