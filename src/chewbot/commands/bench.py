@@ -53,9 +53,11 @@ def bench(
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
             if step_only:
-                from chewbot.bench.benchmark import bench_controller, machine, step_markdown
+                from chewbot.bench.benchmark import bench_controller, load, machine, step_markdown
 
-                text = f"Machine: {machine()}.\n\n" + step_markdown(*bench_controller(passes, progress=step))
+                started = load()
+                table = step_markdown(*bench_controller(passes, progress=step))
+                text = f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end.\n\n" + table
             else:
                 text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
             if sweep:
