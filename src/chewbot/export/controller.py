@@ -135,15 +135,6 @@ class StepSpec:
         """The law distributes the target's torques by Newton-Euler's fixed-cost solver (limits checked)."""
         return self.kind == "computed-torque" and self.method == "newton-euler" and self.model.has_hkp
 
-    def digest(self) -> str:
-        h = hashlib.sha256()
-        h.update(repr((VERSION, self.model.mechanism, self.kind, self.method, self.goal, self.friction, self.cutoff, self.rate,
-                       self.side, self.torque_rate_limit, FK_ITERATIONS)).encode())
-        for a in (self.model.vector(), self.gains, self.t, self.q, self.dq, self.ddq, self.force):
-            h.update(np.ascontiguousarray(a, float).tobytes())
-        h.update(Path(__file__).read_bytes())
-        return h.hexdigest()[:20]
-
 
 def fk_function(model: Model) -> ca.Function:
     """(theta, q_guess) -> q, X (pose X_EE), residual, step, conditioning (:func:`gauss_newton_sx`), transmission (the
@@ -888,19 +879,25 @@ def write_sources(spec: StepSpec, folder: Path, fk: ca.Function | None = None, l
 # ------------------------------------------------------------------------------------------- through ctypes
 
 
-def build_shared(spec: StepSpec, folder: Path | None = None, flags: tuple[str, ...] = STRICT_FLAGS) -> Path:
+def build_shared(spec: StepSpec, flags: tuple[str, ...] = STRICT_FLAGS) -> Path:
     """The library of ``spec`` compiled as a shared object (with :data:`STRICT_FLAGS` and -fPIC), kept in the kernel
-    cache under the spec's digest (or in ``folder``)."""
+    cache under the SHA-256 of its generated sources and the flags (the graphs are built each time, about a second;
+    the compilation only once)."""
     cc = c_compiler()
     if cc is None:
         raise RuntimeError("the exported controller needs a C compiler (set $CC, or install cc/gcc/clang)")
-    base = Path(folder) if folder is not None else KERNELS.folder() / "controllers" / f"{PREFIX}-{spec.digest()}"
+    root = KERNELS.folder() / "controllers"
+    work = root / f"{PREFIX}.tmp{os.getpid()}"
+    shutil.rmtree(work, ignore_errors=True)
+    sources = write_sources(spec, work)
+    digest = hashlib.sha256(repr((cc, flags)).encode())
+    for path in sorted(work.rglob("*.[ch]")):
+        digest.update(path.name.encode() + path.read_bytes())
+    base = root / f"{PREFIX}-{digest.hexdigest()[:20]}"
     lib = base / f"lib{PREFIX}.so"
     if lib.exists():
+        shutil.rmtree(work, ignore_errors=True)
         return lib
-    work = base.with_name(f"{base.name}.tmp{os.getpid()}")
-    work.mkdir(parents=True, exist_ok=True)
-    sources = write_sources(spec, work)
     done = subprocess.run([cc, *flags, "-fPIC", "-shared", f"-I{work / 'include'}", "-o", str(work / lib.name), *map(str, sources), "-lm"],
                           capture_output=True, text=True)
     if done.returncode:
