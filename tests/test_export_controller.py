@@ -316,7 +316,8 @@ def test_bad_input_holds(step):
 @pytest.mark.slow
 def test_g1_with_friction_exported_equals_python_and_reports_active_limits():
     """Newton-Euler with G1 and friction: the C step equals the Python controller on the default task; a reference
-    with an acceleration far beyond the actuators raises LIMIT_ACTIVE (and saturation)."""
+    with an acceleration far beyond the actuators raises LIMIT_ACTIVE (and saturation); DISTRIBUTION_NOT_CONVERGED
+    by its tolerance."""
     options = dict(controller="computed-torque", method="newton-euler", friction="on")
     c = compute(SimulateOptions(**options, exported=True), exported=ExportedController)
     py = compute(SimulateOptions(**options, sensor="measured"))
@@ -331,6 +332,12 @@ def test_g1_with_friction_exported_equals_python_and_reports_active_limits():
     tau, status = lib.step(0.0, home(spec))
     assert status & STATUS_BITS["LIMIT_ACTIVE"] and status & STATUS_BITS["TORQUE_SATURATED"] and lib.limit_excess[0] > 0
     assert np.max(np.abs(tau)) == pytest.approx(spec.model.limits.torque, abs=0)
+    # the distribution's convergence: its last Newton step (~1e-14 N at the optimum) against a tolerance of zero
+    lib.init(0.0)
+    lib.fields["distribution_step_tolerance"][0] = 0.0
+    _, status = lib.step(0.0, home(spec))
+    assert status & STATUS_BITS["DISTRIBUTION_NOT_CONVERGED"] and 0 < lib.dist_step[0] < 1e-9
+    assert not status & STATUS_BITS["HOLDING"]  # the torques are used: they satisfy the equations of motion
 
 
 def test_outputs_pose_error_and_normal_forces_by_other_routes(step, exported):
