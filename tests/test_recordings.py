@@ -533,14 +533,19 @@ def test_markers_of_the_registration_must_be_in_the_recording(tmp_path):
 # ------------------------------------------------------------------ the command
 
 
+def chewing_recording(tmp_path, peak_force_N: float = 40.0):
+    """A recording of one chewing cycle of the target (markers, a bite force of up to ``peak_force_N`` down):
+    its path, the times and the forces."""
+    t, q = chewing()
+    force = np.zeros((len(t), 3))
+    force[:, 2] = -peak_force_N * np.sin(np.pi * t / t[-1]) ** 2
+    return write_csv(tmp_path / "rec.csv", t, seen(*pose(model("target"), q)), force=force), t, force
+
+
 def test_command_writes_a_task_that_runs_to_torques(tmp_path):
     help_text = runner.invoke(app, ["import-motion", "--help"])
     assert help_text.exit_code == 0 and "Examples" in help_text.output
-    m = model("target")
-    t, q = chewing()
-    force = np.zeros((len(t), 3))
-    force[:, 2] = -40 * np.sin(np.pi * t / t[-1]) ** 2
-    rec = write_csv(tmp_path / "rec.csv", t, seen(*pose(m, q)), force=force)
+    rec, t, force = chewing_recording(tmp_path)
     out = tmp_path / "task.csv"
     result = runner.invoke(app, ["import-motion", rec, "--registration", registration(tmp_path), "--out", str(out)])
     assert result.exit_code == 0, result.output

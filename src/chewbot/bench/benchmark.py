@@ -20,6 +20,7 @@ Makefile). With ``long``: runs of 10,000 to 1,000,000 samples, their time per sa
 from __future__ import annotations
 
 import os
+import re
 import platform
 import statistics
 import subprocess
@@ -351,6 +352,69 @@ def bench_export(calls: int = 200000, repeats: int = 7) -> tuple[str, list[Timin
     return f"{version}, {flags}", [Timing(name, tuple(values)) for name, values in runs.items()]
 
 
+# --- the exported controller step --------------------------------------------------------------------------
+
+# The exported step's cases: label, chewbot simulate options (the controller exported), and the budget of the issue (us).
+STEP_CASES = (("computed torque, Hessian (minimum-norm)", {"method": "hessian"}, 25.0),
+              ("computed torque, Newton-Euler G1 with friction", {"method": "newton-euler", "friction": "on"}, 60.0))
+
+
+@dataclass(frozen=True)
+class StepTiming:
+    """The exported controller step timed by its example program over ``steps`` calls pinned to ``core``: median, 99th
+    percentile and maximum time per step (us)."""
+
+    label: str
+    median_us: float
+    p99_us: float
+    max_us: float
+    steps: int
+    core: int
+    budget_us: float
+
+
+def bench_controller(passes: int = 20, core: int | None = None, progress=None) -> tuple[str, list[StepTiming]]:
+    """Export each of :data:`STEP_CASES` (``chewbot export-controller``, default task, its log from a simulation), build
+    it with its Makefile (-std=c99 ... -O2) and run its example over the log ``passes`` times in a process pinned to
+    one core (``os.sched_setaffinity``; ``core`` None: the last this process may use): (the compiler and flags, the
+    timings)."""
+    from chewbot.compiled.kernels import c_compiler
+    from chewbot.export.controller import StepSpec, export_controller, simulation_log
+    from chewbot.simulation.run import SimulateOptions, build, compute
+
+    cc = c_compiler()
+    if cc is None:
+        return "no C compiler", []
+    core = max(os.sched_getaffinity(0)) if core is None else core
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, options, budget in STEP_CASES:
+            if progress is not None:
+                progress(f"exporting the controller step: {label}")
+            opts = SimulateOptions(controller="computed-torque", sensor="measured", **options)
+            controller = build(opts)[6]
+            folder = export_controller(StepSpec.of(controller, 1000.0), Path(tmp) / options["method"],
+                                       log=simulation_log(compute(opts)))
+            subprocess.run(["make", "-s", "-C", str(folder), "example/example"], check=True, capture_output=True, env={**os.environ, "CC": cc})
+            done = subprocess.run([str(folder / "example" / "example"), str(folder / "example" / "log.csv"), str(passes)], check=True,
+                                  capture_output=True, text=True, preexec_fn=lambda: os.sched_setaffinity(0, {core}))
+            found = re.search(r"over (\d+) steps: median ([\d.]+) us, p99 ([\d.]+) us, max ([\d.]+) us", done.stdout)
+            out.append(StepTiming(label, float(found[2]), float(found[3]), float(found[4]), int(found[1]), core, budget))
+        flags = (folder / "Makefile").read_text().split("CFLAGS ?= ", 1)[1].splitlines()[0]
+    version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    return f"{version}, {flags}", out
+
+
+def step_markdown(compiler: str, timings: list[StepTiming]) -> str:
+    if not timings:
+        return f"The exported controller step: not timed ({compiler}).\n"
+    lines = [f"The exported controller step (`chewbot export-controller`, default task; its example program over its log, "
+             f"pinned to core {timings[0].core}, {compiler}):", "",
+             "| controller | median (us) | p99 (us) | max (us) | steps | budget of p99 (us) |", "|---|---|---|---|---|---|"]
+    lines += [f"| {t.label} | {t.median_us:.2f} | {t.p99_us:.2f} | {t.max_us:.1f} | {t.steps} | {t.budget_us:g} |" for t in timings]
+    return "\n".join(lines) + "\n"
+
+
 # --- long runs -----------------------------------------------------------------------------------------------
 
 
@@ -531,6 +595,8 @@ def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progres
     loop = bench_loop(calls, repeats)
     step("the exported C")
     compiler, c_timings = bench_export()
+    step("the exported controller step")
+    step_compiler, step_timings = bench_controller(progress=progress)
     runs = bench_long(progress=progress) if long else []
     minutes = (time.perf_counter() - t0) / 60
     lines = [f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end "
@@ -538,6 +604,7 @@ def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progres
              "table ran interleaved; a ratio whose two spreads overlap is printed as \"within noise\".", ""]
     lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + _loop_table(loop)
     lines += _export_table(compiler, c_timings)
+    lines += [step_markdown(step_compiler, step_timings)]
     if runs:
         lines += _long_table(runs)
     return "\n".join(lines) + "\n"

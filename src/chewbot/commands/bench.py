@@ -18,6 +18,10 @@ def bench(
     sweep: int = typer.Option(0, "--sweep", metavar="N", min=0, help="Also time the sweep's scale study (the built-in "
                               "SPEC sobol-scale) with N base samples, a power of 2 (10 N evaluations), in this process and "
                               "on local clusters of 1 and 2 workers, and project the whole study (1,024 base samples)."),
+    step_only: bool = flag("--step-only", help="Time only the exported controller step (chewbot export-controller: "
+                           "computed torque with minimum-norm and with G1 and friction): median, p99 and maximum per step "
+                           "over --passes runs of its log, pinned to one core."),
+    passes: int = typer.Option(20, "--passes", min=1, help="Runs of the exported step's log (5001 steps each) for its timing."),
     out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
                                     "file written by chewbot bench with --force)."),
     force: bool = flag("--force", help=FORCE_HELP),
@@ -36,6 +40,8 @@ def bench(
       taskset -c 0 chewbot bench --long --out bench.md
 
       chewbot bench --sweep 32 --out bench.md
+
+      chewbot bench --step-only --passes 50
     """
     from chewbot.bench.benchmark import bench_sweep, benchmark, sweep_markdown
     from chewbot.files import WRITTEN_FILE, atomic_file, check_output, marker_line
@@ -46,7 +52,14 @@ def bench(
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
-            text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
+            if step_only:
+                from chewbot.bench.benchmark import bench_controller, load, machine, step_markdown
+
+                started = load()
+                table = step_markdown(*bench_controller(passes, progress=step))
+                text = f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end.\n\n" + table
+            else:
+                text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)
             if sweep:
                 text += sweep_markdown(*bench_sweep(sweep, progress=step))
         stdout.print(text, markup=False, highlight=False)

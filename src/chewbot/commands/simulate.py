@@ -49,6 +49,8 @@ def simulate(
     rate: str = typer.Option("1000", "--rate", callback=_rate, help="Control rate in Hz (torques held between ticks), or 'continuous': the controller evaluated at every integrator stage, rows at the task's samples (for verification)."),
     noise: float = typer.Option(0.0, "--noise", min=0.0, help="Standard deviation (rad) of Gaussian noise on the measured crank angles; the controller then gets its state from an estimator (docs/simulation.md). 0: it sees the plant's state."),
     seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
+    sensor: str | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
+    exported: bool = typer.Option(False, "--exported", help="Run the controller as the exported C step (chewbot export-controller), compiled and called through ctypes at each tick (pd or computed-torque, --sensor measured); run.json records how far its torques are from the Python controller's on the same ticks (N m)."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not the controller's (built-in name or TOML file)."),
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
@@ -84,6 +86,8 @@ def simulate(
       chewbot simulate --food cheddar --task closing.csv --out runs/cheddar
 
       chewbot simulate --controller hybrid --food cheddar --task bite.csv --out runs/hybrid
+
+      chewbot simulate --controller computed-torque --exported --out runs/ct-c
     """
     from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
                                          resolved, set_overrides, stdout)
@@ -97,13 +101,15 @@ def simulate(
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set, "--plant-set"),
                               bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides,
-                              food=food)
+                              food=food, sensor=sensor, exported=exported)
+    if noise > 0 and options.rate is None:
+        fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
+    if exported and compare:
+        fail(ChewbotError("--exported runs one controller (pd or computed-torque), --compare all three: choose one"), EXIT_BAD_INPUT)
     with resolved():
         options = options.resolved(controllers=COMPARED if compare else (controller,))
     if controller == "hybrid" and options.rate is None:
         fail(ChewbotError("--controller hybrid switches on the force observer's estimate at the ticks of a control rate: it needs a rate, not --rate continuous"), EXIT_BAD_INPUT)
-    if noise > 0 and options.rate is None:
-        fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
     with errors_reported():
         check_output(out, force, SIMULATION_FOLDER, inputs=input_files(options))  # before the work, not after it
         if compare:
@@ -117,8 +123,11 @@ def simulate(
             from chewbot.outputs.simulation import write
             from chewbot.simulation.run import compute
 
-            with progress(quiet, "simulate", total=SIMULATE_STEPS) as step:
-                results = {controller: compute(options, progress=step, check=check_interrupted)}
+            exported_step = None
+            if exported:
+                from chewbot.export.controller import ExportedController as exported_step
+            with progress(quiet, "simulate", total=SIMULATE_STEPS + exported) as step:
+                results = {controller: compute(options, progress=step, check=check_interrupted, exported=exported_step)}
                 write(results[controller], out, force=force, progress=step)
     if not quiet:
         _print_summary(stdout, results, out, compare)

@@ -50,10 +50,12 @@ CONTROL_INPUTS = ("q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains", "B", 
 @dataclass(frozen=True)
 class State:
     """What a controller is given: q (n,) the independent coordinates (Euler angles; m, rad) and dq their rates;
+    theta (6,) the crank angles the encoders read (rad), from which the estimate was made (None: not given);
     ``force`` (3,) the force observer's bite force on the mandible (N, {S}), None where no observer runs."""
 
     q: np.ndarray
     dq: np.ndarray
+    theta: np.ndarray | None = None
     force: np.ndarray | None = None
 
 

@@ -23,7 +23,7 @@ from chewbot.kinematics.task import Task
 # Monomial coefficients of the quintic on s in [0, 1] from (p(0), p'(0), p''(0), p(1), p'(1), p''(1)).
 _ENDS = np.array([[1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 2, 0, 0, 0],
                   [1, 1, 1, 1, 1, 1], [0, 1, 2, 3, 4, 5], [0, 0, 2, 6, 12, 20]], dtype=float)
-_COEFFICIENTS = np.linalg.inv(_ENDS)  # exact: the inverse of this integer matrix has small rational entries
+HERMITE_COEFFICIENTS = np.linalg.inv(_ENDS)  # exact: the inverse of this integer matrix has small rational entries
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ class Reference:
         s = ((times - self.t[i]) / dt[:, 0])[:, None]
         ends = np.stack([self.q[i], dt * self.dq[i], dt**2 * self.ddq[i],
                          self.q[i + 1], dt * self.dq[i + 1], dt**2 * self.ddq[i + 1]], axis=1)  # (M, 6, n)
-        c = np.einsum("kj,mjn->mkn", _COEFFICIENTS, ends)  # monomial coefficients in s
+        c = np.einsum("kj,mjn->mkn", HERMITE_COEFFICIENTS, ends)  # monomial coefficients in s
         powers = s[:, None, :] ** np.arange(6)[None, :, None]  # (M, 6, 1): 1, s, ..., s^5
         k = np.arange(6)[None, :, None]
         p = np.sum(c * powers, axis=1)

@@ -50,7 +50,10 @@ class SimulateOptions:
     """Everything that defines a simulation (recorded in run.json). ``rate`` None: ``--rate continuous``;
     ``friction`` the plant's ("on"/"off"); ``overrides`` the controller's model and the default task (``--set``),
     ``plant_overrides`` the plant's only (``--plant-set``); ``noise_rad`` the standard deviation of the crank
-    encoders' noise (0: the controller sees the plant's state)."""
+    encoders' noise; ``sensor`` what the controller is given: "exact" (the plant's state) or "measured" (the estimate
+    from the crank angles, :class:`~chewbot.simulation.sensor.CrankSensor`; None: "measured" with noise or with
+    ``exported``, else "exact"); ``exported``: the controller is the exported C step (run through ctypes, the sensor
+    then "measured", the one path the C step has)."""
 
     controller: str = "computed-torque"
     model: str = "target"
@@ -70,6 +73,8 @@ class SimulateOptions:
     gains: str | None = None
     gain_overrides: dict[str, float] = field(default_factory=dict)
     food: str | None = None
+    sensor: str | None = None
+    exported: bool = False
 
     @property
     def controller_friction(self) -> bool:
@@ -95,7 +100,7 @@ class SimulateOptions:
             if kind in CONTROLLERS and kind not in controllers:
                 raise OptionError(f"gain {key}={value:g}", f"changes nothing: it is a gain of --controller {kind}, and "
                                   f"this simulation runs {' and '.join(controllers)}")
-            if section == "estimator" and not self.noise_rad > 0:
+            if section == "estimator" and not (self.noise_rad > 0 or self.exported or self.sensor == "measured"):
                 raise OptionError(f"gain {key}={value:g}", "changes nothing: the estimator runs only with sensor noise "
                                   "(--noise RAD > 0); without it the controller sees the plant's state")
 
@@ -116,7 +121,23 @@ class SimulateOptions:
         for option, overrides in (("set", self.overrides), ("plant-set", self.plant_overrides)):
             refuse_unused(overrides, option, friction=self.friction == Switch.on, contact=d.contact,
                           friction_users="the plant with --friction on (and a newton-euler controller's model with it)")
-        return replace(self, method=d.method, goal=d.goal, contact=d.contact)
+        sensor = self.sensor or ("measured" if self.noise_rad > 0 or self.exported else "exact")
+        if sensor not in SENSORS:
+            raise OptionError("sensor", f"must be one of {', '.join(SENSORS)}, not {sensor!r}")
+        if sensor == "exact" and self.noise_rad > 0:
+            raise OptionError("sensor", "exact gives the controller the plant's state: noise on the encoders needs --sensor measured")
+        if self.exported:
+            if sensor == "exact":
+                raise OptionError("sensor", "the exported step estimates its state from the measured angles: --exported needs "
+                                  "--sensor measured")
+            if self.controller not in ("pd", "computed-torque"):
+                raise OptionError("controller", f"--exported runs pd or computed-torque, not {self.controller}")
+            if self.rate is None:
+                raise OptionError("rate", "--exported runs the C step at the ticks of a control rate, not continuous")
+        if sensor == "measured" and self.rate is None:
+            raise OptionError(("noise", "sensor") if self.noise_rad > 0 else "sensor",
+                              "read the encoders at the ticks of a control rate, not with --rate continuous")
+        return replace(self, method=d.method, goal=d.goal, contact=d.contact, sensor=sensor)
 
 
 @dataclass
@@ -182,7 +203,7 @@ def build(options: SimulateOptions, task: Task | None = None):
         plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
     else:
         plant = food_plant(options, plant_model, task, reference)
-    sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.noise_rad > 0 else None
+    sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.sensor == "measured" else None
     return options, model, plant_model, task, reference, gains, controller, plant, sensor
 
 
@@ -212,13 +233,22 @@ def food_plant(options: SimulateOptions, plant_model: Model, task: Task, referen
     return FoodPlant(plant_model, friction=options.friction == "on", side=task.side, food=food)
 
 
-def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None) -> SimulateResult:
+def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None, exported=None) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
     ``simulation``); ``check()`` is called in the loop and raises to stop it; ``task`` a task built in memory
-    instead of ``options.task``."""
+    instead of ``options.task``. ``exported(controller, rate)``: with ``options.exported``, makes the controller
+    that runs the exported C step in place of the built-in ``controller``
+    (:class:`chewbot.export.controller.ExportedController`; the layer above passes it); its ``comparison()`` with the
+    Python controller goes into run.json."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
     options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options, task)
+    loop_controller = controller
+    if options.exported:
+        if exported is None:
+            raise ValueError("options.exported: pass exported(controller, rate), the exported step's controller")
+        step("compiling the exported controller step")
+        loop_controller = exported(controller, options.rate)
     label = f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})"
     step(label, stage="simulation")
     t0 = time.perf_counter()
@@ -237,7 +267,7 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
     observer = None
     if options.controller == "hybrid":
         observer = ForceObserver(model, gains.observer_cutoff, task.side, options.controller_friction)
-    sim = simulate(plant, controller, reference, options.rate, sensor, progress=loop_progress, check=check, observer=observer)
+    sim = simulate(plant, loop_controller, reference, options.rate, sensor, progress=loop_progress, check=check, observer=observer)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -254,6 +284,8 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
     if sim.food is not None:
         info["food"] = plant.info(sim.food)
+    if loop_controller is not controller:
+        info["simulation"]["exported"] = loop_controller.comparison()
     result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
     step("validity checks")
     from chewbot.analysis.checks import run_checks
@@ -404,13 +436,16 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                       if plant.model.has_hkp else None,
                       "friction_smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
                                              "delta_F_G_N": DELTA_F_G}},
-            "sensor": None if sensor is None else {"noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
+            "sensor": None if sensor is None else {"measured": True, "noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
 def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
     return {kind: compute(replace(options, controller=kind), progress, check) for kind in COMPARED}
+
+
+SENSORS = ("exact", "measured")
 
 
 def input_files(options: SimulateOptions) -> list[Path]:

@@ -13,7 +13,9 @@ estimate made from the measured angles alone, with the controller's model (it do
   b = exp(-2 pi cutoff dt). It trades noise (a raw difference amplifies the angles' noise by sqrt(2)/dt) for a lag of
   about 1/(2 pi cutoff) seconds.
 
-The estimator starts from the simulation's initial state. Without noise the controller is given the plant's state.
+The estimator starts from the simulation's initial state. It is what the controller is given with noise, and with
+``--sensor measured`` (then noise-free): the path of the exported C step (:mod:`chewbot.export.controller`);
+otherwise the controller is given the plant's state.
 """
 
 from __future__ import annotations
@@ -33,27 +35,42 @@ from chewbot.simulation.forward import ORIENTATION, n_coordinates
 FK_ITERATIONS = 3
 
 
+def gauss_newton_sx(mechanism: str, m, theta: ca.SX, q: ca.SX) -> dict[str, ca.SX]:
+    """:data:`FK_ITERATIONS` Gauss-Newton steps on the closure equations (each scaled by the coupler length squared)
+    from ``q`` (Euler angles) for the crank angles ``theta``, on the model's numbers ``m``: the answer ``q``, the scaled
+    closure residual at it (inf-norm, m^2 / m^2), the size of the last step (inf-norm, m or rad: ~0 once converged)
+    and ``conditioning``, det(J'J)^(1/n) / (trace(J'J)/n) of the scaled closure Jacobian J at the answer (the ratio
+    of the geometric to the arithmetic mean of the eigenvalues of J'J: 1 for a well-conditioned J, 0 where the crank
+    angles no longer determine the pose, a singularity of the direct kinematics)."""
+    n = n_coordinates(mechanism)
+    closure = closure_function(mechanism, ORIENTATION)
+    scale = m.coupler_length**2
+
+    def residual(x):
+        H, J = closure(theta, x, m.p)[:2]
+        return H / scale, J / ca.repmat(scale, 1, n)
+
+    x, step = q, ca.SX(0)
+    for _ in range(FK_ITERATIONS):
+        H, J = residual(x)
+        dx = ca.solve(ca.mtimes(J.T, J), ca.mtimes(J.T, H))
+        x, step = x - dx, ca.norm_inf(dx)
+    H, J = residual(x)
+    JtJ = ca.mtimes(J.T, J)
+    conditioning = ca.fabs(ca.det(JtJ)) ** (1.0 / n) / (ca.trace(JtJ) / n)
+    return {"q": x, "residual": ca.norm_inf(H), "step": step, "conditioning": conditioning}
+
+
 def forward_kinematics_kernel(mechanism: str) -> KernelSpec:
     """(theta, q_guess, p) -> q: :data:`FK_ITERATIONS` Gauss-Newton steps on the closure equations from q_guess
-    (Euler angles), and the scaled closure residual at the answer (m^2 / m^2)."""
+    (Euler angles), and the scaled closure residual at the answer (m^2 / m^2) (:func:`gauss_newton_sx`)."""
     name = f"forward_kinematics_{c_name(mechanism)}"
 
     def build(params):
-        m = params
         n = n_coordinates(mechanism)
         theta, q = ca.SX.sym("theta", 6), ca.SX.sym("q", n)
-        closure = closure_function(mechanism, ORIENTATION)
-        scale = m.coupler_length**2
-
-        def residual(x):
-            H, J = closure(theta, x, m.p)[:2]
-            return H / scale, J / ca.repmat(scale, 1, n)
-
-        x = q
-        for _ in range(FK_ITERATIONS):
-            H, J = residual(x)
-            x = x - ca.solve(ca.mtimes(J.T, J), ca.mtimes(J.T, H))
-        return ca.Function(name, [theta, q, m.p], [x, ca.norm_inf(residual(x)[0])], ["theta", "q_guess", "p"], ["q", "residual"],
+        fk = gauss_newton_sx(mechanism, params, theta, q)
+        return ca.Function(name, [theta, q, params.p], [fk["q"], fk["residual"]], ["theta", "q_guess", "p"], ["q", "residual"],
                            {"cse": True})
 
     return KernelSpec(name, build, (mechanism, FK_ITERATIONS), mechanism)
@@ -90,4 +107,4 @@ class CrankSensor:
             b = np.exp(-2 * np.pi * self.cutoff * dt)
             self._dq = b * self._dq + (1 - b) * (q - self._q) / dt
         self._q, self._t = q, t
-        return State(q, self._dq.copy())
+        return State(q, self._dq.copy(), measured)

@@ -21,7 +21,7 @@ a condyle outside its socket): :attr:`Simulation.stopped` says when and why, and
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -179,11 +179,11 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     for k in range(K):
         q[k], dq[k], internal[k] = state.q, state.dq, state.food
         if rate is not None:
-            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq)
+            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq, state.theta)
             if observer is not None:
                 if k:
                     observed[k] = observer.update(times[k], seen.q, seen.dq, tau_k)
-                seen = State(seen.q, seen.dq, observed[k, :3].copy())
+                seen = replace(seen, force=observed[k, :3].copy())
             tau_cmd[k] = controller(times[k], seen)
             tau_k = np.clip(tau_cmd[k], -limit, limit)
             data = _held_data(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
