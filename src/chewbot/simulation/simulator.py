@@ -31,8 +31,9 @@ from chewbot.errors import KinematicsError
 from chewbot.model.vector import N_P
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.simulation.controllers import ModelBasedController, State
-from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
+from chewbot.simulation.forward import Forward, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C
+from chewbot.simulation.mujoco_plant import MujocoPlant
 from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage_times, step_kernel
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
@@ -112,10 +113,11 @@ def closed_loop_kernel(controller: ModelBasedController) -> KernelSpec:
     return step_kernel(controller.mechanism, name, lambda: closed_loop_stage(controller), ("closed-loop", *spec.key), 4)
 
 
-def simulate(plant: Plant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
+def simulate(plant: Plant | MujocoPlant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
              sensor: CrankSensor | None = None, progress=None, check=None) -> Simulation:
-    """Simulate ``plant`` under ``controller`` following ``reference`` from its first to its last sample, starting on
-    the reference (its first sample's position and rate).
+    """Simulate ``plant`` (chewbot's :class:`~chewbot.simulation.plant.Plant` or MuJoCo's
+    :class:`~chewbot.simulation.mujoco_plant.MujocoPlant`) under ``controller`` following ``reference`` from its first
+    to its last sample, starting on the reference (its first sample's position and rate).
 
     ``rate``: the control rate (Hz; ticks t_0 + k / rate), or None for the controller at every integrator stage
     (rows at the reference's samples; a built-in controller). ``sensor``: noisy crank encoders and the estimator the
@@ -123,6 +125,8 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     ``check()`` too, which raises to stop the loop (a signal a library swallowed: the command line's check).
     """
     if rate is None:
+        if isinstance(plant, MujocoPlant):
+            raise ValueError("the MuJoCo plant runs the controller at the ticks of a control rate, not continuously")
         if not isinstance(controller, ModelBasedController):
             raise ValueError("rate=None evaluates the controller inside the integrator: it needs a built-in controller")
         if sensor is not None:
@@ -183,7 +187,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
         tau_cmd[rows] = evaluate(native(controller.kernel_spec()), q[rows], dq[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
                                  controller.known_force(force[rows]), gains, B_c, p_c)[0]
     tau = np.clip(tau_cmd[rows], -limit, limit)
-    fwd: Forward = forward_dynamics(plant.model, q[rows], dq[rows], tau, force[rows], plant.side, plant.friction)
+    fwd: Forward = plant.forward(q[rows], dq[rows], tau, force[rows])
     return Simulation(times[rows], q[rows], dq[rows], tau, tau_cmd[rows], force[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
                       fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu)
 
