@@ -34,6 +34,12 @@ def _controller(value: str) -> str:
     return value
 
 
+def _engine(value: str) -> str:
+    if value not in ("chewbot", "mujoco"):
+        raise typer.BadParameter(f"{value!r} is not a plant engine; choose chewbot or mujoco")
+    return value
+
+
 def simulate(
     controller: str = typer.Option("computed-torque", "--controller", callback=_controller, help="feedforward (the inverse dynamics of the reference, no feedback), pd (independent PD on the crank angles) or computed-torque (inverse dynamics at the measured state with PD on the independent coordinates)."),
     compare: bool = typer.Option(False, "--compare", help="Run the three controllers on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
@@ -48,6 +54,8 @@ def simulate(
     noise: float = typer.Option(0.0, "--noise", min=0.0, help="Standard deviation (rad) of Gaussian noise on the measured crank angles; the controller then gets its state from an estimator (docs/simulation.md). 0: it sees the plant's state."),
     seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not the controller's (built-in name or TOML file)."),
+    plant_engine: str = typer.Option("chewbot", "--plant-engine", callback=_engine, help="What simulates the plant's model: chewbot (its Newton-Euler equations, Radau IIA) or mujoco (MuJoCo's simulation of the model's MJCF, as chewbot export-model writes it; steps of 0.1 ms, unilateral condyle contacts; docs/mujoco.md). Needs a control rate in Hz."),
+    compare_engines: bool = typer.Option(False, "--compare-engines", help="Simulate the controller on both engines (chewbot and mujoco), each into OUT/ENGINE/, and print one table; the comparison's report.html shows both side by side."),
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
     bite_unknown: bool = typer.Option(False, "--bite-unknown", help="The bite force acts on the plant but the controller's inverse dynamics does not know it."),
@@ -61,7 +69,7 @@ def simulate(
     """Simulate the robot driven by a controller along a task, and write a results folder.
 
     The plant (the Newton-Euler model, with friction if --friction on) is integrated by a compiled Radau IIA
-    method in its independent coordinates; the controller runs at --rate with its own model (--model, --set),
+    method in its independent coordinates, or simulated by MuJoCo (--plant-engine mujoco); the controller runs at --rate with its own model (--model, --set),
     which may differ from the plant's (--plant, --plant-set). Torques are saturated at limits.torque_Nm. Writes
     results.csv (the simulated motion, applied and commanded torques, reference, tracking error, N_L, N_R,
     constraint drift; units in the header), run.json (options, both models, checks, tracking), figures and
@@ -77,6 +85,10 @@ def simulate(
       chewbot simulate --controller pd --friction on --noise 1e-4 --out runs/pd-noisy
 
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
+
+      chewbot simulate --plant-engine mujoco --contact unilateral --out runs/ct-mujoco
+
+      chewbot simulate --compare-engines --contact unilateral --out runs/engines
     """
     from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
                                          resolved, set_overrides, stdout)
@@ -89,29 +101,45 @@ def simulate(
     options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set),
-                              bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides)
+                              bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides,
+                              engine=plant_engine)
     with resolved():
         options = options.resolved()
     if noise > 0 and options.rate is None:
         fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
+    if compare_engines and options.rate is None:
+        fail(ChewbotError("--compare-engines needs a control rate: the MuJoCo plant runs the controller at its ticks, not with "
+                          "--rate continuous"), EXIT_BAD_INPUT)
+    if compare and compare_engines:
+        fail(ChewbotError("--compare and --compare-engines: choose one (controllers on one engine, or one controller on both)"),
+             EXIT_BAD_INPUT)
+    from chewbot.export.mjcf import mjcf
+
     with errors_reported():
         check_output(out, force, SIMULATION_FOLDER, inputs=input_files(options))  # before the work, not after it
-        if compare:
+        if compare_engines:
+            from chewbot.outputs.simulation import write_comparison
+            from chewbot.simulation.run import compare_engines as run_engines
+
+            with progress(quiet, "simulate --compare-engines", total=2 * SIMULATE_STEPS) as step:
+                results = run_engines(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
+                write_comparison(results, out, force=force, progress=step)
+        elif compare:
             from chewbot.outputs.simulation import write_comparison
             from chewbot.simulation.run import compare as run_compare
 
             with progress(quiet, "simulate --compare", total=3 * SIMULATE_STEPS) as step:
-                results = run_compare(options, progress=step, check=check_interrupted)
+                results = run_compare(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
                 write_comparison(results, out, force=force, progress=step)
         else:
             from chewbot.outputs.simulation import write
             from chewbot.simulation.run import compute
 
             with progress(quiet, "simulate", total=SIMULATE_STEPS) as step:
-                results = {controller: compute(options, progress=step, check=check_interrupted)}
+                results = {controller: compute(options, progress=step, check=check_interrupted, write_mjcf=mjcf)}
                 write(results[controller], out, force=force, progress=step)
     if not quiet:
-        _print_summary(stdout, results, out, compare)
+        _print_summary(stdout, results, out, compare or compare_engines)
     exit_after_checks([c for r in results.values() for c in r.checks], allow_violations, quiet)
 
 

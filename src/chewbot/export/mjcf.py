@@ -50,6 +50,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from chewbot.files import marker_line
 from chewbot.model import Model
 
 TIMESTEP = 1e-4  # s: 10 steps per control tick at 1 kHz
@@ -117,7 +118,8 @@ def plane_pose(model: Model, side: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mjcf(model: Model, friction: bool = True) -> str:
-    """The MJCF text of ``model`` (the module's docstring says what is written and how)."""
+    """The MJCF text of ``model`` (the module's docstring says what is written and how), its first line chewbot's
+    marker (:func:`chewbot.files.marker_line`)."""
     root = ET.Element("mujoco", model=f"chewbot {model.name}")
     ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false", autolimits="true")
     option = ET.SubElement(root, "option", timestep=f"{TIMESTEP:g}", gravity=_vec([0, 0, -model.g]), integrator="RK4",
@@ -187,6 +189,15 @@ def mjcf(model: Model, friction: bool = True) -> str:
     for i in range(6):
         ET.SubElement(actuator, "motor", name=f"crank{i + 1}", joint=f"crank{i + 1}", gear="1")
     ET.indent(root)
-    header = (f"<!-- chewbot's {model.name} model ({model.mechanism}) as MJCF: SI units; written by chewbot export-model; "
-              f"friction {'on' if friction else 'off'} -->\n")
+    header = marker_line("<!--", f"chewbot export-model: the {model.name} model ({model.mechanism}) as MJCF, SI units, "
+                                  f"friction {'on' if friction else 'off'}") + "\n"
     return header + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_mjcf(model: Model, path, friction: bool = True, force: bool = False, inputs=()) -> None:
+    """Write :func:`mjcf` to ``path`` whole (:func:`chewbot.files.atomic_file`: never over a file chewbot did not
+    write, over one it wrote only with ``force``)."""
+    from chewbot.files import atomic_file
+
+    with atomic_file(path, force, inputs) as tmp:
+        tmp.write_text(mjcf(model, friction), encoding="utf-8")

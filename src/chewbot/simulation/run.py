@@ -345,9 +345,15 @@ def _loop_info(sim: Simulation, controller: ModelBasedController, sensor) -> dic
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
-def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
+def compare(options: SimulateOptions, progress=None, check=None, write_mjcf=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
+    return {kind: compute(replace(options, controller=kind), progress, check, write_mjcf) for kind in CONTROLLERS}
+
+
+def compare_engines(options: SimulateOptions, progress=None, check=None, write_mjcf=None) -> dict[str, SimulateResult]:
+    """One controller on the same task and model simulated by each engine of :data:`ENGINES` (``options.engine`` is
+    ignored)."""
+    return {engine: compute(replace(options, engine=engine), progress, check, write_mjcf) for engine in ENGINES}
 
 
 def input_files(options: SimulateOptions) -> list[Path]:
@@ -358,10 +364,12 @@ def input_files(options: SimulateOptions) -> list[Path]:
 
 
 def comparison_table(results: dict[str, SimulateResult]) -> Table:
-    """comparison.csv: one row per controller (the index of CONTROLLERS), the figures of :func:`tracking_metrics`."""
+    """comparison.csv: one row per controller (the index of CONTROLLERS) or per engine (the index of ENGINES), the
+    figures of :func:`tracking_metrics`."""
     table = Table()
-    table.add("controller", np.array([CONTROLLERS.index(k) for k in results], float), "1",
-              "controller: " + ", ".join(f"{i} {k}" for i, k in enumerate(CONTROLLERS)))
+    name, choices = ("controller", CONTROLLERS) if set(results) <= set(CONTROLLERS) else ("engine", ENGINES)
+    table.add(name, np.array([choices.index(k) for k in results], float), "1",
+              f"{name}: " + ", ".join(f"{i} {k}" for i, k in enumerate(choices)))
     for key, unit, what in (("rms_position_mm", "mm", "RMS position error"), ("peak_position_mm", "mm", "peak position error"),
                             ("rms_orientation_deg", "deg", "RMS orientation error"), ("peak_orientation_deg", "deg", "peak orientation error"),
                             ("peak_torque_Nm", "N*m", "peak applied torque"), ("saturated_s", "s", "time in saturation")):
