@@ -182,7 +182,7 @@ def test_forward_accelerations_agree_with_chewbot(target):
     heavier = MujocoPlant(target, mjcf(target, friction=False).replace(f'mass="{target.mandible_mass:.17g}"',
                                                                        f'mass="{1.1 * target.mandible_mass:.17g}"'))
     ddq, _ = _rigid_accelerations(heavier, q[0], dq[0], tau[0], force[0])
-    assert np.max(np.abs(ddq - ours.ddq[0]) / scale) > 1e-3
+    assert np.max(np.abs(ddq - ours.ddq[0]) / scale) > 0.1  # measured 0.9 (X), against 1e-6 above
 
 
 def _home_torques(model) -> np.ndarray:

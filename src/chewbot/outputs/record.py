@@ -118,8 +118,22 @@ def read_record(folder: Path) -> dict:
 
 
 def read_results(folder: Path) -> tuple[dict, Table]:
-    """A results folder read back: run.json (as a dict, :func:`read_record`) and results.csv as a :class:`Table` with
-    its units."""
+    """A results folder read back: run.json (as a dict, :func:`read_record`) and its rows (results.csv, or
+    results.parquet where run.json's ``results_file`` names it) as a :class:`Table` with its units."""
     run = read_record(folder)
     units = {name: c.get("unit", "") for name, c in run.get("columns", {}).items()}
-    return run, Table.read_csv(Path(folder) / "results.csv", units)
+    name = run.get("results_file", "results.csv")
+    if name == "results.parquet":
+        import pyarrow.parquet as pq
+
+        path = Path(folder) / name
+        try:
+            data = pq.read_table(path)
+        except (OSError, ValueError) as exc:
+            raise ChewbotError(f"{path}: cannot read it as Parquet ({exc})") from None
+        table = Table()
+        for field, column in zip(data.schema, data.columns):
+            meta = field.metadata or {}
+            table.add(meta.get(b"name", field.name.encode()).decode(), column.to_numpy(), meta.get(b"unit", b"").decode())
+        return run, table
+    return run, Table.read_csv(Path(folder) / name, units)
