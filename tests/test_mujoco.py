@@ -91,6 +91,23 @@ def test_mjcf_file_from_the_command_line(tmp_path):
     assert again.exit_code == 5  # exists: never replaced without --force
 
 
+def test_sixrss_rigid_accelerations_agree_with_chewbot():
+    """The 6RSS (no HKPs, no contacts): its MJCF has the model's total mass, and MuJoCo's rigid accelerations equal
+    chewbot's forward dynamics to 1e-6 of their largest magnitude at states of its default task."""
+    sixrss = load_model("6rss")
+    rods = sixrss.coupler_density * sixrss.coupler_area * sixrss.coupler_length
+    plant = MujocoPlant(sixrss, mjcf(sixrss, friction=False))
+    assert mujoco.mj_getTotalmass(plant.mj) == pytest.approx(sixrss.mandible_mass + sixrss.crank_mass.sum() + rods.sum(), rel=1e-12)
+    assert plant.mj.npair == 0
+    q, dq, tau, force = _task_states(sixrss, 8, seed=3)
+    ours = forward_dynamics(sixrss, q, dq, tau, force)
+    scale = np.abs(ours.ddq).max(axis=0)
+    for k in range(8):
+        ddq, N = _rigid_accelerations(plant, q[k], dq[k], tau[k], force[k])
+        assert N.size == 0
+        np.testing.assert_allclose(ddq, ours.ddq[k], rtol=0, atol=1e-6 * scale.max())
+
+
 def _task_states(model, n: int, seed: int = 0):
     """States, torques and bite forces along the default task: the torques of chewbot's inverse dynamics there, so that
     both condyles stay pressed (N > 0: MuJoCo's contacts are unilateral)."""
@@ -150,7 +167,8 @@ def _rigid_accelerations(plant: MujocoPlant, q, dq, tau, force):
     d.qpos[:] = qpos
     mujoco.mj_forward(mj, d)
     d.qacc[:] = solution[:nv]
-    return plant.accelerations(), -solution[-2:]  # the two contact rows come after the 18 of the loops
+    contacts = -solution[nv + 18:]  # the contact rows come after the 18 of the loops
+    return plant.accelerations(), contacts
 
 
 def test_forward_accelerations_agree_with_chewbot(target):
