@@ -36,7 +36,7 @@ from chewbot.table import CsvWriter, Table, read_csv_chunks
 RESULTS_FILE = "results.csv"
 RECORD_FILE = "run.json"
 # The formats of a results folder's rows: the file each writes. Parquet (pyarrow, columnar, float64 as computed, no
-# text conversion) has the columns of results.csv, named as its header cells (`tau1 [N*m]`), each field's unit and
+# text conversion, plain encoding, uncompressed) has the columns of results.csv, named as its header cells (`tau1 [N*m]`), each field's unit and
 # description in the field's metadata and the table of units in the schema's metadata (key ``chewbot_units``).
 RESULTS_FILES = {"csv": RESULTS_FILE, "parquet": "results.parquet"}
 # rows per Parquet row group: large enough for columnar compression, small enough to read a run back in chunks
@@ -67,7 +67,9 @@ class ParquetWriter:
 
         if self._writer is None:
             self._schema_ = self._schema(table)
-            self._writer = pq.ParquetWriter(self.path, self._schema_, compression="snappy")
+            # float64 results are noise to a dictionary and barely compress: encoding them plainly writes a million
+            # rows of 61 columns about 5 times faster than the defaults (dictionary, snappy) at ~the same size
+            self._writer = pq.ParquetWriter(self.path, self._schema_, compression="none", use_dictionary=False)
         columns = [pa.array(np.ascontiguousarray(v, dtype=float)) for v in table.columns.values()]
         self._writer.write_table(pa.Table.from_arrays(columns, schema=self._schema_), row_group_size=PARQUET_ROW_GROUP)
 
