@@ -401,9 +401,12 @@ def long_cycles(samples: int) -> int:
     return max(1, round((samples - 1001) / 800))
 
 
+LONG_PARQUET = "hessian, --format parquet --no-figures --no-report"
+
+
 def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]:
     """Each method (default: every formulation) on default tasks of ``sizes`` samples (more chewing cycles), figures
-    and report included."""
+    and report included; and the Hessian method as a batch run (:data:`LONG_PARQUET`)."""
     import json
 
     from chewbot.dynamics.registry import METHODS
@@ -412,13 +415,16 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
 
     step = progress or (lambda msg: None)
     out = []
+    # each method with all outputs, and the Hessian method as a batch run writes it: results.parquet, no drawings
+    cases = [(method, method, ()) for method in methods] + [
+        (LONG_PARQUET, "hessian", ("--format", "parquet", "--no-figures", "--no-report"))]
     with tempfile.TemporaryDirectory() as tmp:
         for samples in sizes:
-            for method in methods:
-                step(f"{method}, {samples} samples")
+            for label, method, extra in cases:
+                step(f"{label}, {samples} samples")
                 folder = Path(tmp) / "run"
                 command = _chewbot("run", "--method", method, "--set", f"task.cycles={long_cycles(samples)}", "--out", str(folder),
-                                   "--force", "-q", "--allow-violations")
+                                   "--force", "-q", "--allow-violations", *extra)
                 t0 = time.perf_counter()
                 process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 _, status, usage = os.wait4(process.pid, 0)
@@ -428,7 +434,7 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
                     raise RuntimeError(f"{' '.join(command)} ended with {process.returncode}")
                 record = json.loads((folder / "run.json").read_text())
                 stages = sum(v for k, v in record["timings"].items())
-                out.append(LongRun(method, record["task"]["samples"], wall, stages, usage.ru_maxrss / 1024))
+                out.append(LongRun(label, record["task"]["samples"], wall, stages, usage.ru_maxrss / 1024))
     return out
 
 
@@ -611,7 +617,7 @@ def _export_table(compiler: str, timings: list[Timing]) -> list[str]:
 
 
 def _long_table(runs: list[LongRun]) -> list[str]:
-    lines = ["Long tasks (`chewbot run --set task.cycles=N`, figures and report included): the time per sample of the "
+    lines = ["Long tasks (`chewbot run --set task.cycles=N`, figures and report included unless the method says otherwise): the time per sample of the "
              "stages that grow with the task (run.json's timings), the whole wall time, the peak memory:", "",
              "| method | samples | per sample (us) | wall (s) | peak memory (MB) |", "|---|---|---|---|---|"]
     lines += [f"| {r.method} | {r.samples} | {r.per_sample_us:.3g} | {r.wall_s:.1f} | {r.peak_mb:.0f} |" for r in runs]
