@@ -442,3 +442,29 @@ def test_a_results_folder_carries_its_model_and_task_and_is_redrawn_elsewhere(ta
     assert result.exit_code == 0, result.output
     copied, read = read_task_csv(again / "task.csv"), read_task_csv(moved / "results.csv")
     assert np.array_equal(copied.q, read.q) and np.array_equal(copied.dq, read.dq) and np.array_equal(copied.force, read.force)
+def test_parquet_results_hold_the_csv_columns_and_values_with_units_in_the_schema(task_csv, tmp_path):
+    """--format parquet: results.parquet instead of results.csv, the same columns (header cells as names) and the same
+    float64 values (CSV writes each float in its shortest exact form: the two read back equal), units and descriptions
+    in the schema's metadata; chewbot report redraws from it."""
+    import pyarrow.parquet as pq
+
+    csv_out, pq_out = tmp_path / "csv", tmp_path / "parquet"
+    assert invoke("run", "--task", str(task_csv), "--quiet", "--out", str(csv_out)).exit_code == 0
+    result = invoke("run", "--task", str(task_csv), "--format", "parquet", "--quiet", "--no-report", "--no-figures", "--out", str(pq_out))
+    assert result.exit_code == 0, result.output
+    assert not (pq_out / "results.csv").exists() and (pq_out / "results.parquet").is_file()
+    run_csv, table_csv = read_results(csv_out)
+    run_pq, table_pq = read_results(pq_out)
+    assert run_pq["results_file"] == "results.parquet"
+    assert list(table_pq.columns) == list(table_csv.columns) and table_pq.units == table_csv.units
+    for name in table_csv.columns:
+        np.testing.assert_array_equal(table_pq[name], table_csv[name], err_msg=name)
+    header = (csv_out / "results.csv").read_text().splitlines()[0].split(",")
+    schema = pq.read_schema(pq_out / "results.parquet")
+    assert schema.names == header
+    assert json.loads(schema.metadata[b"chewbot_units"]) == table_csv.units
+    tau1 = schema.field("tau1 [N*m]")
+    assert tau1.metadata[b"unit"] == b"N*m" and tau1.metadata[b"description"]
+    redrawn = invoke("report", str(pq_out))
+    assert redrawn.exit_code == 0, redrawn.output
+    assert (pq_out / "report.html").is_file()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import typer
 
-from chewbot.commands import bench, cache, estimate_force, export_c, export_controller, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
+from chewbot.commands import bench, cache, estimate_force, export_c, export_controller, export_model, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
 from chewbot.commands.common import stdout
 
 app = typer.Typer(
@@ -65,6 +65,7 @@ app.command("report")(report.report_command)
 app.command("bench")(bench.bench)
 app.command("export-c")(export_c.export_c)
 app.command("export-controller")(export_controller.export_controller)
+app.command("export-model")(export_model.export_model)
 app.command("study")(study.study)
 app.command("track-incisor")(track_incisor.track_incisor)
 app.command("import-motion")(import_motion.import_motion)

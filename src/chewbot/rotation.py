@@ -105,7 +105,8 @@ def R_omega(angles: np.ndarray) -> np.ndarray:
     )
 
 
-def _R_omega_dot(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+def R_omega_dot(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """(N, 3) XYZ angles and their rates -> (N, 3, 3) the time derivative of :func:`R_omega`."""
     a, b = angles[:, 0], angles[:, 1]
     da, db = rates[:, 0], rates[:, 1]
     z = np.zeros_like(a)
@@ -194,7 +195,7 @@ def euler_angles_to_parameters(angles, rates, accels):
     e = euler_parameters_from_matrix(matrix_from_euler_angles(angles))
     Rw = R_omega(angles)
     omega = np.einsum("nij,nj->ni", Rw, rates)
-    omega_dot = np.einsum("nij,nj->ni", Rw, accels) + np.einsum("nij,nj->ni", _R_omega_dot(angles, rates), rates)
+    omega_dot = np.einsum("nij,nj->ni", Rw, accels) + np.einsum("nij,nj->ni", R_omega_dot(angles, rates), rates)
     Et = np.swapaxes(E_matrix(e), 1, 2)
     e_dot = 0.5 * np.einsum("nij,nj->ni", Et, omega)
     e_ddot = 0.5 * np.einsum("nij,nj->ni", Et, omega_dot) - np.sum(e_dot**2, axis=1, keepdims=True) * e
@@ -214,5 +215,5 @@ def euler_parameters_to_angles(e, e_dot, e_ddot, times=None):
     omega_dot = 2 * np.einsum("nij,nj->ni", E, e_ddot)  # E_dot e_dot = 0 identically
     Rw = R_omega(angles)
     rates = np.linalg.solve(Rw, omega[..., None])[..., 0]
-    accels = np.linalg.solve(Rw, (omega_dot - np.einsum("nij,nj->ni", _R_omega_dot(angles, rates), rates))[..., None])[..., 0]
+    accels = np.linalg.solve(Rw, (omega_dot - np.einsum("nij,nj->ni", R_omega_dot(angles, rates), rates))[..., None])[..., 0]
     return angles, rates, accels

@@ -327,8 +327,8 @@ def _repeat(fn, n: int) -> None:
 
 def bench_export(calls: int = 200000, repeats: int = 7) -> tuple[str, list[Timing]]:
     """The exported C (:func:`chewbot.export.c.export_c`) built by its own Makefile and its example program run
-    ``repeats`` times with ``calls`` calls of each kernel: (the compiler and flags, a timing per kernel, in ns per
-    call)."""
+    ``repeats`` times with ``calls`` calls of each kernel, pinned to one core: (the compiler and flags, a timing per
+    kernel, in ns per call, with the median, p99 and maximum of single calls)."""
     from chewbot.compiled.kernels import c_compiler
     from chewbot.export.c import export_c
     from chewbot.model.params import load_model
@@ -342,14 +342,39 @@ def bench_export(calls: int = 200000, repeats: int = 7) -> tuple[str, list[Timin
         subprocess.run(["make", "-s", "-C", str(folder), "example"], check=True, capture_output=True, env={**os.environ, "CC": cc})
         flags = (folder / "Makefile").read_text().split("CFLAGS ?= ", 1)[1].splitlines()[0]
         runs: dict[str, list[float]] = {}
+        singles: dict[str, list[tuple[float, float, float]]] = {}
         for _ in range(repeats):
-            out = subprocess.run([str(folder / "example"), str(calls)], check=True, capture_output=True, text=True).stdout
+            out = subprocess.run([str(folder / "example"), str(calls)], check=True, capture_output=True, text=True,
+                                 preexec_fn=_pin_to_one_core).stdout
             for line in out.splitlines():
                 if line.startswith("time "):
-                    _, name, ns, _ = line.split()
-                    runs.setdefault(name, []).append(float(ns))
+                    # time NAME MEAN ns/call median MEDIAN p99 P99 max MAX
+                    words = line.split()
+                    runs.setdefault(words[1], []).append(float(words[2]))
+                    singles.setdefault(words[1], []).append((float(words[5]), float(words[7]), float(words[9])))
     version = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
-    return f"{version}, {flags}", [Timing(name, tuple(values)) for name, values in runs.items()]
+    return f"{version}, {flags}", [ExportTiming(name, tuple(values), single=single_calls(singles[name])) for name, values in runs.items()]
+
+
+def _pin_to_one_core() -> None:
+    """Run the example program on one core, the last this process may use (no migration between cores)."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {max(os.sched_getaffinity(0))})
+
+
+@dataclass(frozen=True)
+class ExportTiming(Timing):
+    """A kernel of the exported C: the mean time per call of each run (ns, :class:`Timing`) and ``single``, the
+    median, 99th percentile and maximum of its single calls (ns): the median over the runs of each run's median
+    and 99th percentile, the largest of the maxima."""
+
+    single: tuple[float, float, float] = (np.nan, np.nan, np.nan)
+
+
+def single_calls(per_run: list[tuple[float, float, float]]) -> tuple[float, float, float]:
+    """Median, p99, maximum over runs of the single calls' (median, p99, max) of each run."""
+    a = np.array(per_run)
+    return float(np.median(a[:, 0])), float(np.median(a[:, 1])), float(a[:, 2].max())
 
 
 # --- the exported controller step --------------------------------------------------------------------------
@@ -440,9 +465,12 @@ def long_cycles(samples: int) -> int:
     return max(1, round((samples - 1001) / 800))
 
 
+LONG_PARQUET = "hessian, --format parquet --no-figures --no-report"
+
+
 def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]:
     """Each method (default: every formulation) on default tasks of ``sizes`` samples (more chewing cycles), figures
-    and report included."""
+    and report included; and the Hessian method as a batch run (:data:`LONG_PARQUET`)."""
     import json
 
     from chewbot.dynamics.registry import METHODS
@@ -451,13 +479,16 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
 
     step = progress or (lambda msg: None)
     out = []
+    # each method with all outputs, and the Hessian method as a batch run writes it: results.parquet, no drawings
+    cases = [(method, method, ()) for method in methods] + [
+        (LONG_PARQUET, "hessian", ("--format", "parquet", "--no-figures", "--no-report"))]
     with tempfile.TemporaryDirectory() as tmp:
         for samples in sizes:
-            for method in methods:
-                step(f"{method}, {samples} samples")
+            for label, method, extra in cases:
+                step(f"{label}, {samples} samples")
                 folder = Path(tmp) / "run"
                 command = _chewbot("run", "--method", method, "--set", f"task.cycles={long_cycles(samples)}", "--out", str(folder),
-                                   "--force", "-q", "--allow-violations")
+                                   "--force", "-q", "--allow-violations", *extra)
                 t0 = time.perf_counter()
                 process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 _, status, usage = os.wait4(process.pid, 0)
@@ -467,7 +498,7 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
                     raise RuntimeError(f"{' '.join(command)} ended with {process.returncode}")
                 record = json.loads((folder / "run.json").read_text())
                 stages = sum(v for k, v in record["timings"].items())
-                out.append(LongRun(method, record["task"]["samples"], wall, stages, usage.ru_maxrss / 1024))
+                out.append(LongRun(label, record["task"]["samples"], wall, stages, usage.ru_maxrss / 1024))
     return out
 
 
@@ -642,15 +673,18 @@ def _loop_table(timings: dict[str, Timing]) -> list[str]:
 
 
 def _export_table(compiler: str, timings: list[Timing]) -> list[str]:
-    lines = [f"Exported C, one call (its example program, {compiler}):", "", "| kernel | ns per call |", "|---|---|"]
+    lines = [f"Exported C, one call (its example program, {compiler}; single calls timed one by one, each with a clock "
+             "reading):", "", "| kernel | ns per call (mean of a loop) | single call: median (ns) | p99 (ns) | max (ns) |",
+             "|---|---|---|---|---|"]
     for t in timings:
         q1, q3 = t.spread
-        lines.append(f"| {t.label} | {t.median:.0f} ({q1:.0f}–{q3:.0f}) |")
+        med, p99, top = t.single
+        lines.append(f"| {t.label} | {t.median:.0f} ({q1:.0f}–{q3:.0f}) | {med:.0f} | {p99:.0f} | {top:.0f} |")
     return lines + [""]
 
 
 def _long_table(runs: list[LongRun]) -> list[str]:
-    lines = ["Long tasks (`chewbot run --set task.cycles=N`, figures and report included): the time per sample of the "
+    lines = ["Long tasks (`chewbot run --set task.cycles=N`, figures and report included unless the method says otherwise): the time per sample of the "
              "stages that grow with the task (run.json's timings), the whole wall time, the peak memory:", "",
              "| method | samples | per sample (us) | wall (s) | peak memory (MB) |", "|---|---|---|---|---|"]
     lines += [f"| {r.method} | {r.samples} | {r.per_sample_us:.3g} | {r.wall_s:.1f} | {r.peak_mb:.0f} |" for r in runs]

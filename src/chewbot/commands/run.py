@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import Enum
 from pathlib import Path
 
 import typer
@@ -12,6 +13,11 @@ from chewbot.commands.common import (FORCE_HELP, PROGRESS_DELAY_S, SET_HELP, che
 from chewbot.dynamics.options import Contact, Goal
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.run.options import Switch
+
+
+class ResultsFormat(str, Enum):
+    csv = "csv"
+    parquet = "parquet"
 
 
 def run(
@@ -30,10 +36,11 @@ def run(
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help=SET_HELP),
     no_figures: bool = flag("--no-figures", help="Write no PNG figures (chewbot report DIR draws them later)."),
     no_report: bool = flag("--no-report", help="Write no report.html (chewbot report DIR writes it later)."),
+    format_: ResultsFormat = typer.Option(ResultsFormat.csv, "--format", help="The rows' file: csv (results.csv, units in the header) or parquet (results.parquet: the same columns as float64, named 'name [unit]', units and descriptions in the schema's metadata; faster for long tasks)."),
 ) -> None:
     """Compute the kinematics and inverse dynamics of a task, check every sample, and write a results folder.
 
-    Writes results.csv (one row per sample, SI units in the header; torques tau1..tau6 and inertia coupling
+    Writes results.csv (or results.parquet with --format parquet; one row per sample, SI units in the header; torques tau1..tau6 and inertia coupling
     MCI1..MCI6 included), run.json (model, options, versions, units, the validity checks), figures and report.html.
     The folder is always written in full; the exit code is then 4 if a validity check failed (torque, power or
     bearing limits, crank range, speed, an infeasible distribution, and under --contact unilateral a normal force
@@ -57,6 +64,8 @@ def run(
       chewbot run --set chains.crank_length_mm[3]=12 --set task.force_z_N=-100 --out runs/longer-crank
 
       chewbot run --task long_recording.csv --no-figures --no-report --out runs/batch
+
+      chewbot run --task long_recording.csv --format parquet --no-figures --out runs/batch-parquet
     """
     from chewbot.files import RESULTS_FOLDER, check_output
     from chewbot.run.options import resolve
@@ -71,7 +80,7 @@ def run(
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:
             done = write_run(options, out, force=force, progress=step, figures=not no_figures, report=not no_report,
-                                 check=check_interrupted)
+                                 check=check_interrupted, format=format_.value)
     if not quiet:
         _print_run_summary(done, out)
     exit_after_checks(done.checks, allow_violations, quiet)

@@ -36,6 +36,12 @@ def _controller(value: str) -> str:
     return value
 
 
+def _engine(value: str) -> str:
+    if value not in ("chewbot", "mujoco"):
+        raise typer.BadParameter(f"{value!r} is not a plant engine; choose chewbot or mujoco")
+    return value
+
+
 def simulate(
     controller: str = typer.Option("computed-torque", "--controller", callback=_controller, help="feedforward (the inverse dynamics of the reference, no feedback), pd (independent PD on the crank angles), computed-torque (inverse dynamics at the measured state with PD on the independent coordinates), impedance (springs and dampers in the molar point's x, y, z [N/m, N*s/m] and alpha [N*m/rad] around the reference, on top of the inverse dynamics) or hybrid (with --food: position control until the observed force passes hybrid.threshold_N, then force control along z following the task's Fz [N]; docs/bite_force.md)."),
     compare: bool = typer.Option(False, "--compare", help="Run feedforward, pd and computed-torque on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
@@ -45,13 +51,15 @@ def simulate(
     method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of the model-based controllers (feedforward, computed-torque): hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles). Default: hessian."),
     goal: str | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: the distribution of the redundant torques (min-torque, min-coupler-force, min-hkp-force). Default: min-torque."),
     friction: str = typer.Option("off", "--friction", help="on|off: HKP and actuator friction in the plant (the model's coefficients); the controller's model has it only with --method newton-euler."),
-    contact: str = typer.Option("bilateral", "--contact", help="bilateral|unilateral: whether the contact-pull check (the plant's N_L, N_R < 0, or below contact.preload_N) fails the run (unilateral) or is reported (bilateral). The plant keeps both contacts closed either way."),
+    contact: str = typer.Option("bilateral", "--contact", help="bilateral|unilateral: whether the contact-pull check (the plant's N_L, N_R < 0, or below contact.preload_N) fails the run (unilateral) or is reported (bilateral). chewbot's plant keeps both contacts closed either way; MuJoCo's (--plant-engine mujoco) are unilateral."),
     rate: str = typer.Option("1000", "--rate", callback=_rate, help="Control rate in Hz (torques held between ticks), or 'continuous': the controller evaluated at every integrator stage, rows at the task's samples (for verification)."),
     noise: float = typer.Option(0.0, "--noise", min=0.0, help="Standard deviation (rad) of Gaussian noise on the measured crank angles; the controller then gets its state from an estimator (docs/simulation.md). 0: it sees the plant's state."),
     seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
     sensor: str | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
     exported: bool = typer.Option(False, "--exported", help="Run the controller as the exported C step (chewbot export-controller), compiled and called through ctypes at each tick (pd or computed-torque, --sensor measured); run.json records how far its torques are from the Python controller's on the same ticks (N m)."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not the controller's (built-in name or TOML file)."),
+    plant_engine: str = typer.Option("chewbot", "--plant-engine", callback=_engine, help="What simulates the plant's model: chewbot (its Newton-Euler equations, Radau IIA) or mujoco (MuJoCo's simulation of the model's MJCF, as chewbot export-model writes it; steps of 0.1 ms, unilateral condyle contacts; docs/mujoco.md). Needs a control rate in Hz."),
+    compare_engines: bool = typer.Option(False, "--compare-engines", help="Simulate the controller on both engines (chewbot and mujoco), each into OUT/ENGINE/, and print one table; the comparison's report.html shows both side by side."),
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
     bite_unknown: bool = typer.Option(False, "--bite-unknown", help="The bite force acts on the plant but the controller's inverse dynamics does not know it."),
@@ -66,7 +74,7 @@ def simulate(
     """Simulate the robot driven by a controller along a task, and write a results folder.
 
     The plant (the Newton-Euler model, with friction if --friction on) is integrated by a compiled Radau IIA
-    method in its independent coordinates; the controller runs at --rate with its own model (--model, --set),
+    method in its independent coordinates, or simulated by MuJoCo (--plant-engine mujoco); the controller runs at --rate with its own model (--model, --set),
     which may differ from the plant's (--plant, --plant-set). Torques are saturated at limits.torque_Nm. Writes
     results.csv (the simulated motion, applied and commanded torques, reference, tracking error, N_L, N_R,
     constraint drift; units in the header), run.json (options, both models, checks, tracking), figures and
@@ -88,6 +96,10 @@ def simulate(
       chewbot simulate --controller hybrid --food cheddar --task bite.csv --out runs/hybrid
 
       chewbot simulate --controller computed-torque --exported --out runs/ct-c
+
+      chewbot simulate --plant-engine mujoco --contact unilateral --out runs/ct-mujoco
+
+      chewbot simulate --compare-engines --contact unilateral --out runs/engines
     """
     from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
                                          resolved, set_overrides, stdout)
@@ -101,7 +113,7 @@ def simulate(
                               contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
                               plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set, "--plant-set"),
                               bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides,
-                              food=food, sensor=sensor, exported=exported)
+                              food=food, sensor=sensor, exported=exported, engine=plant_engine)
     if noise > 0 and options.rate is None:
         fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
     if exported and compare:
@@ -110,14 +122,29 @@ def simulate(
         options = options.resolved(controllers=COMPARED if compare else (controller,))
     if controller == "hybrid" and options.rate is None:
         fail(ChewbotError("--controller hybrid switches on the force observer's estimate at the ticks of a control rate: it needs a rate, not --rate continuous"), EXIT_BAD_INPUT)
+    if compare_engines and options.rate is None:
+        fail(ChewbotError("--compare-engines needs a control rate: the MuJoCo plant runs the controller at its ticks, not with "
+                          "--rate continuous"), EXIT_BAD_INPUT)
+    if compare and compare_engines:
+        fail(ChewbotError("--compare and --compare-engines: choose one (controllers on one engine, or one controller on both)"),
+             EXIT_BAD_INPUT)
+    from chewbot.export.mjcf import mjcf
+
     with errors_reported():
         check_output(out, force, SIMULATION_FOLDER, inputs=input_files(options))  # before the work, not after it
-        if compare:
+        if compare_engines:
+            from chewbot.outputs.simulation import write_comparison
+            from chewbot.simulation.run import compare_engines as run_engines
+
+            with progress(quiet, "simulate --compare-engines", total=2 * SIMULATE_STEPS) as step:
+                results = run_engines(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
+                write_comparison(results, out, force=force, progress=step)
+        elif compare:
             from chewbot.outputs.simulation import write_comparison
             from chewbot.simulation.run import compare as run_compare
 
             with progress(quiet, "simulate --compare", total=3 * SIMULATE_STEPS) as step:
-                results = run_compare(options, progress=step, check=check_interrupted)
+                results = run_compare(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
                 write_comparison(results, out, force=force, progress=step)
         else:
             from chewbot.outputs.simulation import write
@@ -127,10 +154,11 @@ def simulate(
             if exported:
                 from chewbot.export.controller import ExportedController as exported_step
             with progress(quiet, "simulate", total=SIMULATE_STEPS + exported) as step:
-                results = {controller: compute(options, progress=step, check=check_interrupted, exported=exported_step)}
+                results = {controller: compute(options, progress=step, check=check_interrupted, exported=exported_step,
+                                                  write_mjcf=mjcf)}
                 write(results[controller], out, force=force, progress=step)
     if not quiet:
-        _print_summary(stdout, results, out, compare)
+        _print_summary(stdout, results, out, compare or compare_engines)
     exit_after_checks([c for r in results.values() for c in r.checks], allow_violations, quiet)
 
 

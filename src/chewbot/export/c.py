@@ -68,7 +68,8 @@ def _example_program(prefix: str, kernels: list[Kernel]) -> str:
         "/* Evaluates each exported kernel once on the sample listed in README.md, prints its outputs and checks them",
         "   against the values chewbot computed in Python for that sample (relative difference at most 1e-9 of the",
         "   output's largest entry: the same graph compiled differs by rounding, ~1e-15; exit code 1 otherwise).",
-        "   With an argument R, also calls each kernel R times and prints the mean time per call. */",
+        "   With an argument R, also calls each kernel R times and prints the mean time per call, then times R single",
+        "   calls and prints their median, 99th percentile and maximum (ns; each includes a clock reading). */",
         "#define _POSIX_C_SOURCE 199309L",
         "#include <math.h>",
         "#include <stdio.h>",
@@ -82,9 +83,16 @@ def _example_program(prefix: str, kernels: list[Kernel]) -> str:
         "  return ts.tv_sec + 1e-9 * ts.tv_nsec;",
         "}",
         "",
+        "static int by_value(const void* a, const void* b) {",
+        "  double x = *(const double*)a, y = *(const double*)b;",
+        "  return (x > y) - (x < y);",
+        "}",
+        "",
         "int main(int argc, char** argv) {",
         "  int failed = 0;",
         "  long repeats = argc > 1 ? atol(argv[1]) : 0;",
+        "  double* calls = repeats > 0 ? malloc((size_t)repeats * sizeof(double)) : NULL;",
+        "  if (repeats > 0 && calls == NULL) { fprintf(stderr, \"out of memory\\n\"); return 1; }",
     ]
     for k in kernels:
         f = k.function
@@ -122,11 +130,15 @@ def _example_program(prefix: str, kernels: list[Kernel]) -> str:
             "    if (repeats > 0) {",
             "      double t0 = now();",
             f"      for (long r = 0; r < repeats; ++r) {n}(arg, res, iw, w, 0);",
-            f'      printf("time {n} %.1f ns/call\\n", 1e9 * (now() - t0) / repeats);',
+            "      double mean = 1e9 * (now() - t0) / repeats;",
+            f"      for (long r = 0; r < repeats; ++r) {{ double s = now(); {n}(arg, res, iw, w, 0); calls[r] = 1e9 * (now() - s); }}",
+            "      qsort(calls, (size_t)repeats, sizeof(double), by_value);",
+            f'      printf("time {n} %.1f ns/call median %.1f p99 %.1f max %.1f\\n", mean, calls[repeats / 2], '
+            "calls[(long)(0.99 * (repeats - 1))], calls[repeats - 1]);",
             "    }",
             "  }",
         ]
-    lines += ["  return failed;", "}", ""]
+    lines += ["  free(calls);", "  return failed;", "}", ""]
     return "\n".join(lines)
 
 

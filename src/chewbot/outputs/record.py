@@ -165,11 +165,25 @@ def read_record(folder: Path) -> dict:
 
 
 def read_results(folder: Path) -> tuple[dict, Table]:
-    """A results folder read back: run.json (as a dict, :func:`read_record`) and results.csv as a :class:`Table` with
-    its units."""
+    """A results folder read back: run.json (as a dict, :func:`read_record`) and its rows (results.csv, or
+    results.parquet where run.json's ``results_file`` names it) as a :class:`Table` with its units."""
     run = read_record(folder)
     units = {name: c.get("unit", "") for name, c in run.get("columns", {}).items()}
-    return run, Table.read_csv(Path(folder) / "results.csv", units)
+    name = run.get("results_file", "results.csv")
+    if name == "results.parquet":
+        import pyarrow.parquet as pq
+
+        path = Path(folder) / name
+        try:
+            data = pq.read_table(path)
+        except (OSError, ValueError) as exc:
+            raise ChewbotError(f"{path}: cannot read it as Parquet ({exc})") from None
+        table = Table()
+        for field, column in zip(data.schema, data.columns):
+            meta = field.metadata or {}
+            table.add(meta.get(b"name", field.name.encode()).decode(), column.to_numpy(), meta.get(b"unit", b"").decode())
+        return run, table
+    return run, Table.read_csv(Path(folder) / name, units)
 
 
 RESULTS_RECORDS = ("chewbot_run", "chewbot_simulation")  # the folders with a results.csv: a run's, a simulation's
@@ -195,10 +209,11 @@ def read_frame(folder: Path):
     if not isinstance(record, dict) or not any(key in record for key in RESULTS_RECORDS):
         raise ChewbotError(f"{path}: not the record of a run or a simulation (no key {' or '.join(RESULTS_RECORDS)}); "
                            "chewbot.read_results reads the folders of chewbot run and chewbot simulate")
+    name = record.get("results_file", "results.csv")
     try:
-        frame = pd.read_csv(folder / "results.csv")
+        frame = pd.read_parquet(folder / name) if name.endswith(".parquet") else pd.read_csv(folder / name)
     except FileNotFoundError:
-        raise ChewbotError(f"{folder}: no results.csv") from None
+        raise ChewbotError(f"{folder}: no {name}") from None
     from chewbot.units import HEADER_CELL
 
     columns = record.get("columns", {})

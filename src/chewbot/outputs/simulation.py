@@ -46,6 +46,8 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path
     step = progress or (lambda msg, stage=None: None)
     copies = copy_inputs(folder, {"model": result.model, "plant": result.plant}, result.task)
     record, view = write_table(folder, result.table, with_copies(simulation_json(result), copies), progress=step)
+    for name, text in result.files.items():  # the MuJoCo plant's model file
+        (folder / name).write_text(text, encoding="utf-8")
     series = view.series
     step("drawing figures")
     drawn = [
@@ -57,7 +59,7 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path
     ]
     step("writing report.html")
     report = write_simulation_report(result, record, view, folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
-    return [folder / RESULTS_FILE, folder / RECORD_FILE, *drawn, report]
+    return [folder / RESULTS_FILE, folder / RECORD_FILE, *(folder / n for n in result.files), *drawn, report]
 
 
 def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
@@ -71,7 +73,8 @@ def write(result: SimulateResult, out: Path, force: bool = False, progress=None)
 
 
 def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool = False, progress=None) -> Path:
-    """The comparison folder: one simulation folder per controller, comparison.csv, the figure, run.json and the report."""
+    """The comparison folder: one simulation folder per controller (or per engine), comparison.csv, the figure, run.json
+    and the report."""
     from chewbot.report.simulation_figures import comparison
     from chewbot.report.simulation_html import write_comparison_report
 
@@ -84,7 +87,8 @@ def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool 
         comparison_table(results).to_csv(tmp / "comparison.csv")
         comparison({k: r.table for k, r in results.items()}, tmp / "comparison.png")
         record = {"chewbot_simulation": SIMULATION_FORMAT, "comparison": {k: r.metrics for k, r in results.items()},
-                  "options": {k: v for k, v in vars(first.options).items() if k != "controller"},
+                  "options": {k: v for k, v in vars(first.options).items() if k not in ("controller", "engine") or
+                              len({getattr(r.options, k) for r in results.values()}) == 1},
                   "folders": {k: k for k in results}}
         (tmp / "run.json").write_text(to_json(record))
         write_comparison_report(results, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))

@@ -46,7 +46,8 @@ def write_simulation_report(result, record: dict, view: RunView, path: Path, fil
     body = [_robots_section(result, view, figures), checks_section(record), _tracking_section({result.options.controller: result}),
             plots_section(view, figures), _run_section(result, files or [])]
     return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",
-                 f"{controller_label(result)} · {result.table.n} rows · plant friction {result.options.friction}", body, figures, path)
+                 f"{controller_label(result)} · {result.table.n} rows · plant {result.options.engine}, friction {result.options.friction}", body,
+                 figures, path)
 
 
 def _robots_section(result, view: RunView, figures: dict) -> str:
@@ -93,16 +94,28 @@ def _tracking_section(results: dict) -> str:
             + html_table(["controller", "coordinate", "RMS", "peak", "unit"], per) + "</section>")
 
 
+def _integrator_text(info: dict, sim) -> str:
+    """The plant's integrator in words: chewbot's Radau IIA, or MuJoCo's solver settings (run.json's plant)."""
+    if "integrator" in info:
+        i = info["integrator"]
+        return (f"{escape(i['method'])}; steps of at most {i['max_step_s'] * 1e3:g} ms, {i['split_steps']} split; largest "
+                f"residual {number(i['largest_residual_Nm'], 3)} N·m")
+    p = info["plant"]
+    settings = ", ".join(f"{escape(k)} {escape(str(v))}" for k, v in p["solver"].items())
+    return (f"MuJoCo {escape(p['mujoco_version'])} (robot.xml): {settings}; largest residual of chewbot's equations at MuJoCo's "
+            f"accelerations {number(float(np.max(sim.residual)), 3)} N·m")
+
+
 def _run_section(result, files: list[str]) -> str:
     o, sim = result.options, result.simulation
     info = result.info["simulation"]
     rows = [["controller", escape(controller_label(result)) + f" on the model {escape(result.model.name)} (<code>{escape(result.model.source)}</code>)"],
-            ["plant", f"{escape(result.plant.name)} (<code>{escape(result.plant.source)}</code>), friction {escape(o.friction)}"
+            ["plant", f"{escape(result.plant.name)} (<code>{escape(result.plant.source)}</code>), simulated by {escape(o.engine)}, "
+                      f"friction {escape(o.friction)}"
              + (f", --plant-set {escape(', '.join(f'{k}={v:g}' for k, v in o.plant_overrides.items()))}" if o.plant_overrides else "")],
             ["bite force", "hidden from the controller (--bite-unknown)" if o.bite_unknown else "known to the controller"],
             ["sensor", f"crank encoders with noise of {o.noise_rad:g} rad (seed {o.seed})" if o.noise_rad else "the plant's state"],
-            ["integrator", f"{escape(info['integrator']['method'])}; steps of at most {info['integrator']['max_step_s'] * 1e3:g} ms, "
-                           f"{info['integrator']['split_steps']} split; largest residual {number(info['integrator']['largest_residual_Nm'], 3)} N·m"],
+            ["integrator", _integrator_text(info, sim)],
             ["task", f"{escape(result.task.name)} from <code>{escape(result.task.source)}</code>, {sim.n} rows over {sim.t[-1] - sim.t[0]:.4g} s"],
             ["timings", ", ".join(f"{escape(k)} {v:.3g} s" for k, v in result.info.get("timings", {}).items())]]
     if files:
@@ -117,14 +130,15 @@ def write_comparison_report(results: dict, path: Path, files: list[str] | None =
     first = next(iter(results.values()))
     links = ", ".join(f'<a href="{escape(c)}/report.html">{escape(c)}</a>' for c in results)
     body = [_tracking_section(results),
-            '<section id="plots"><h2>Tracking error of the controllers</h2><p class="note">The norm of the translational errors '
-            f"(mm) against time, each controller until it was stopped. Each controller's report: {links}.</p>"
+            '<section id="plots"><h2>Tracking error compared</h2><p class="note">The norm of the translational errors '
+            f"(mm) against time, each simulation until it was stopped. Each simulation's report: {links}.</p>"
             '<div id="errors" class="plot" style="height: 420px"></div></section>']
     if files:
         listed = ", ".join(f'<a href="{escape(f)}">{escape(f)}</a>' for f in files)
         body.append(f'<section id="run"><h2>Files</h2><p>{listed}</p></section>')
-    return _page(f"chewbot simulation: controllers compared on {first.plant.name}, {first.task.name}",
-                 f"plant friction {first.options.friction} · {len(results)} controllers", body, figures, path,
+    what = "controllers" if len({r.options.controller for r in results.values()}) > 1 else "plants' engines"
+    return _page(f"chewbot simulation: {what} compared on {first.plant.name}, {first.task.name}",
+                 f"plant friction {first.options.friction} · {len(results)} {what}", body, figures, path,
                  nav=(("summary", "Tracking"), ("plots", "Errors"), ("run", "Files")))
 
 

@@ -139,6 +139,31 @@ def workspace_margin_sx(m, kinematics: dict) -> ca.SX:
 FORWARD_OUTPUTS = {"target": ("ddq", "N", "residual"), "6rss": ("ddq", "residual")}
 
 
+def forward_data_function(params: SymbolicModel) -> ca.Function:
+    """The sample's Newton-Euler data D (:func:`chewbot.dynamics.newton_euler.coefficients_kernel`) split into what
+    does not depend on the accelerations and what multiplies them: (q, dq, B, F_B, p) -> D0, Dq with
+    D(q_ddot) = D0 + Dq q_ddot exactly (the bodies' accelerations are affine in q_ddot; checked when built). The
+    whole cost of the kinematics and of the bodies' equations is here, once per sample."""
+
+    def build():
+        m = params
+        extra, names = parameter_input(m)
+        n = n_coordinates(m.mechanism)
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+        B, F = ca.SX.sym("B", 3), ca.SX.sym("F_B", 3)
+        kin = kinematics_kernel(m.mechanism, ORIENTATION).graph(params)
+        theta = kin(q, dq, ca.SX.zeros(n), *extra)[KINEMATICS_OUTPUTS.index("theta")]
+        D = coefficients_kernel(m.mechanism, ORIENTATION).graph(params)(theta, q, dq, ddq, F, B, *extra)[0]
+        Dq = ca.jacobian(D, ddq)
+        if ca.depends_on(Dq, ddq):
+            raise AssertionError("the Newton-Euler data are not affine in the accelerations")
+        D0 = ca.substitute(D, ddq, ca.SX.zeros(n))
+        return ca.Function("forward_data", [q, dq, B, F, *extra], [D0, Dq], ["q", "dq", "B", "F_B", *names],
+                           ["D0", "Dq"], {"cse": True})
+
+    return cached_graph(params, ("forward-data",), build)
+
+
 def forward_kernel(mechanism: str) -> KernelSpec:
     """Per-sample forward dynamics (q, dq, tau, B, F_B, friction, p) -> q_ddot, N (target only), residual.
 
@@ -147,45 +172,67 @@ def forward_kernel(mechanism: str) -> KernelSpec:
     coefficients). q_ddot (m/s^2, rad/s^2), N = (N_L, N_R) (N) the normal forces of the planes on the condyles,
     residual = max abs(tau_NE - tau) at the answer (N m; rounding when the Newton iteration converged). No p for a
     model (its numbers folded in, as ``chewbot export-c`` writes it).
+
+    The kinematics and the bodies' equations are evaluated once (:func:`forward_data_function`: D = D0 + Dq q_ddot);
+    the Newton iteration then works on the torques of D0 + Dq q_ddot and N (:func:`chewbot.dynamics.newton_euler.forces_sx`),
+    a small graph: without friction one step from 0 is exact, with it each step and each trial of its step length
+    costs a few hundred operations.
     """
     name = f"forward_{c_name(mechanism)}"
 
     def build(params):
+        m = params
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
+        data = forward_data_function(params)
+        nD = data.size1_out(0)
+        # the residual of the torques given D0, Dq: r(z) = tau_NE(D0 + Dq z[:n], z[n:]) - tau
+        # Dq keeps its sparsity (166 of 624 entries on the target): most of D does not depend on the accelerations
+        D0s, Dqs, zs = ca.SX.sym("D0", nD), ca.SX.sym("Dq", data.sparsity_out(1)), ca.SX.sym("z", n + nN)
+        taus, fls = ca.SX.sym("tau", 6), ca.SX.sym("friction")
+        ps, _ = parameter_input(m)  # [p] where the model's numbers are an input, [] where they are folded in
+        r = forces_sx(m, D0s + ca.mtimes(Dqs, zs[:n]), zs[n:], fls)["tau"] - taus
+        residual = ca.Function("forward_residual_of_data", [zs, D0s, Dqs, taus, fls, *ps], [r], {"cse": True})
+        step = ca.Function("forward_newton_step", [zs, D0s, Dqs, taus, fls, *ps], [r, -ca.solve(ca.jacobian(r, zs), r)],
+                           {"cse": True})
+
         R = residual_function(params)
-        x = [ca.SX.sym(R.name_in(i), R.sparsity_in(i)) for i in range(R.n_in())]
-        r = R.call(x)[0]
-        newton_step = ca.Function("forward_newton_step", x, [r, -ca.solve(ca.jacobian(r, ca.vertcat(x[2], x[3])), r)],
-                                  {"cse": True})
-        # one MX graph calling the residual and the Newton step as functions: each is compiled once, not per iteration
         q, dq, tau, B, F, fl = (ca.MX.sym(R.name_in(i), R.sparsity_in(i)) for i in (0, 1, 4, 5, 6, 7))
         extra = [ca.MX.sym("p", R.sparsity_in(8))] if R.n_in() > 8 else []
+        D0, Dq = data(q, dq, B, F, *extra)
 
-        args = [q, dq, tau, B, F, fl, *extra]
-
-        def residual(z, q, dq, tau, B, F, fl, *extra):
-            return R(q, dq, z[:n], z[n:], tau, B, F, fl, *extra)
-
-        # One safeguarded Newton step as a function of (z, r, inputs) -> (z, r), skipped at run time once the residual
-        # is below TOLERANCE (a Switch: the C code evaluates only the branch taken): without friction the start is
-        # exact and no step runs; with it, as many as Newton needs.
-        zs, rs = ca.MX.sym("z", n + nN), ca.MX.sym("r", 6)
-        xs = [ca.MX.sym(a.name(), a.sparsity()) for a in args]
-        step = newton_step(xs[0], xs[1], zs[:n], zs[n:], *xs[2:])[1]
-        best, best_r = zs + step, residual(zs + step, *xs)
-        for k in range(1, HALVINGS):  # the trial step with the smallest residual (the full step where Newton converges)
-            trial = zs + 0.5**k * step
-            r_trial = residual(trial, *xs)
+        # One safeguarded Newton step as a function of (z, r, data) -> (z, r), skipped at run time once the residual is
+        # below TOLERANCE (a Switch: the C code evaluates only the branch taken).
+        z_, r_, D0_, Dq_, tau_, fl_ = (ca.MX.sym(nm, sp) for nm, sp in (("z", ca.Sparsity.dense(n + nN, 1)), ("r", ca.Sparsity.dense(6, 1)),
+                                                                        ("D0", ca.Sparsity.dense(nD, 1)), ("Dq", data.sparsity_out(1)),
+                                                                        ("tau", ca.Sparsity.dense(6, 1)), ("friction", ca.Sparsity.dense(1, 1))))
+        p_ = [ca.MX.sym("p", x.sparsity()) for x in extra]
+        data_ = [D0_, Dq_, tau_, fl_, *p_]
+        full = step(z_, *data_)[1]
+        z_full = z_ + full
+        r_full = residual(z_full, *data_)
+        # the shorter trials (steps 1/2, ..., 1/2^(HALVINGS - 1)) only where the full step did not lower the residual:
+        # the trial with the smallest residual, the full step included
+        zf_, rf_, s_ = ca.MX.sym("z_full", n + nN), ca.MX.sym("r_full", 6), ca.MX.sym("step", n + nN)
+        best, best_r = zf_, rf_
+        for k in range(1, HALVINGS):
+            trial = z_ + 0.5**k * s_
+            r_trial = residual(trial, *data_)
             better = ca.sumsqr(r_trial) < ca.sumsqr(best_r)
             best, best_r = ca.if_else(better, trial, best), ca.if_else(better, r_trial, best_r)
-        correct = ca.Function("forward_correct", [zs, rs, *xs], [best, best_r])
-        keep = ca.Function("forward_keep", [zs, rs, *xs], [zs, rs])
+        trial_ins = [z_, zf_, rf_, s_, *data_]
+        shorter = ca.Function("forward_shorter", trial_ins, [best, best_r])
+        accept = ca.Function("forward_accept", trial_ins, [zf_, rf_])
+        choose = ca.Function.if_else("forward_choose", accept, shorter)
+        z_next, r_next = choose(ca.sumsqr(r_full) < ca.sumsqr(r_), z_, z_full, r_full, full, *data_)
+        ins = [z_, r_, *data_]
+        correct = ca.Function("forward_correct", ins, [z_next, r_next])
+        keep = ca.Function("forward_keep", ins, [z_, r_])
         iteration = ca.Function.if_else("forward_iteration", keep, correct)
         # without friction r is affine in z: one step from 0 is exact; with it, Newton from there
-        z = newton_step(q, dq, ca.MX.zeros(n), ca.MX.zeros(nN), tau, B, F, 0, *extra)[1]
-        r = residual(z, *args)
+        z = step(ca.MX.zeros(n + nN), D0, Dq, tau, 0, *extra)[1]
+        r = residual(z, D0, Dq, tau, fl, *extra)
         for _ in range(NEWTON_ITERATIONS):
-            z, r = iteration(ca.norm_inf(r) <= TOLERANCE, z, r, *args)
+            z, r = iteration(ca.norm_inf(r) <= TOLERANCE, z, r, D0, Dq, tau, fl, *extra)
         res = ca.norm_inf(r)
         outs = [z[:n], z[n:], res] if nN else [z[:n], res]
         return ca.Function(name, [q, dq, tau, B, F, fl, *extra], outs,

@@ -171,6 +171,13 @@ class Plant:
         ``states`` the rows' :attr:`PlantState.food`."""
         return force, None
 
+    def forward(self, q, dq, tau, force):
+        """The accelerations and normal forces at states (q, dq) (N, n) under torques (N, 6) and bite forces (N, 3)
+        (:func:`chewbot.simulation.forward.forward_dynamics` on the plant's model, side and friction)."""
+        from chewbot.simulation.forward import forward_dynamics
+
+        return forward_dynamics(self.model, q, dq, tau, force, self.side, self.friction)
+
     def _interval(self, fn, s, state: PlantState, h: float, stage_data, depth: int) -> PlantState:
         q1, v1, z1, res, theta, dtheta, margin = fn(state.q, state.dq, state.z, stage_data(state.t, h), self.step_shared(s, state), h)
         if res[0] <= TOLERANCE or not margin[0] > 0:  # converged, or ended outside the workspace (the caller stops)

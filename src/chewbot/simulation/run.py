@@ -45,6 +45,11 @@ from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 
 
+# The plant's engines: chewbot's own (chewbot.simulation.plant) and MuJoCo's simulation of the MJCF model
+# (chewbot.simulation.mujoco_plant).
+ENGINES = ("chewbot", "mujoco")
+
+
 @dataclass
 class SimulateOptions:
     """Everything that defines a simulation (recorded in run.json). ``rate`` None: ``--rate continuous``;
@@ -53,7 +58,7 @@ class SimulateOptions:
     encoders' noise; ``sensor`` what the controller is given: "exact" (the plant's state) or "measured" (the estimate
     from the crank angles, :class:`~chewbot.simulation.sensor.CrankSensor`; None: "measured" with noise or with
     ``exported``, else "exact"); ``exported``: the controller is the exported C step (run through ctypes, the sensor
-    then "measured", the one path the C step has)."""
+    then "measured", the one path the C step has); ``engine`` the plant's engine (:data:`ENGINES`)."""
 
     controller: str = "computed-torque"
     model: str = "target"
@@ -75,6 +80,7 @@ class SimulateOptions:
     food: str | None = None
     sensor: str | None = None
     exported: bool = False
+    engine: str = "chewbot"
 
     @property
     def controller_friction(self) -> bool:
@@ -116,6 +122,10 @@ class SimulateOptions:
         for option, value, kind in (("side", self.side, Side), ("friction", self.friction, Switch)):
             if value is not None and value not in tuple(kind):
                 raise OptionError(option, f"must be one of {', '.join(kind)}, not {value!r}")
+        if self.engine not in ENGINES:
+            raise OptionError("plant-engine", f"must be one of {', '.join(ENGINES)}, not {self.engine!r}")
+        if self.engine == "mujoco" and self.rate is None:
+            raise OptionError("rate", "the MuJoCo plant runs the controller at the ticks of a control rate, not 'continuous'")
         d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, None, self.contact, has_hkp=has_hkp,
                              model=self.model)
         for option, overrides in (("set", self.overrides), ("plant-set", self.plant_overrides)):
@@ -144,7 +154,8 @@ class SimulateOptions:
 class SimulateResult:
     """What a simulation computed, in memory (the folder holds the same). ``model`` is the controller's, ``plant``
     the simulated robot's; ``kinematics`` the simulated motion's, ``reference_kinematics`` the reference's (both
-    on the plant's model); ``table`` results.csv; ``metrics`` the tracking figures (:func:`tracking_metrics`)."""
+    on the plant's model); ``table`` results.csv; ``metrics`` the tracking figures (:func:`tracking_metrics`); ``files``
+    other files of its folder by name (the MuJoCo plant's robot.xml)."""
 
     options: SimulateOptions
     model: Model
@@ -159,6 +170,7 @@ class SimulateResult:
     gains: Gains
     checks: list = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    files: dict[str, str] = field(default_factory=dict)
 
 
 def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float]]:
@@ -178,10 +190,12 @@ def load_models(options: SimulateOptions) -> tuple[Model, Model, dict[str, float
     return model, plant, task_overrides
 
 
-def build(options: SimulateOptions, task: Task | None = None):
+def build(options: SimulateOptions, task: Task | None = None, write_mjcf=None):
     """The options resolved (:meth:`SimulateOptions.resolved`, with the side in effect) and the parts of a simulation:
     controller's model, plant model, task, reference, gains, the controller, the plant and the sensor (None without
-    noise). ``task``: a task built in memory instead of ``options.task`` (``chewbot tpa``)."""
+    noise). ``task``: a task built in memory instead of ``options.task`` (``chewbot tpa``). ``write_mjcf(model,
+    friction) -> str``: the MJCF text of a model (:func:`chewbot.export.mjcf.mjcf`, handed down by the caller),
+    needed by the MuJoCo engine."""
     model, plant_model, task_overrides = load_models(options)
     options = options.resolved(model.has_hkp)
     if task is None:
@@ -200,11 +214,26 @@ def build(options: SimulateOptions, task: Task | None = None):
         controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
                                           options.controller_friction, not options.bite_unknown)
     if options.food is None:
-        plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
+        plant = make_plant(options.engine, plant_model, options.friction == "on", task.side, write_mjcf)
+    elif options.engine != "chewbot":
+        raise ChewbotError(f"--food {options.food}: the food's law is a plant force of chewbot's engine; it is not in the "
+                           f"{options.engine} plant (leave out --plant-engine {options.engine})")
     else:
         plant = food_plant(options, plant_model, task, reference)
     sensor = CrankSensor(model, options.noise_rad, gains.cutoff, options.seed) if options.sensor == "measured" else None
     return options, model, plant_model, task, reference, gains, controller, plant, sensor
+
+
+def make_plant(engine: str, model: Model, friction: bool, side: str, write_mjcf=None):
+    """The plant of ``engine``: chewbot's :class:`Plant`, or a :class:`~chewbot.simulation.mujoco_plant.MujocoPlant` of
+    the MJCF text ``write_mjcf(model, friction)``."""
+    if engine == "chewbot":
+        return Plant(model, friction=friction, side=side)
+    if write_mjcf is None:
+        raise ValueError("the MuJoCo engine needs write_mjcf, the MJCF writer (chewbot.export.mjcf.mjcf)")
+    from chewbot.simulation.mujoco_plant import MujocoPlant
+
+    return MujocoPlant(model, write_mjcf(model, friction), friction=friction, side=side)
 
 
 def food_plant(options: SimulateOptions, plant_model: Model, task: Task, reference: Reference):
@@ -233,16 +262,17 @@ def food_plant(options: SimulateOptions, plant_model: Model, task: Task, referen
     return FoodPlant(plant_model, friction=options.friction == "on", side=task.side, food=food)
 
 
-def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None, exported=None) -> SimulateResult:
+def compute(options: SimulateOptions, progress=None, check=None, task: Task | None = None, exported=None,
+            write_mjcf=None) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
     ``simulation``); ``check()`` is called in the loop and raises to stop it; ``task`` a task built in memory
     instead of ``options.task``. ``exported(controller, rate)``: with ``options.exported``, makes the controller
     that runs the exported C step in place of the built-in ``controller``
     (:class:`chewbot.export.controller.ExportedController`; the layer above passes it); its ``comparison()`` with the
-    Python controller goes into run.json."""
+    Python controller goes into run.json. ``write_mjcf`` as :func:`build`."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
-    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options, task)
+    options, model, plant_model, task, reference, gains, controller, plant, sensor = build(options, task, write_mjcf)
     loop_controller = controller
     if options.exported:
         if exported is None:
@@ -277,7 +307,11 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
     ref_kin = Chunk(plant_model, motion_task(plant_model, task, sim.t, sim.q_ref, sim.dq_ref, sim.ddq_ref, sim.force, "reference"),
                     kinematic).kinematics
     kin = motion.kinematics
-    table = simulation_table(plant, sim, kin, motion.kinematic_columns)
+    drift = None
+    if options.engine == "mujoco":  # the engine's own violations: chewbot's kinematics of q closes every constraint
+        d = np.asarray(plant.drift)[:sim.n]
+        drift = {"drift_chains": d[:, 0], **({"drift_hkp": d[:, 1]} if plant_model.has_hkp else {})}
+    table = simulation_table(plant, sim, kin, motion.kinematic_columns, drift)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
     if observer is not None:
         metrics["force"] = add_force_control(table, sim, reference, controller)
@@ -286,7 +320,8 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
         info["food"] = plant.info(sim.food)
     if loop_controller is not controller:
         info["simulation"]["exported"] = loop_controller.comparison()
-    result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info)
+    result = SimulateResult(options, model, plant_model, task, reference, sim, kin, ref_kin, table, metrics, gains, info=info,
+                            files={"robot.xml": plant.xml} if options.engine == "mujoco" else {})
     step("validity checks")
     from chewbot.analysis.checks import run_checks
 
@@ -330,11 +365,12 @@ def coordinate_units(names) -> list[str]:
     return [POSE_UNITS[("X", "Y", "Z", "alpha", "beta", "gamma").index(n)] for n in names]
 
 
-def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_columns: Table) -> Table:
+def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_columns: Table, drift: dict | None = None) -> Table:
     """results.csv of a simulation: ``kinematic_columns``, the columns of a run's kinematics of the plant's motion
     ``kin`` (:attr:`chewbot.run.pipeline.Chunk.kinematic_columns`), then the applied and the commanded torques, the
     reference and the tracking error in the independent coordinates, the plant's normal forces, bearing loads, the
-    residual of its equations of motion and the drift of its constraints."""
+    residual of its equations of motion and the drift of its constraints (``drift``: the engine's own, by column name;
+    default: :func:`constraint_drift` of the simulated pose and crank angles)."""
     model = plant.model
     table = kinematic_columns
     table.add_block([f"tau{i + 1}" for i in range(6)], sim.tau, "N*m", "actuator torques applied to the plant (saturated at limits.torque_Nm)")
@@ -357,7 +393,7 @@ def simulation_table(plant: Plant, sim: Simulation, kin: Kinematics, kinematic_c
         table.add("food_compression", sim.food["compression"], "m", "the food's compression max(0, h0 - g), g the bite point's gap along {S}'s z")
         table.add("food_force", sim.food["force"], "N", "the food's normal force on the teeth (positive pushing them apart; Fz = -food_force)")
         table.add("food_broken", sim.food["broken"], "1", "1 once the food has broken (its fracture strain reached)")
-    drift = constraint_drift(model, kin)
+    drift = constraint_drift(model, kin) if drift is None else drift
     for name, values in drift.items():
         table.add(name, values, "m", DRIFT_DESCRIPTIONS[name])
     return table
@@ -414,8 +450,10 @@ def tracking_metrics(sim: Simulation, names) -> dict:
             "samples": int(sim.n), "duration_s": float(sim.t[-1] - sim.t[0]), "stopped": sim.stopped}
 
 
-def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedController, sensor) -> dict:
+def simulation_info(sim: Simulation, plant, controller: ModelBasedController, sensor) -> dict:
     """What run.json says about the loop: the integrator, the control rate, the controller's model, the plant's."""
+    if not isinstance(plant, Plant):
+        return {**_loop_info(sim, controller, sensor), "plant": mujoco_info(plant)}
     from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
     from chewbot.simulation.integrator import TOLERANCE
     from chewbot.simulation.plant import MAX_STEP
@@ -423,7 +461,31 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
     return {"integrator": {"method": "Radau IIA, 3 stages (order 5, L-stable), compiled", "max_step_s": MAX_STEP,
                            "stage_residual_tolerance_Nm": TOLERANCE, "split_steps": sim.splits,
                            "largest_residual_Nm": float(np.max(sim.residual))},
-            "control": {"rate_Hz": sim.rate, "hold": "zero-order hold between ticks" if sim.rate else "evaluated at every integrator stage",
+            **_loop_info(sim, controller, sensor),
+            "plant": {"engine": "chewbot", "model": plant.model.name, "file": plant.model.source, "friction": plant.friction,
+                      "contact": "bilateral: both contacts stay closed, N_L and N_R of either sign (contact-pull reports N < 0)"
+                      if plant.model.has_hkp else None,
+                      "friction_smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
+                                             "delta_F_G_N": DELTA_F_G}}}
+
+
+def mujoco_info(plant) -> dict:
+    """run.json's plant of a MuJoCo simulation: the engine, its version and the solver settings read from the model."""
+    import mujoco
+
+    o = plant.mj.opt
+    return {"engine": "mujoco", "mujoco_version": mujoco.__version__, "model": plant.model.name, "file": plant.model.source,
+            "mjcf": "robot.xml", "friction": plant.friction,
+            "contact": "unilateral: a sphere on a plane per condyle (MuJoCo contact pairs), N_L, N_R >= 0" if plant.model.has_hkp else None,
+            "solver": {"timestep_s": float(o.timestep), "integrator": mujoco.mjtIntegrator(o.integrator).name,
+                       "solver": mujoco.mjtSolver(o.solver).name, "iterations": int(o.iterations), "tolerance": float(o.tolerance),
+                       "cone": mujoco.mjtCone(o.cone).name, "impratio": float(o.impratio), "noslip_iterations": int(o.noslip_iterations),
+                       "equality_solref": plant.mj.eq_solref[0].tolist(), "equality_solimp": plant.mj.eq_solimp[0].tolist()},
+            "residual": "residual column: chewbot's equations of motion at MuJoCo's accelerations and normal forces"}
+
+
+def _loop_info(sim: Simulation, controller: ModelBasedController, sensor) -> dict:
+    return {"control": {"rate_Hz": sim.rate, "hold": "zero-order hold between ticks" if sim.rate else "evaluated at every integrator stage",
                         "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
             "controller": {"kind": controller.kind, "model": controller.model.name, "method": controller.method,
                            "goal": controller.goal, "friction": controller.friction, "bite_force_known": controller.bite_known,
@@ -431,18 +493,21 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                            **({"force_observer": {"cutoff_Hz": controller.gains.observer_cutoff,
                                                   "method": "the bite-force estimator at each tick (docs/bite_force.md)"}}
                               if controller.kind == "hybrid" else {})},
-            "plant": {"model": plant.model.name, "file": plant.model.source, "friction": plant.friction,
-                      "contact": "bilateral: both contacts stay closed, N_L and N_R of either sign (contact-pull reports N < 0)"
-                      if plant.model.has_hkp else None,
-                      "friction_smoothing": {"eps_theta_dot_rad_s": EPS_THETA_DOT, "eps_v_T_m_s": EPS_V_T, "delta_N_N": DELTA_N,
-                                             "delta_F_G_N": DELTA_F_G}},
             "sensor": None if sensor is None else {"measured": True, "noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
-def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
+def compare(options: SimulateOptions, progress=None, check=None, write_mjcf=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress, check) for kind in COMPARED}
+    return {kind: compute(replace(options, controller=kind), progress, check, write_mjcf=write_mjcf) for kind in COMPARED}
+
+
+
+
+def compare_engines(options: SimulateOptions, progress=None, check=None, write_mjcf=None) -> dict[str, SimulateResult]:
+    """One controller on the same task and model simulated by each engine of :data:`ENGINES` (``options.engine`` is
+    ignored)."""
+    return {engine: compute(replace(options, engine=engine), progress, check, write_mjcf=write_mjcf) for engine in ENGINES}
 
 
 SENSORS = ("exact", "measured")
@@ -456,10 +521,12 @@ def input_files(options: SimulateOptions) -> list[Path]:
 
 
 def comparison_table(results: dict[str, SimulateResult]) -> Table:
-    """comparison.csv: one row per controller (the index of CONTROLLERS), the figures of :func:`tracking_metrics`."""
+    """comparison.csv: one row per controller (the index of CONTROLLERS) or per engine (the index of ENGINES), the
+    figures of :func:`tracking_metrics`."""
     table = Table()
-    table.add("controller", np.array([CONTROLLERS.index(k) for k in results], float), "1",
-              "controller: " + ", ".join(f"{i} {k}" for i, k in enumerate(CONTROLLERS)))
+    name, choices = ("controller", CONTROLLERS) if set(results) <= set(CONTROLLERS) else ("engine", ENGINES)
+    table.add(name, np.array([choices.index(k) for k in results], float), "1",
+              f"{name}: " + ", ".join(f"{i} {k}" for i, k in enumerate(choices)))
     for key, unit, what in (("rms_position_mm", "mm", "RMS position error"), ("peak_position_mm", "mm", "peak position error"),
                             ("rms_orientation_deg", "deg", "RMS orientation error"), ("peak_orientation_deg", "deg", "peak orientation error"),
                             ("peak_torque_Nm", "N*m", "peak applied torque"), ("saturated_s", "s", "time in saturation")):

@@ -31,8 +31,9 @@ from chewbot.errors import KinematicsError
 from chewbot.model.vector import N_P
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.simulation.controllers import ModelBasedController, State
-from chewbot.simulation.forward import Forward, forward_dynamics, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
+from chewbot.simulation.forward import Forward, forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C
+from chewbot.simulation.mujoco_plant import MujocoPlant
 from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage_times, step_kernel
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
@@ -116,10 +117,11 @@ def closed_loop_kernel(controller: ModelBasedController) -> KernelSpec:
     return step_kernel(controller.mechanism, name, lambda: closed_loop_stage(controller), ("closed-loop", *spec.key), 4)
 
 
-def simulate(plant: Plant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
+def simulate(plant: Plant | MujocoPlant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
              sensor: CrankSensor | None = None, progress=None, check=None, observer=None) -> Simulation:
-    """Simulate ``plant`` under ``controller`` following ``reference`` from its first to its last sample, starting on
-    the reference (its first sample's position and rate).
+    """Simulate ``plant`` (chewbot's :class:`~chewbot.simulation.plant.Plant` or MuJoCo's
+    :class:`~chewbot.simulation.mujoco_plant.MujocoPlant`) under ``controller`` following ``reference`` from its first
+    to its last sample, starting on the reference (its first sample's position and rate).
 
     ``rate``: the control rate (Hz; ticks t_0 + k / rate), or None for the controller at every integrator stage
     (rows at the reference's samples; a built-in controller). ``sensor``: noisy crank encoders and the estimator the
@@ -133,6 +135,8 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
         if getattr(plant, "food", None) is not None:
             raise ValueError("a food in the plant needs a control rate: its events are located between the ticks, not "
                              "inside a closed-loop step (--rate continuous)")
+        if isinstance(plant, MujocoPlant):
+            raise ValueError("the MuJoCo plant runs the controller at the ticks of a control rate, not continuously")
         if not isinstance(controller, ModelBasedController):
             raise ValueError("rate=None evaluates the controller inside the integrator: it needs a built-in controller")
         if sensor is not None:
@@ -208,7 +212,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     force_rows, food = plant.outputs(times[rows], q[rows], dq[rows], force[rows], internal[: last + 1])
     force = np.array(force)
     force[rows] = force_rows
-    fwd: Forward = forward_dynamics(plant.model, q[rows], dq[rows], tau, force[rows], plant.side, plant.friction)
+    fwd: Forward = plant.forward(q[rows], dq[rows], tau, force[rows])
     return Simulation(times[rows], q[rows], dq[rows], tau, tau_cmd[rows], force[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
                       fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu, food=food,
                       observed=None if observed is None else observed[rows])
