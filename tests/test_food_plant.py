@@ -155,3 +155,19 @@ def test_tpa_command_writes_its_folder(tmp_path):
     elastic = float(bread.elastic(0.5 * bread.height))
     instantaneous = elastic * (1 + bread.relaxation_modulus / bread.young_modulus) * (1 + 1.5 * bread.damping * 6e-3)
     assert elastic * 0.99 < record["plant"]["hardness_N"] < instantaneous
+    # the same test from the robot's log (its angles and torques): the same "estimated" measures
+    import csv
+
+    with open(tmp_path / "tpa" / "results.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    columns = ["t [s]"] + [f"theta{i} [rad]" for i in range(1, 7)] + [f"tau{i} [N*m]" for i in range(1, 7)]
+    keep = [rows[0].index(c) for c in columns]
+    with open(tmp_path / "log.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([[row[j] for j in keep] for row in rows])
+    r = runner.invoke(app, ["tpa", "--log", str(tmp_path / "log.csv"), "--food", "bread", "--out", str(tmp_path / "logged"), "-q"])
+    assert r.exit_code == 0, r.output
+    logged = json.loads((tmp_path / "logged" / "tpa.json").read_text())
+    assert logged["plant"] is None
+    for key, value in record["estimated"].items():
+        if isinstance(value, float):
+            assert logged["estimated"][key] == pytest.approx(value, rel=1e-6, abs=1e-9), key
