@@ -35,8 +35,8 @@ def _controller(value: str) -> str:
 
 
 def simulate(
-    controller: str = typer.Option("computed-torque", "--controller", callback=_controller, help="feedforward (the inverse dynamics of the reference, no feedback), pd (independent PD on the crank angles) or computed-torque (inverse dynamics at the measured state with PD on the independent coordinates)."),
-    compare: bool = typer.Option(False, "--compare", help="Run the three controllers on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
+    controller: str = typer.Option("computed-torque", "--controller", callback=_controller, help="feedforward (the inverse dynamics of the reference, no feedback), pd (independent PD on the crank angles), computed-torque (inverse dynamics at the measured state with PD on the independent coordinates), impedance (springs and dampers in the molar point's x, y, z [N/m, N*s/m] and alpha [N*m/rad] around the reference, on top of the inverse dynamics) or hybrid (with --food: position control until the observed force passes hybrid.threshold_N, then force control along z following the task's Fz [N]; docs/bite_force.md)."),
+    compare: bool = typer.Option(False, "--compare", help="Run feedforward, pd and computed-torque on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     model: str = typer.Option("target", "--model", help="The controller's model: a built-in model or a TOML parameter file (also the plant's unless --plant)."),
     side: str | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts (left or right). Default: left, or the side of the run whose results.csv is the --task."),
@@ -51,9 +51,9 @@ def simulate(
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
     bite_unknown: bool = typer.Option(False, "--bite-unknown", help="The bite force acts on the plant but the controller's inverse dynamics does not know it."),
-    food: str | None = typer.Option(None, "--food", show_default=False, help="A food sample on the molar of the task's side: a built-in food (peanut, cheddar, gummy, bread, artisynth-bolus) or a TOML food file (docs/food.md). The bite force is then the food's force from the plant's state (results.csv: food_compression [m], food_force [N], food_broken [1]); the task must carry no bite force."),
+    food: str | None = typer.Option(None, "--food", show_default=False, help="A food sample on the molar of the task's side: a built-in food (peanut, cheddar, gummy, bread, artisynth-bolus) or a TOML food file (docs/food.md). The bite force is then the food's force from the plant's state (results.csv: food_compression [m], food_force [N], food_broken [1]); the task must carry no bite force, except under --controller hybrid (its Fz is the force reference)."),
     gains: Path | None = typer.Option(None, "--gains", help="TOML file of the controllers' gains (default: the built-in gains, docs/simulation.md)."),
-    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain: pd.kp_Nm_per_rad, pd.kd_Nms_per_rad, computed_torque.frequency_Hz, computed_torque.damping, estimator.cutoff_Hz (KEY[i] for the i-th entry); repeatable."),
+    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain: pd.kp_Nm_per_rad, pd.kd_Nms_per_rad, computed_torque.frequency_Hz, computed_torque.damping, estimator.cutoff_Hz, impedance.stiffness_N_per_m, impedance.damping_Ns_per_m, impedance.angle_stiffness_Nm_per_rad, impedance.angle_damping_Nms_per_rad, hybrid.frequency_Hz, hybrid.damping, hybrid.force_frequency_Hz, hybrid.force_damping, hybrid.threshold_N, hybrid.stiffness_min_N_per_m, hybrid.stiffness_max_N_per_m, hybrid.speed_limit_m_per_s, observer.cutoff_Hz (KEY[i] for the i-th entry; units in the key names); repeatable."),
     out: Path = typer.Option(Path("runs/simulation"), "--out", help="Results folder to write."),
     force: bool = typer.Option(False, "--force", help="Replace the output if it exists and chewbot wrote it (anything else is never replaced)."),
     allow_violations: bool = typer.Option(False, "--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
@@ -80,6 +80,8 @@ def simulate(
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
 
       chewbot simulate --food cheddar --task closing.csv --out runs/cheddar
+
+      chewbot simulate --controller hybrid --food cheddar --task bite.csv --out runs/hybrid
     """
     from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
                                          resolved, set_overrides, stdout)
@@ -96,6 +98,8 @@ def simulate(
                               food=food)
     with resolved():
         options = options.resolved()
+    if controller == "hybrid" and options.rate is None:
+        fail(ChewbotError("--controller hybrid switches on the force observer's estimate at the ticks of a control rate: it needs a rate, not --rate continuous"), EXIT_BAD_INPUT)
     if noise > 0 and options.rate is None:
         fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
     with errors_reported():
@@ -138,6 +142,10 @@ def _print_summary(stdout, results: dict, out: Path, compare: bool) -> None:
         if stopped is not None:
             stdout.print(f"{label}: the robot left the workspace at t = {stopped['t']:.4g} s ({escape(stopped['reason'])}); "
                          "its motion ends at the last pose inside", highlight=False)
+        f = r.metrics.get("force")
+        if f and f["samples"]:
+            stdout.print(f"{label}: force tracking, the plant's Fz against the task's Fz where it is not zero: RMS {f['rms_N']:.4g} N "
+                         f"({f['rms_percent']:.3g} % of its peak {f['reference_peak_N']:.4g} N), peak {f['peak_N']:.4g} N", highlight=False)
         passed = sum(c.passed and c.samples is not None for c in r.checks)
         stdout.print(f"{label}: validity checks {passed} passed, {sum(not c.passed for c in r.checks)} failed, "
                      f"{sum(c.samples is None for c in r.checks)} not evaluated; largest drift of the constraints "

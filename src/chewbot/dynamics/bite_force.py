@@ -139,20 +139,37 @@ def estimate(model: Model, kin: Kinematics, tau: np.ndarray, *, side: str | None
     ``contact``: ``bilateral`` (N of either sign) or ``unilateral`` (N >= 0); ``friction``: the model's friction
     in the equations (off: the frictionless model); ``sigma``: the torques' standard deviation (N m) if known, else
     pooled from the residuals."""
+    q, dq, ddq = kin.euler_angle_state()
+    return estimate_states(model, kin.t, kin.theta, q, dq, ddq, tau, side=side or kin.side, contact=contact,
+                           friction=friction, sigma=sigma)
+
+
+def estimate_states(model: Model, t, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
+                    friction: bool = True, sigma: float | None = None) -> ForceEstimate:
+    """:func:`estimate` on the states themselves: times ``t`` (n,), crank angles ``theta`` (n, 6), the independent
+    coordinates in Euler angles ``q`` (n, 4) and their rates ``dq``, ``ddq``, torques ``tau`` (n, 6)."""
+    u, free, (r, G) = solve_states(model, theta, q, dq, ddq, tau, side=side, contact=contact, friction=friction)
+    return summarise(t, u, r, G, free, sigma, info={"contact": contact, "friction": bool(friction), "side": side,
+                                                     "equations": "newton-euler"})
+
+
+def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
+                 friction: bool = True, kernel=None) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """The answer u (n, 5) of :func:`estimate_states`, which unknowns are free (n, 5), and (r, G) there, without
+    the statistics (what the force observer needs at each tick). ``kernel``: the compiled :func:`residual_kernel`
+    where the caller holds it."""
     check_contact(contact)
     if not model.has_hkp:
         raise ValueError(f"{model.name}: the bite-force estimator needs the target robot (six torques, five unknowns); "
                          "on the 6RSS the force has six components and the normal forces none")
     tau = np.asarray(tau, dtype=float)
-    if tau.shape != (kin.n, 6):
-        raise ValueError(f"tau must be ({kin.n}, 6), not {tau.shape}")
-    q, dq, ddq = kin.euler_angle_state()
-    fn = native(residual_kernel(model.mechanism))
-    B, p, fl = model.molar(side or kin.side), model.vector(), 1.0 if friction else 0.0
-    u, free = solve(lambda u, signs: evaluate(fn, kin.theta, q, dq, ddq, B, u, tau, signs, fl, p), kin.n, contact, fl)
-    r, G = evaluate(fn, kin.theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p)
-    return summarise(kin.t, u, r, G, free, sigma, info={"contact": contact, "friction": bool(friction),
-                                                         "side": side or kin.side, "equations": "newton-euler"})
+    n = np.shape(q)[0]
+    if tau.shape != (n, 6):
+        raise ValueError(f"tau must be ({n}, 6), not {tau.shape}")
+    fn = kernel if kernel is not None else native(residual_kernel(model.mechanism))
+    B, p, fl = model.molar(side), model.vector(), 1.0 if friction else 0.0
+    u, free = solve(lambda u, signs: evaluate(fn, theta, q, dq, ddq, B, u, tau, signs, fl, p), n, contact, fl)
+    return u, free, tuple(evaluate(fn, theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p))
 
 
 def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, np.ndarray]:

@@ -38,6 +38,7 @@ from chewbot.model.vector import N_P
 from chewbot.kinematics.options import Orientation
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.model.symbolic import c_name
+from chewbot.rotation import matrix_from_euler_angles_sx
 from chewbot.run.options import Switch, resolve_dynamics
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation import CONTROLLERS
@@ -48,10 +49,12 @@ CONTROL_INPUTS = ("q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains", "B", 
 
 @dataclass(frozen=True)
 class State:
-    """What a controller is given: q (n,) the independent coordinates (Euler angles; m, rad) and dq their rates."""
+    """What a controller is given: q (n,) the independent coordinates (Euler angles; m, rad) and dq their rates;
+    ``force`` (3,) the force observer's bite force on the mandible (N, {S}), None where no observer runs."""
 
     q: np.ndarray
     dq: np.ndarray
+    force: np.ndarray | None = None
 
 
 # ------------------------------------------------------------------------------------------- inverse dynamics
@@ -75,8 +78,26 @@ def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = No
 
 
 def gain_count(kind: str, mechanism: str) -> int:
-    """Entries of a controller's gains vector: pd kp, kd per crank (12); computed-torque kp, kd per coordinate."""
-    return {"feedforward": 0, "pd": 12, "computed-torque": 2 * n_coordinates(mechanism)}[kind]
+    """Entries of a controller's gains vector: pd kp, kd per crank (12); computed-torque kp, kd per coordinate;
+    impedance stiffness and damping, hybrid kp, kd per task coordinate (x, y, z of the molar point, alpha)."""
+    n = n_coordinates(mechanism)
+    return {"feedforward": 0, "pd": 12, "computed-torque": 2 * n, "impedance": 2 * n, "hybrid": 2 * n}[kind]
+
+
+def task_space_sx(q: ca.SX, dq: ca.SX, B: ca.SX, p: ca.SX, mechanism: str = "target") -> dict:
+    """The task coordinates of the impedance and hybrid controllers as expressions of the state: y = (x, y, z of
+    the molar point B in {S}, alpha) (m, rad), its Jacobian J = dy/dq (q in Euler angles), y_dot = J q_dot, the
+    bias J_dot q_dot, and J_theta1 = d theta / d q (the map of a generalised force onto the torques). The target
+    only: its four coordinates are the point's three and the pinned angle (as chewbot track-incisor --pin alpha)."""
+    if mechanism != "target":
+        raise ValueError("the impedance and hybrid controllers are for the target (the molar point and alpha)")
+    n = q.numel()
+    out = dict(zip(KINEMATICS_OUTPUTS, kinematics_kernel(mechanism, ORIENTATION).graph()(q, dq, ca.SX.zeros(n), p)))
+    X = out["X"]
+    y = ca.vertcat(X[0:3] + ca.mtimes(matrix_from_euler_angles_sx(X[3], X[4], X[5]), B), q[2])
+    J = ca.jacobian(y, q)
+    dy = ca.mtimes(J, dq)
+    return {"y": y, "J": J, "dy": dy, "bias": ca.jtimes(dy, q, dq), "J_theta1": out["J_theta1_angles"]}
 
 
 def control_function(kind: str, mechanism: str, method: str = "hessian", goal: str | None = None,
@@ -94,7 +115,18 @@ def _control(kind: str, mechanism: str, method: str, goal: str | None, friction:
     n = n_coordinates(mechanism)
     q, dq, q_ref, dq_ref, ddq_ref = (ca.SX.sym(name, n) for name in CONTROL_INPUTS[:5])
     F, gains, B, p = ca.SX.sym("F_B", 3), ca.SX.sym("gains", gain_count(kind, mechanism)), ca.SX.sym("B", 3), ca.SX.sym("p", N_P)
-    if kind == "pd":
+    if kind == "impedance":
+        # tau = ID(q, q_dot, q_ddot_ref) + the least-norm torques of the generalised force J' (K e + D e_dot), e the
+        # task-space error: the molar point held to the reference by springs and dampers, alpha likewise
+        ID = inverse_dynamics_function(mechanism, method, goal, friction)
+        now, ref = task_space_sx(q, dq, B, p, mechanism), task_space_sx(q_ref, dq_ref, B, p, mechanism)
+        n_y = now["y"].numel()
+        wrench = gains[:n_y] * (ref["y"] - now["y"]) + gains[n_y:] * (ref["dy"] - now["dy"])
+        J1 = now["J_theta1"]
+        tau = ID(q, dq, ddq_ref, B, F, p) + ca.mtimes(J1, ca.solve(ca.mtimes(J1.T, J1), ca.mtimes(now["J"].T, wrench)))
+    elif kind == "hybrid":
+        tau = hybrid_function(mechanism, method, goal, friction)(q, dq, q_ref, dq_ref, ddq_ref, F, gains, B, p, 0, 0)[0]
+    elif kind == "pd":
         kin = kinematics_kernel(mechanism, ORIENTATION).graph()
         i_theta, i_dtheta = KINEMATICS_OUTPUTS.index("theta"), KINEMATICS_OUTPUTS.index("dtheta")
         now, ref = kin(q, dq, ca.SX.zeros(n), p), kin(q_ref, dq_ref, ca.SX.zeros(n), p)
@@ -110,6 +142,48 @@ def _control(kind: str, mechanism: str, method: str, goal: str | None, friction:
             tau = ID(q, dq, ddq, B, F, p)
     return ca.Function(f"control_{kind.replace('-', '_')}", [q, dq, q_ref, dq_ref, ddq_ref, F, gains, B, p], [tau],
                        list(CONTROL_INPUTS), ["tau"])
+
+
+HYBRID_INPUTS = CONTROL_INPUTS + ("force_mode", "a_force")
+HYBRID_OUTPUTS = ("tau", "y", "dy", "y_ref", "dy_ref")
+
+
+def hybrid_function(mechanism: str, method: str = "hessian", goal: str | None = None, friction: bool = False) -> ca.Function:
+    """The hybrid controller's law (:class:`HybridController`) as one CasADi function of :data:`HYBRID_INPUTS` ->
+    :data:`HYBRID_OUTPUTS`: computed torque in the task coordinates of :func:`task_space_sx`,
+    y_ddot = y_ddot_ref + kd (y_dot_ref - y_dot) + kp (y_ref - y) on x, y and alpha always and on z unless
+    ``force_mode`` is 1, where z's acceleration is ``a_force`` (the force loop's); q_ddot = J^-1 (y_ddot - J_dot
+    q_dot) and tau = ID(q, q_dot, q_ddot, F_B), F_B the bite force the controller knows (the observer's). Also
+    returns y, y_dot and the reference's."""
+    key = ("hybrid", method, goal, bool(friction))
+    return cached_graph(symbols(mechanism), key, lambda: _hybrid(mechanism, method, goal, friction))
+
+
+def _hybrid(mechanism: str, method: str, goal: str | None, friction: bool) -> ca.Function:
+    n = n_coordinates(mechanism)
+    q, dq, q_ref, dq_ref, ddq_ref = (ca.SX.sym(name, n) for name in CONTROL_INPUTS[:5])
+    F, gains, B, p = ca.SX.sym("F_B", 3), ca.SX.sym("gains", gain_count("hybrid", mechanism)), ca.SX.sym("B", 3), ca.SX.sym("p", N_P)
+    mode, a_force = ca.SX.sym("force_mode"), ca.SX.sym("a_force")
+    now, ref = task_space_sx(q, dq, B, p, mechanism), task_space_sx(q_ref, dq_ref, B, p, mechanism)
+    ddy_ref = ca.mtimes(ref["J"], ddq_ref) + ref["bias"]
+    a = ddy_ref + gains[n:] * (ref["dy"] - now["dy"]) + gains[:n] * (ref["y"] - now["y"])
+    a = ca.vertcat(a[0:2], ca.if_else(mode > 0.5, a_force, a[2]), a[3:])
+    ddq = ca.solve(now["J"], a - now["bias"])
+    tau = inverse_dynamics_function(mechanism, method, goal, friction)(q, dq, ddq, B, F, p)
+    return ca.Function("control_hybrid", [q, dq, q_ref, dq_ref, ddq_ref, F, gains, B, p, mode, a_force],
+                       [tau, now["y"], now["dy"], ref["y"], ref["dy"]], list(HYBRID_INPUTS), list(HYBRID_OUTPUTS))
+
+
+def hybrid_kernel(mechanism: str, method: str = "hessian", goal: str | None = None, friction: bool = False) -> KernelSpec:
+    """:func:`hybrid_function` compiled, for the ticks of a simulation."""
+    name = f"hybrid_{control_name('hybrid', mechanism, method, goal, friction)}"
+
+    def build(params):
+        fn = hybrid_function(mechanism, method, goal, friction)
+        x = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+        return ca.Function(name, x, fn.call(x), list(HYBRID_INPUTS), list(HYBRID_OUTPUTS), {"cse": True})
+
+    return KernelSpec(name, build, (mechanism, "hybrid", method, goal, bool(friction)), mechanism)
 
 
 def control_name(kind: str, mechanism: str, method: str, goal: str | None, friction: bool) -> str:
@@ -146,54 +220,79 @@ def _default_gains_file() -> Path:
     return Path(__file__).with_name("gains.toml")
 
 
+# Sections a gains file may leave out: their keys then take the built-in values (recorded in run.json as such).
+OPTIONAL_SECTIONS = ("impedance", "hybrid", "observer")
+
+
 @dataclass(frozen=True)
 class Gains:
     """The controllers' gains (SI): ``pd_kp`` (6,) N m/rad and ``pd_kd`` (6,) N m s/rad on the crank angles;
     ``ct_frequency`` (n,) Hz and ``ct_damping`` (n,) of the computed-torque error dynamics (kp = (2 pi f)^2,
-    kd = 2 zeta (2 pi f)); ``cutoff`` Hz of the velocity estimate's low-pass (with sensor noise only).
-    ``source``: the file they were read from; ``overrides``: the single values changed (``--gain``)."""
+    kd = 2 zeta (2 pi f)); ``cutoff`` Hz of the velocity estimate's low-pass (with sensor noise only);
+    ``imp_stiffness`` (3,) N/m, ``imp_damping`` (3,) N s/m of the molar point and ``imp_angle_stiffness`` (1,)
+    N m/rad, ``imp_angle_damping`` (1,) N m s/rad of alpha (impedance); ``hy_frequency``, ``hy_damping`` (4,) of the
+    hybrid controller's task-space position loop (x, y, z of the molar point, alpha), ``hy_force_frequency`` Hz and
+    ``hy_force_damping`` of its force loop, ``hy_threshold`` N, ``hy_stiffness_min``, ``hy_stiffness_max`` N/m,
+    ``hy_speed_limit`` m/s of the molar point along z under force control;
+    ``observer_cutoff`` Hz of the force observer's low-pass. ``source``: the file they were read from; ``overrides``:
+    the single values changed (``--gain``); ``defaulted``: keys the file left out (built-in values)."""
 
     pd_kp: np.ndarray
     pd_kd: np.ndarray
     ct_frequency: np.ndarray
     ct_damping: np.ndarray
     cutoff: float
+    imp_stiffness: np.ndarray = field(default_factory=lambda: np.full(3, 2000.0))
+    imp_damping: np.ndarray = field(default_factory=lambda: np.full(3, 20.0))
+    imp_angle_stiffness: np.ndarray = field(default_factory=lambda: np.full(1, 5.0))
+    imp_angle_damping: np.ndarray = field(default_factory=lambda: np.full(1, 0.05))
+    hy_frequency: np.ndarray = field(default_factory=lambda: np.full(4, 30.0))
+    hy_damping: np.ndarray = field(default_factory=lambda: np.full(4, 1.0))
+    hy_force_frequency: float = 15.0
+    hy_force_damping: float = 1.0
+    hy_threshold: float = 0.2
+    hy_stiffness_min: float = 100.0
+    hy_stiffness_max: float = 1e5
+    hy_speed_limit: float = 0.05
+    observer_cutoff: float = 200.0
     source: str = ""
     overrides: dict = field(default_factory=dict)
+    defaulted: tuple = ()
 
     KEYS = {"pd.kp_Nm_per_rad": ("pd_kp", 6), "pd.kd_Nms_per_rad": ("pd_kd", 6),
             "computed_torque.frequency_Hz": ("ct_frequency", None), "computed_torque.damping": ("ct_damping", None),
-            "estimator.cutoff_Hz": ("cutoff", 0)}
+            "estimator.cutoff_Hz": ("cutoff", 0),
+            "impedance.stiffness_N_per_m": ("imp_stiffness", 3), "impedance.damping_Ns_per_m": ("imp_damping", 3),
+            "impedance.angle_stiffness_Nm_per_rad": ("imp_angle_stiffness", 1),
+            "impedance.angle_damping_Nms_per_rad": ("imp_angle_damping", 1),
+            "hybrid.frequency_Hz": ("hy_frequency", 4), "hybrid.damping": ("hy_damping", 4),
+            "hybrid.force_frequency_Hz": ("hy_force_frequency", 0), "hybrid.force_damping": ("hy_force_damping", 0),
+            "hybrid.threshold_N": ("hy_threshold", 0), "hybrid.stiffness_min_N_per_m": ("hy_stiffness_min", 0),
+            "hybrid.stiffness_max_N_per_m": ("hy_stiffness_max", 0), "hybrid.speed_limit_m_per_s": ("hy_speed_limit", 0),
+            "observer.cutoff_Hz": ("observer_cutoff", 0)}
 
     @classmethod
     def load(cls, path: str | Path | None = None, mechanism: str = "target", overrides: dict[str, float] | None = None) -> Gains:
         """Gains from a TOML file (default: the built-in ``gains.toml``), then single values ``overrides``
         (``{"pd.kp_Nm_per_rad": 3.0, "pd.kp_Nm_per_rad[2]": 4.0}``: a key sets every entry, KEY[i] the i-th, 1-based).
-        A scalar in the file applies to every joint (pd: six cranks) or coordinate (computed-torque: n). Errors name
-        the file and the key."""
-        import tomllib
-
+        A scalar in the file applies to every joint (pd: six cranks) or coordinate (computed-torque: n). The sections
+        of :data:`OPTIONAL_SECTIONS` may be left out (their keys take the built-in values). Errors name the file and
+        the key."""
         path = Path(path) if path is not None else _default_gains_file()
-        try:
-            raw = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ChewbotError(f"{path}: no such gains file") from None
-        except (OSError, ValueError) as exc:
-            raise ChewbotError(f"{path}: cannot read it as TOML ({exc})") from None
-        n = n_coordinates(mechanism)
-        values = {}
+        values = _read_gains(path)
         known = set(cls.KEYS)
-        for section, content in raw.items():
-            if not isinstance(content, dict):
-                raise ChewbotError(f"{path}: {section!r} must be a table ([pd], [computed_torque], [estimator])")
-            for key, value in content.items():
-                full = f"{section}.{key}"
-                if full not in known:
-                    raise ChewbotError(f"{path}: unknown key {full!r}; the keys are {', '.join(sorted(known))}")
-                values[full] = value
+        defaulted = []
         missing = known - set(values)
+        optional = {k for k in missing if k.split(".")[0] in OPTIONAL_SECTIONS}
+        if optional and path != _default_gains_file():
+            builtin = _read_gains(_default_gains_file())
+            for key in sorted(optional):
+                values[key] = builtin[key]
+                defaulted.append(key)
+            missing -= optional
         if missing:
             raise ChewbotError(f"{path}: missing key(s) {', '.join(sorted(missing))}")
+        n = n_coordinates(mechanism)
         arrays = {}
         for full, (attr, size) in cls.KEYS.items():
             size = n if size is None else size
@@ -216,8 +315,12 @@ class Gains:
             else:
                 target = np.full_like(target, value)
             arrays[attr] = _gain_value(target, 0 if size == 0 else target.size, f"--gain {key}={value:g}")
-        return cls(arrays["pd_kp"], arrays["pd_kd"], arrays["ct_frequency"], arrays["ct_damping"], float(arrays["cutoff"]),
-                   str(path), dict(overrides or {}))
+        if arrays["hy_stiffness_min"] > arrays["hy_stiffness_max"]:
+            raise ChewbotError(f"{path}: hybrid.stiffness_min_N_per_m ({arrays['hy_stiffness_min']:g}) is above "
+                               f"hybrid.stiffness_max_N_per_m ({arrays['hy_stiffness_max']:g})")
+        scalars = {attr for attr, size in cls.KEYS.values() if size == 0}
+        return cls(**{attr: float(v) if attr in scalars else v for attr, v in arrays.items()}, source=str(path),
+                   overrides=dict(overrides or {}), defaulted=tuple(defaulted))
 
     def vector(self, kind: str) -> np.ndarray:
         """The gains input of :func:`control_function` for ``kind``."""
@@ -226,12 +329,43 @@ class Gains:
         if kind == "computed-torque":
             w = 2 * np.pi * self.ct_frequency
             return np.concatenate([w**2, 2 * self.ct_damping * w])
+        if kind == "impedance":
+            return np.concatenate([self.imp_stiffness, self.imp_angle_stiffness, self.imp_damping, self.imp_angle_damping])
+        if kind == "hybrid":
+            w = 2 * np.pi * self.hy_frequency
+            return np.concatenate([w**2, 2 * self.hy_damping * w])
         return np.zeros(0)
 
     def as_dict(self) -> dict:
-        return {"file": self.source, "overrides": self.overrides, "pd.kp_Nm_per_rad": self.pd_kp.tolist(),
-                "pd.kd_Nms_per_rad": self.pd_kd.tolist(), "computed_torque.frequency_Hz": self.ct_frequency.tolist(),
-                "computed_torque.damping": self.ct_damping.tolist(), "estimator.cutoff_Hz": self.cutoff}
+        out = {"file": self.source, "overrides": self.overrides, "defaulted": list(self.defaulted)}
+        for key, (attr, _) in self.KEYS.items():
+            value = getattr(self, attr)
+            out[key] = value.tolist() if isinstance(value, np.ndarray) else value
+        return out
+
+
+def _read_gains(path: Path) -> dict:
+    """The keys of a gains file, ``section.key`` -> value; unknown sections and keys are errors naming the file."""
+    import tomllib
+
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ChewbotError(f"{path}: no such gains file") from None
+    except (OSError, ValueError) as exc:
+        raise ChewbotError(f"{path}: cannot read it as TOML ({exc})") from None
+    known = set(Gains.KEYS)
+    values = {}
+    for section, content in raw.items():
+        if not isinstance(content, dict):
+            raise ChewbotError(f"{path}: {section!r} must be a table ([pd], [computed_torque], [estimator], "
+                               "[impedance], [hybrid], [observer])")
+        for key, value in content.items():
+            full = f"{section}.{key}"
+            if full not in known:
+                raise ChewbotError(f"{path}: unknown key {full!r}; the keys are {', '.join(sorted(known))}")
+            values[full] = value
+    return values
 
 
 def _gain_value(value, size: int, where: str) -> np.ndarray | float:
@@ -256,6 +390,13 @@ def _gain_value(value, size: int, where: str) -> np.ndarray | float:
 # ------------------------------------------------------------------------------------------- controller objects
 
 
+def controller_dynamics(method: str, goal: str | None, friction: bool, has_hkp: bool) -> tuple[str | None, bool]:
+    """A controller's goal and friction switch as a run resolves them (friction only where ``method`` takes it)."""
+    takes_friction = "friction" in formulation(method).options
+    d = resolve_dynamics(method, Orientation.euler_angles.value, goal, bool(friction) if takes_friction else None, has_hkp=has_hkp)
+    return d.goal, d.friction == Switch.on
+
+
 @dataclass
 class ModelBasedController:
     """A built-in controller (``kind``: feedforward, pd or computed-torque) on the controller's ``model``: it follows
@@ -277,10 +418,11 @@ class ModelBasedController:
     def __post_init__(self):
         if self.kind not in CONTROLLERS:
             raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, not {self.kind!r}")
-        takes_friction = "friction" in formulation(self.method).options
-        d = resolve_dynamics(self.method, Orientation.euler_angles.value, self.goal, bool(self.friction) if takes_friction else None,
-                             has_hkp=self.model.has_hkp)
-        self.goal, self.friction = d.goal, d.friction == Switch.on
+        if self.kind == "hybrid":
+            raise ValueError("the hybrid controller switches on the observed force: it is a HybridController")
+        if self.kind == "impedance" and not self.model.has_hkp:
+            raise ChewbotError("--controller impedance is for the target (the molar point's x, y, z and alpha)")
+        self.goal, self.friction = controller_dynamics(self.method, self.goal, self.friction, self.model.has_hkp)
 
     @property
     def mechanism(self) -> str:
@@ -306,3 +448,120 @@ class ModelBasedController:
             self._kernel, self._shared = native(self.kernel_spec()), self.shared()
         q_ref, dq_ref, ddq_ref, force = self.reference.state(t)
         return self._kernel(state.q, state.dq, q_ref, dq_ref, ddq_ref, self.known_force(force), *self._shared)[0]
+
+
+TASK_STATE_OUTPUTS = ("y", "dy", "y_ref", "dy_ref")
+# Memory (s) of the food-stiffness estimate of the hybrid controller's force loop, and the spread of the molar
+# point's z (m) below which the estimate is not updated (the points do not tell a slope).
+STIFFNESS_MEMORY_S = 0.05
+STIFFNESS_SPREAD_M = 5e-6
+
+
+def task_state_kernel(mechanism: str) -> KernelSpec:
+    """(q, dq, q_ref, dq_ref, B, p) -> y, y_dot of the state and of the reference (:func:`task_space_sx`)."""
+    name = f"task_state_{c_name(mechanism)}"
+
+    def build(params):
+        n = n_coordinates(mechanism)
+        q, dq, q_ref, dq_ref = (ca.SX.sym(s, n) for s in ("q", "dq", "q_ref", "dq_ref"))
+        B, p = ca.SX.sym("B", 3), ca.SX.sym("p", N_P)
+        now, ref = task_space_sx(q, dq, B, p, mechanism), task_space_sx(q_ref, dq_ref, B, p, mechanism)
+        return ca.Function(name, [q, dq, q_ref, dq_ref, B, p], [now["y"], now["dy"], ref["y"], ref["dy"]],
+                           ["q", "dq", "q_ref", "dq_ref", "B", "p"], list(TASK_STATE_OUTPUTS), {"cse": True})
+
+    return KernelSpec(name, build, (mechanism,), mechanism)
+
+
+@dataclass
+class HybridController:
+    """Position control while the teeth are apart, force control along z once they bite (``--controller hybrid``).
+
+    The task coordinates are those of :func:`task_space_sx`: the molar point's x, y, z and alpha. x, y and alpha are
+    always position-controlled (computed torque in task space, ``hybrid.frequency_Hz``, ``hybrid.damping``); z too
+    until the observed force f = -F_z (the observer's, ``State.force``) reaches ``hybrid.threshold_N``. Then z's
+    acceleration follows the force loop, with f_ref = -F_z of the task (its Fz is the force reference):
+
+        a_z = [kv (f_ref_dot - k_hat z_dot) + kp (f_ref - f)] / k_hat,   kp = (2 pi f_F)^2, kv = 2 zeta_F (2 pi f_F),
+
+    which for a food of stiffness k_hat (f_dot = k z_dot) makes the force error obey e'' + kv e' + kp e = 0 whatever
+    the stiffness. Written as a velocity loop, a_z = kv (z_dot_cmd - z_dot) with z_dot_cmd = (f_ref_dot + kp/kv
+    (f_ref - f)) / k_hat, the commanded speed is held within ``hybrid.speed_limit_m_per_s`` (a force the food
+    cannot give, or a soft food far from its force, would otherwise drive the teeth together at metres per second).
+    The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the
+    observer's lags the motion), the observed F_x, F_y, and the observed force under position control. k_hat is estimated on line: the slope of the observed force against the molar point's z (passed
+    through the observer's low-pass, so that both lag alike) by least squares with exponential forgetting
+    (:data:`STIFFNESS_MEMORY_S`), within ``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at
+    the maximum (a stiffness overestimated by c slows the loop by c; underestimated, it makes it faster). The force
+    loop is left when the force reference is below the threshold, the observed force too, and the task's z
+    reference lies below the point (the task opens)."""
+
+    model: Model
+    reference: Reference
+    gains: Gains
+    method: str = "hessian"
+    goal: str | None = None
+    friction: bool = False
+    kind: str = field(default="hybrid", init=False)
+    bite_known: bool = field(default=True, init=False)
+    log: list = field(default_factory=list, init=False, repr=False)
+    _kernels: tuple = field(default=(), init=False, repr=False)
+    _mode: int = field(default=0, init=False, repr=False)
+    _k: float = field(default=0.0, init=False, repr=False)
+    _moments: np.ndarray = field(default=None, init=False, repr=False)
+    _z: float | None = field(default=None, init=False, repr=False)
+    _t: float | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self):
+        if not self.model.has_hkp:
+            raise ChewbotError("--controller hybrid is for the target (the molar point's x, y, z and alpha)")
+        self.goal, self.friction = controller_dynamics(self.method, self.goal, self.friction, True)
+        self._k = self.gains.hy_stiffness_max
+
+    @property
+    def mechanism(self) -> str:
+        return self.model.mechanism
+
+    def kernel_specs(self) -> list[KernelSpec]:
+        return [hybrid_kernel(self.mechanism, self.method, self.goal, self.friction), task_state_kernel(self.mechanism)]
+
+    def __call__(self, t: float, state: State) -> np.ndarray:
+        if state.force is None:
+            raise ValueError("the hybrid controller needs the force observer's estimate (State.force)")
+        if not self._kernels:
+            self._kernels = tuple(native(k) for k in self.kernel_specs())
+            self._shared = (self.gains.vector("hybrid"), self.model.molar(self.reference.side), self.model.vector())
+        law, task = self._kernels
+        gains, B, p = self._shared
+        q_ref, dq_ref, ddq_ref, force = self.reference.state(t)
+        y, dy, y_ref, dy_ref = (np.asarray(v).ravel() for v in task(state.q, state.dq, q_ref, dq_ref, B, p))
+        g = self.gains
+        f, f_ref = -float(state.force[2]), -float(force[2])
+        h = 0.0 if self._t is None else t - self._t
+        self._t = t
+        # z through the observer's low-pass, so that the stiffness's two signals lag alike
+        b = np.exp(-2 * np.pi * g.observer_cutoff * h)
+        self._z = y[2] if self._z is None else b * self._z + (1 - b) * y[2]
+        if self._mode == 0 and f >= g.hy_threshold:
+            self._mode, self._moments = 1, np.zeros(5)
+        elif self._mode == 1 and f_ref < g.hy_threshold and f < g.hy_threshold and y_ref[2] < y[2]:
+            self._mode = 0
+        a_force = 0.0
+        if self._mode == 1:
+            if f >= g.hy_threshold:  # in contact: a point of the food's force against z
+                lam = np.exp(-h / STIFFNESS_MEMORY_S)
+                self._moments = lam * self._moments + np.array([1.0, self._z, f, self._z**2, self._z * f])
+            w, sz, sf, szz, szf = self._moments
+            spread = szz / w - (sz / w) ** 2 if w > 0 else 0.0
+            if spread > STIFFNESS_SPREAD_M**2:
+                slope = (szf / w - sz * sf / w**2) / spread
+                self._k = float(np.clip(slope, g.hy_stiffness_min, g.hy_stiffness_max))
+            dt = 1e-3
+            df_ref = -(self.reference.force_at([t + dt / 2])[0, 2] - self.reference.force_at([t - dt / 2])[0, 2]) / dt
+            w_f = 2 * np.pi * g.hy_force_frequency
+            kv, kp = 2 * g.hy_force_damping * w_f, w_f**2
+            # the law written as a velocity loop, kv (z_dot_cmd - z_dot), with z_dot_cmd within the speed limit
+            dz_cmd = np.clip((df_ref + kp / kv * (f_ref - f)) / self._k, -g.hy_speed_limit, g.hy_speed_limit)
+            a_force = kv * (dz_cmd - dy[2])
+        self.log.append((t, self._mode, self._k))
+        known = np.array([state.force[0], state.force[1], -f_ref]) if self._mode else state.force
+        return np.asarray(law(state.q, state.dq, q_ref, dq_ref, ddq_ref, known, gains, B, p, float(self._mode), a_force)[0]).ravel()

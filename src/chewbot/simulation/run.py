@@ -33,7 +33,9 @@ from chewbot.run.columns import POSE_UNITS
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.run.options import OptionError, RunOptions, Switch, resolve_dynamics
 from chewbot.rotation import matrix_from_euler_angles
-from chewbot.simulation.controllers import CONTROLLERS, Gains, ModelBasedController
+from chewbot.simulation import COMPARED, CONTROLLERS
+from chewbot.simulation.controllers import Gains, HybridController, ModelBasedController
+from chewbot.simulation.observer import ForceObserver
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
 from chewbot.simulation.plant import Plant
 from chewbot.simulation.reference import Reference
@@ -140,8 +142,16 @@ def build(options: SimulateOptions, task: Task | None = None):
     options = replace(options, side=task.side)
     reference = Reference.from_task(model, task)
     gains = Gains.load(options.gains, model.mechanism, options.gain_overrides)
-    controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
-                                      options.controller_friction, not options.bite_unknown)
+    if options.controller == "hybrid":
+        if options.food is None:
+            raise ChewbotError("--controller hybrid follows the task's Fz as a force reference by pressing on a food: give "
+                               "--food FOOD (without one the bite force is the task's, which no controller can change)")
+        if options.bite_unknown:
+            raise ChewbotError("--bite-unknown: the hybrid controller knows no bite force but the one its observer estimates")
+        controller = HybridController(model, reference, gains, options.method, options.goal, options.controller_friction)
+    else:
+        controller = ModelBasedController(options.controller, model, reference, gains, options.method, options.goal,
+                                          options.controller_friction, not options.bite_unknown)
     if options.food is None:
         plant = Plant(plant_model, friction=options.friction == "on", side=task.side)
     else:
@@ -186,7 +196,10 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
     step(f"simulation ({options.controller}, {'continuous' if options.rate is None else f'{options.rate:g} Hz'})",
          stage="simulation")
     t0 = time.perf_counter()
-    sim = simulate(plant, controller, reference, options.rate, sensor, check=check)
+    observer = None
+    if options.controller == "hybrid":
+        observer = ForceObserver(model, gains.observer_cutoff, task.side, options.controller_friction)
+    sim = simulate(plant, controller, reference, options.rate, sensor, check=check, observer=observer)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -198,6 +211,8 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
     kin = motion.kinematics
     table = simulation_table(plant, sim, kin, motion.kinematic_columns)
     metrics = tracking_metrics(sim, coordinate_names(plant_model))
+    if observer is not None:
+        metrics["force"] = add_force_control(table, sim, reference, controller)
     info = {"timings": timings, "simulation": simulation_info(sim, plant, controller, sensor), "tracking": metrics}
     if sim.food is not None:
         info["food"] = plant.info(sim.food)
@@ -207,6 +222,27 @@ def compute(options: SimulateOptions, progress=None, check=None, task: Task | No
 
     result.checks = run_checks(plant_model, table, None, options.contact)
     return result
+
+
+def add_force_control(table: Table, sim: Simulation, reference: Reference, controller: HybridController) -> dict:
+    """The force observer's and the hybrid controller's columns (the observed forces, the force reference, the
+    controller's mode and its food-stiffness estimate) and the force-tracking figures: RMS and peak of the plant's
+    Fz minus the task's Fz over the rows where the reference is not zero (N, and % of the reference's peak)."""
+    table.add_block([f"{name}_obs" for name in ("Fx", "Fy", "Fz", "N_L", "N_R")], sim.observed, "N",
+                    "the force observer's estimate (docs/bite_force.md): food force on the mandible, condyles' normal forces")
+    F_ref = reference.force_at(sim.t)[:, 2]
+    table.add("Fz_ref", F_ref, "N", "the hybrid controller's force reference: the task's Fz")
+    log = np.array(controller.log[: sim.n]) if controller.log else np.zeros((0, 3))
+    table.add("force_mode", log[:, 1], "1", "1 where z is force-controlled, 0 where position-controlled")
+    table.add("stiffness_estimate", log[:, 2], "N/m", "the hybrid controller's estimate of the food's stiffness along z")
+    active = F_ref != 0
+    if not active.any():
+        return {"rms_N": None, "peak_N": None, "rms_percent": None, "samples": 0}
+    e = sim.force[active, 2] - F_ref[active]
+    peak = float(np.abs(F_ref).max())
+    rms = float(np.sqrt(np.mean(e**2)))
+    return {"rms_N": rms, "peak_N": float(np.abs(e).max()), "rms_percent": 100 * rms / peak, "reference_peak_N": peak,
+            "samples": int(active.sum())}
 
 
 def coordinate_names(model: Model) -> tuple[str, ...]:
@@ -321,7 +357,10 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
                         "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
             "controller": {"kind": controller.kind, "model": controller.model.name, "method": controller.method,
                            "goal": controller.goal, "friction": controller.friction, "bite_force_known": controller.bite_known,
-                           "gains": controller.gains.as_dict()},
+                           "gains": controller.gains.as_dict(),
+                           **({"force_observer": {"cutoff_Hz": controller.gains.observer_cutoff,
+                                                  "method": "the bite-force estimator at each tick (docs/bite_force.md)"}}
+                              if controller.kind == "hybrid" else {})},
             "plant": {"model": plant.model.name, "file": plant.model.source, "friction": plant.friction,
                       "contact": "bilateral: both contacts stay closed, N_L and N_R of either sign (contact-pull reports N < 0)"
                       if plant.model.has_hkp else None,
@@ -333,7 +372,7 @@ def simulation_info(sim: Simulation, plant: Plant, controller: ModelBasedControl
 
 def compare(options: SimulateOptions, progress=None, check=None) -> dict[str, SimulateResult]:
     """The three controllers on the same task and plant (``options.controller`` is ignored)."""
-    return {kind: compute(replace(options, controller=kind), progress, check) for kind in CONTROLLERS}
+    return {kind: compute(replace(options, controller=kind), progress, check) for kind in COMPARED}
 
 
 def input_files(options: SimulateOptions) -> list[Path]:

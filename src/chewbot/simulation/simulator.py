@@ -36,6 +36,7 @@ from chewbot.simulation.integrator import C
 from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage_times, step_kernel
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
+from chewbot.dynamics.bite_force import residual_kernel
 from chewbot.dynamics.newton_euler import n_unknowns
 
 DEFAULT_RATE = 1000.0  # Hz
@@ -51,7 +52,8 @@ class Simulation:
     ``ddq`` (K, n) and ``N`` (K, 2 or 0) the accelerations and HKP normal forces that each row's state and torques
     produce (the plant's forward dynamics), ``residual`` (K,) their equations' residual (N m); ``stopped``: None, or
     {"t", "sample", "reason"} where the robot left the workspace; ``rate`` (Hz, None: continuous); ``splits``: steps
-    the integrator split; ``elapsed_s``, ``cpu_s``: the loop's wall-clock and CPU time (s).
+    the integrator split; ``elapsed_s``, ``cpu_s``: the loop's wall-clock and CPU time (s); ``observed`` (K, 5) the
+    force observer's Fx, Fy, Fz, N_L, N_R at each tick (None without an observer).
     """
 
     t: np.ndarray
@@ -73,6 +75,7 @@ class Simulation:
     cpu_s: float = 0.0
     info: dict = field(default_factory=dict)
     food: dict | None = None  # the food's columns per row where the plant holds one (chewbot.simulation.food)
+    observed: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -114,7 +117,7 @@ def closed_loop_kernel(controller: ModelBasedController) -> KernelSpec:
 
 
 def simulate(plant: Plant, controller, reference: Reference, rate: float | None = DEFAULT_RATE,
-             sensor: CrankSensor | None = None, progress=None, check=None) -> Simulation:
+             sensor: CrankSensor | None = None, progress=None, check=None, observer=None) -> Simulation:
     """Simulate ``plant`` under ``controller`` following ``reference`` from its first to its last sample, starting on
     the reference (its first sample's position and rate).
 
@@ -122,6 +125,9 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     (rows at the reference's samples; a built-in controller). ``sensor``: noisy crank encoders and the estimator the
     controller then gets its state from (held rates only). ``progress(fraction)`` is called now and then, and
     ``check()`` too, which raises to stop the loop (a signal a library swallowed: the command line's check).
+    ``observer``: a force observer (:class:`~chewbot.simulation.observer.ForceObserver`) updated at each tick from
+    the state the controller sees and the torques applied since the tick before; its estimate is the controller's
+    ``State.force`` and the rows' ``observed``.
     """
     if rate is None:
         if getattr(plant, "food", None) is not None:
@@ -131,6 +137,8 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
             raise ValueError("rate=None evaluates the controller inside the integrator: it needs a built-in controller")
         if sensor is not None:
             raise ValueError("sensor noise is sampled at the ticks of a control rate: it needs a rate, not continuous control")
+        if observer is not None:
+            raise ValueError("the force observer runs at the ticks of a control rate: it needs a rate, not continuous control")
         times = np.asarray(reference.t, float)
     else:
         if not rate > 0:
@@ -143,6 +151,7 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     kernels = [plant_step_kernel(plant.mechanism), forward_kernel(plant.mechanism), plant_outputs_kernel(plant.mechanism)]
     if isinstance(controller, ModelBasedController):
         kernels.append(closed_loop_kernel(controller) if rate is None else controller.kernel_spec())
+    kernels += getattr(controller, "kernel_specs", lambda: [])() + ([residual_kernel(observer.model.mechanism)] if observer else [])
     prepare_kernels(kernels)
 
     K, n = len(times), n_coordinates(plant.mechanism)
@@ -153,6 +162,10 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     state = plant.initial(times[0], q_ref[0], dq_ref[0])
     if sensor is not None:
         sensor.start(times[0], q_ref[0], dq_ref[0])
+    observed = np.zeros((K, 5)) if observer is not None else None
+    if observer is not None:
+        observer.start(times[0], q_ref[0], dq_ref[0])
+    tau_k = np.zeros(6)
     if rate is None:
         kernel, shared = native(closed_loop_kernel(controller)), _closed_loop_shared(plant, controller, limit)
         data = _closed_loop_data(controller, reference)
@@ -167,6 +180,10 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
         q[k], dq[k], internal[k] = state.q, state.dq, state.food
         if rate is not None:
             seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq)
+            if observer is not None:
+                if k:
+                    observed[k] = observer.update(times[k], seen.q, seen.dq, tau_k)
+                seen = State(seen.q, seen.dq, observed[k, :3].copy())
             tau_cmd[k] = controller(times[k], seen)
             tau_k = np.clip(tau_cmd[k], -limit, limit)
             data = _held_data(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
@@ -193,7 +210,8 @@ def simulate(plant: Plant, controller, reference: Reference, rate: float | None 
     force[rows] = force_rows
     fwd: Forward = forward_dynamics(plant.model, q[rows], dq[rows], tau, force[rows], plant.side, plant.friction)
     return Simulation(times[rows], q[rows], dq[rows], tau, tau_cmd[rows], force[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
-                      fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu, food=food)
+                      fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu, food=food,
+                      observed=None if observed is None else observed[rows])
 
 
 def _held_data(tau: np.ndarray, reference: Reference, tick=None):
