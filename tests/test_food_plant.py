@@ -140,7 +140,11 @@ def test_tpa_refuses_a_sample_taller_than_the_workspace(tmp_path):
 
 
 def test_tpa_command_writes_its_folder(tmp_path):
-    r = runner.invoke(app, ["tpa", "--food", "bread", "--speed", "6", "--pause", "0.5", "--out", str(tmp_path / "tpa"), "-q"])
+    """chewbot tpa writes tpa.json with both sets of measures, results.csv with the food's columns, the figures and
+    the reports; its hardness lies between the equilibrium and the instantaneous modulus' force; and chewbot tpa --log
+    on the same angles and torques gives the same estimated measures."""
+    food = food_file(tmp_path, height_mm=4.0, relaxation_time_s=1.0, relaxation_modulus_kPa=10.0, damping_s_per_m=10.0)
+    r = runner.invoke(app, ["tpa", "--food", food, "--speed", "8", "--pause", "0.3", "--out", str(tmp_path / "tpa"), "-q"])
     assert r.exit_code == 0, r.output
     record = json.loads((tmp_path / "tpa" / "tpa.json").read_text())
     for source in ("plant", "estimated"):
@@ -151,9 +155,9 @@ def test_tpa_command_writes_its_folder(tmp_path):
     for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html"):
         assert (tmp_path / "tpa" / name).exists()
     # the hardness lies between the equilibrium and the instantaneous modulus' force (damping on top)
-    bread = load_food("bread")
-    elastic = float(bread.elastic(0.5 * bread.height))
-    instantaneous = elastic * (1 + bread.relaxation_modulus / bread.young_modulus) * (1 + 1.5 * bread.damping * 6e-3)
+    sample = load_food(food)
+    elastic = float(sample.elastic(0.5 * sample.height))
+    instantaneous = elastic * (1 + sample.relaxation_modulus / sample.young_modulus) * (1 + 1.5 * sample.damping * 8e-3)
     assert elastic * 0.99 < record["plant"]["hardness_N"] < instantaneous
     # the same test from the robot's log (its angles and torques): the same "estimated" measures
     import csv
@@ -164,7 +168,7 @@ def test_tpa_command_writes_its_folder(tmp_path):
     keep = [rows[0].index(c) for c in columns]
     with open(tmp_path / "log.csv", "w", newline="") as fh:
         csv.writer(fh).writerows([[row[j] for j in keep] for row in rows])
-    r = runner.invoke(app, ["tpa", "--log", str(tmp_path / "log.csv"), "--food", "bread", "--out", str(tmp_path / "logged"), "-q"])
+    r = runner.invoke(app, ["tpa", "--log", str(tmp_path / "log.csv"), "--food", food, "--out", str(tmp_path / "logged"), "-q"])
     assert r.exit_code == 0, r.output
     logged = json.loads((tmp_path / "logged" / "tpa.json").read_text())
     assert logged["plant"] is None
