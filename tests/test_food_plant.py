@@ -152,7 +152,7 @@ def test_tpa_command_writes_its_folder(tmp_path):
                                        "adhesiveness_mJ", "gumminess_N", "chewiness_N"}
     header = (tmp_path / "tpa" / "results.csv").read_text().splitlines()[0]
     assert "food_compression [m]" in header and "food_force [N]" in header and "food_broken [1]" in header
-    for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html"):
+    for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html", "task.csv"):
         assert (tmp_path / "tpa" / name).exists()
     # the hardness lies between the equilibrium and the instantaneous modulus' force (damping on top)
     sample = load_food(food)

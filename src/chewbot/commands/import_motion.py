@@ -64,6 +64,7 @@ def import_motion(
     from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
     from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
+    from chewbot.task.csvio import task_table
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
 
     residuals = out.with_name(out.stem + ".residuals.csv")
@@ -83,7 +84,7 @@ def import_motion(
         about = f"chewbot import-motion {shlex.join(_arguments(recording, registration, out, options, force))}"
         files = [(residuals, result.residuals(), "residuals of " + about)]
         if result.task is not None:
-            files.insert(0, (out, _task_table(result.task), "a task, read it with chewbot run --task; from " + about))
+            files.insert(0, (out, task_table(result.task), "a task, read it with chewbot run --task; from " + about))
         with atomic_files([path for path, _, _ in files], force, inputs) as temporaries:
             for (_, table, what), tmp in zip(files, temporaries):
                 table.to_csv(tmp, first_line=marker_line("#", what))
@@ -113,20 +114,6 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
     if o.force_file is not None:
         args += ["--force-file", o.force_file]
     return args + (["--force"] if force else [])
-
-
-def _task_table(task):
-    """The task as ``chewbot run --task`` reads it: t, coordinates, their rates, the bite force; SI units named."""
-    from chewbot.table import Table
-
-    table = Table()
-    table.add("t", task.t, "s")
-    units = {"X": "m", "Y": "m", "Z": "m", "alpha": "rad", "beta": "rad", "gamma": "rad"}
-    for prefix, values, per in (("", task.q, ""), ("d", task.dq, "/s"), ("dd", task.ddq, "/s^2")):
-        for j, c in enumerate(task.coords):
-            table.add(prefix + c, values[:, j], units[c] + per)
-    table.add_block(["Fx", "Fy", "Fz"], task.force, "N")
-    return table
 
 
 def _print_maxima(stdout, result) -> None:

@@ -245,3 +245,17 @@ def read_task_csv(path: str | Path, side: str | None = None, mechanism: str = "t
         a.setflags(write=False)
     return Task(name=name or path.stem, t=col["t"], coords=coords, q=q, dq=dq, ddq=ddq, force=force,
                 side=side, source=str(path), meta=meta, lines=lines)
+
+
+def task_table(task: Task):
+    """The task as ``chewbot run --task`` reads it: t, coordinates, their rates, the bite force; SI units named."""
+    from chewbot.table import Table
+
+    table = Table()
+    table.add("t", task.t, "s")
+    units = {"X": "m", "Y": "m", "Z": "m", "alpha": "rad", "beta": "rad", "gamma": "rad"}
+    for prefix, values, per in (("", task.q, ""), ("d", task.dq, "/s"), ("dd", task.ddq, "/s^2")):
+        for j, c in enumerate(task.coords):
+            table.add(prefix + c, values[:, j], units[c] + per)
+    table.add_block(["Fx", "Fy", "Fz"], task.force, "N")
+    return table
