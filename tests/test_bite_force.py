@@ -158,3 +158,22 @@ def test_estimate_force_names_the_file_of_a_bad_log(tmp_path):
     assert r.exit_code == 2 and "bad.csv" in r.output and "tau6" in r.output
     r = runner.invoke(app, ["estimate-force", str(bad), "--model", "6rss", "--out", str(tmp_path / "f.csv")])
     assert r.exit_code == 2
+
+
+def test_a_results_csv_of_chewbot_is_read_as_a_log_with_its_other_columns_skipped(tmp_path):
+    import json
+
+    from chewbot.errors import TaskError
+    from chewbot.identification.log import read_log
+
+    m, kin, tau, _ = chewing()
+    folder = tmp_path / "sim"
+    folder.mkdir()
+    cols = ["t [s]", "X [m]"] + [f"theta{i} [rad]" for i in range(1, 7)] + [f"tau{i} [N*m]" for i in range(1, 7)]
+    np.savetxt(folder / "results.csv", np.column_stack([kin.t, kin.X[:, 0], kin.theta, tau]), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.17g")
+    with pytest.raises(TaskError, match="unknown column 'X'"):
+        read_log(folder / "results.csv")
+    (folder / "run.json").write_text(json.dumps({"chewbot_simulation": 1, "columns": {"t": "s", "X": "m"}}))
+    log = read_log(folder / "results.csv")
+    assert np.array_equal(log.theta, kin.theta) and np.array_equal(log.tau, tau)

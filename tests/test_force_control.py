@@ -165,3 +165,19 @@ def test_hybrid_needs_a_food_and_a_control_rate(tmp_path):
     assert r.exit_code == 2 and "--food" in r.output
     r = runner.invoke(app, ["simulate", "--controller", "hybrid", "--food", "cheddar", "--rate", "continuous", "--out", str(tmp_path / "b")])
     assert r.exit_code == 2 and "continuous" in r.output
+
+
+def test_the_estimator_gives_back_the_food_plant_s_force_from_the_simulated_log(folder):
+    # The simulated robot as a logged one: its crank angles, rates and accelerations and the torques it applied (held
+    # over each tick) are what results.csv holds; the plant integrated the food's force from its state (Radau IIA,
+    # the food's events located). The estimator, the plant's equations the other way round, gives that force back to
+    # rounding (the forward dynamics' residual is ~1e-13 N m): 1e-6 of the peak, the issue's bound for exact rates.
+    from chewbot.identification.force import estimate_angles
+
+    r = hybrid(50e3, 20.0, 5e-3, folder)
+    tab = r.table
+    cols = lambda name: np.column_stack([tab[f"{name}{i}"] for i in range(1, 7)])  # noqa: E731
+    e = estimate_angles(load_model("target"), tab["t"], cols("theta"), cols("tau"), rates=(cols("dtheta"), cols("ddtheta")),
+                        friction=False)
+    assert np.abs(e.F_B - r.simulation.force).max() <= 1e-6 * 20.0
+    assert np.abs(e.N - r.simulation.N).max() <= 1e-6 * 20.0

@@ -12,7 +12,8 @@ One header row, then one row per sample, comma-separated; blank lines and lines 
 
 Values are SI (s, rad, N*m, N) unless the name carries a unit in brackets, as in task files: ``theta1[deg]``,
 ``dtheta1[deg/s]``, ``tau1[N*mm]``, ``t[ms]``, ``Fz[kN]``. Errors are :class:`~chewbot.errors.TaskError`
-naming the file and the line (1-based, as an editor shows it) and the column.
+naming the file and the line (1-based, as an editor shows it) and the column. The results.csv of a chewbot run or
+simulation is a log too: the other columns that its run.json lists are skipped.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.errors import TaskError
-from chewbot.task.csvio import FORCES, read_signals
+from chewbot.task.csvio import FORCES, columns_beside, read_signals
 
 ANGLES = tuple(f"theta{i}" for i in range(1, 7))
 TORQUES = tuple(f"tau{i}" for i in range(1, 7))
@@ -63,7 +64,7 @@ def read_log(path: str | Path) -> RobotLog:
     """Read a robot log (see the module docstring)."""
     path = Path(path)
     what = "a robot log (t, theta1..6, tau1..6)"
-    names, _, lines, col = read_signals(path, COLUMNS, ("t", *ANGLES, *TORQUES), what)
+    names, _, lines, col = read_signals(path, COLUMNS, ("t", *ANGLES, *TORQUES), what, columns_beside(path))
 
     def block(prefix: str):
         given = [prefix + c in col for c in ANGLES]

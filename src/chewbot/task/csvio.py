@@ -220,6 +220,23 @@ def run_beside(path: Path) -> dict | None:
     return run
 
 
+def columns_beside(path: Path) -> frozenset[str]:
+    """The columns that the run.json beside a chewbot results.csv lists (a run's or a simulation's), or none: the
+    output columns a reader of that file may skip."""
+    path = Path(path)
+    record = path.parent / "run.json"
+    if path.name != "results.csv" or not record.is_file():
+        return frozenset()
+    try:
+        run = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return frozenset()
+    if not (isinstance(run, dict) and any(k in run for k in ("chewbot_run", "chewbot_simulation"))
+            and isinstance(run.get("columns"), dict)):
+        return frozenset()
+    return frozenset(run["columns"])
+
+
 def read_task_csv(path: str | Path, side: str | None = None, mechanism: str = "target", name: str | None = None) -> Task:
     """Read a task file (see the module docstring) for a ``mechanism`` ("target" or "6rss"), bite force at
     ``side``: left or right; None takes the side of the run whose results.csv the file is, else left."""
