@@ -96,9 +96,11 @@ def _path_functions(model: Model, side: str):
     return cached_graph(params, ("food-molar-path", side), build)
 
 
-def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture test", pin_values=None) -> Task:
+def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture test", pin_values=None,
+                    shift=None) -> Task:
     """The target's motion that moves the bite point of ``side`` along {S}'s z through gaps ``g`` (m) with rates
-    ``dg``, ``ddg`` at times ``t``, B_x and B_y held at home, alpha pinned (``pin_values``: its value, rate,
+    ``dg``, ``ddg`` at times ``t``, B_x and B_y held at home (``shift``: or moved from there by (N, 2) offsets, their
+    rates and accelerations, m, m/s, m/s^2: sliding on the tooth), alpha pinned (``pin_values``: its value, rate,
     acceleration (N,) each; default 0). Raises :class:`KinematicsError` naming the first sample the robot cannot
     reach (Newton did not converge, or the pose leaves the workspace)."""
     if not model.has_hkp:
@@ -109,7 +111,8 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
     g, dg, ddg = (np.asarray(x, float).reshape(n) for x in (g, dg, ddg))
     pins = np.zeros((n, 3)) if pin_values is None else np.column_stack([np.asarray(x, float).reshape(n) for x in pin_values])
     home = np.asarray(model.molar(side), float)
-    target = np.column_stack([np.full(n, home[0]), np.full(n, home[1]), home[2] - g])
+    xy, v_xy, a_xy = (np.zeros((n, 2)),) * 3 if shift is None else (np.asarray(x, float).reshape(n, 2) for x in shift)
+    target = np.column_stack([home[0] + xy[:, 0], home[1] + xy[:, 1], home[2] - g])
     solver, levels = _path_functions(model, side)
     # Newton from the home pose on every sample at once (the gaps of a texture test are within a few degrees of it)
     mapped = solver.map(n)
@@ -123,8 +126,8 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
                               f"(position error {err[k]:.3g} m)", sample=k, time=float(t[k]))
     # rates: J du = v - (pinned angle's share), J ddu = a - J_dot du - (pinned share), from the exact derivatives
     J = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), pins)[3]
-    v_target = np.column_stack([np.zeros(n), np.zeros(n), -dg])
-    a_target = np.column_stack([np.zeros(n), np.zeros(n), -ddg])
+    v_target = np.column_stack([v_xy, -dg])
+    a_target = np.column_stack([a_xy, -ddg])
     _, v_pin, _, _ = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), np.column_stack([pins[:, 0], pins[:, 1], np.zeros(n)]))
     du = np.linalg.solve(J, (v_target - v_pin)[..., None])[..., 0]
     _, _, a_rest, _ = evaluate(levels, u, du, np.zeros((n, 3)), pins)
