@@ -53,6 +53,9 @@ HALVINGS = 6
 # A pattern's minimiser counts as having its signs down to this far on the wrong side (N): the smoothing of abs(N)
 # (DELTA_N) blurs the kink over that width anyway.
 SIGN_TOL = 10 * DELTA_N
+# Without friction the pieces are exact linear least squares: a face's minimiser counts as inside the bounds down to
+# rounding (N of tens of newtons carry ~1e-14 N).
+BOUND_TOL = 1e-9
 # Condition number of G (all unknowns in N, all equations in N m: no scaling needed) above which a sample is named:
 # a relative torque error e then moves the forces by up to MAX_CONDITION e relative to their size.
 MAX_CONDITION = 1e4
@@ -191,7 +194,8 @@ def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, 
             u = u + _lstsq(G, -r, free)
         r, _ = residual(u, sign)
         cost = np.einsum("ij,ij->i", r, r)
-        ok = np.all(sign * u[:, 3:] >= -SIGN_TOL, axis=1)  # the piece's minimiser has the piece's signs
+        # the piece's minimiser has the piece's signs (without friction: exactly, up to rounding)
+        ok = np.all(sign * u[:, 3:] >= -(SIGN_TOL if friction else BOUND_TOL), axis=1)
         better = ok & (cost < best_cost)
         best[better], best_cost[better], best_free[better] = u[better], cost[better], free
     # a sample no piece claims (rounding at a kink): the friction-free answer, clipped to the bounds where unilateral
