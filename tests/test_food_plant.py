@@ -140,7 +140,11 @@ def test_tpa_refuses_a_sample_taller_than_the_workspace(tmp_path):
 
 
 def test_tpa_command_writes_its_folder(tmp_path):
-    r = runner.invoke(app, ["tpa", "--food", "bread", "--speed", "6", "--pause", "0.5", "--out", str(tmp_path / "tpa"), "-q"])
+    """chewbot tpa writes tpa.json with both sets of measures, results.csv with the food's columns, the figures and
+    the reports; its hardness lies between the equilibrium and the instantaneous modulus' force; and chewbot tpa --log
+    on the same angles and torques gives the same estimated measures."""
+    food = food_file(tmp_path, height_mm=4.0, relaxation_time_s=1.0, relaxation_modulus_kPa=10.0, damping_s_per_m=10.0)
+    r = runner.invoke(app, ["tpa", "--food", food, "--speed", "8", "--pause", "0.3", "--out", str(tmp_path / "tpa"), "-q"])
     assert r.exit_code == 0, r.output
     record = json.loads((tmp_path / "tpa" / "tpa.json").read_text())
     for source in ("plant", "estimated"):
@@ -148,10 +152,68 @@ def test_tpa_command_writes_its_folder(tmp_path):
                                        "adhesiveness_mJ", "gumminess_N", "chewiness_N"}
     header = (tmp_path / "tpa" / "results.csv").read_text().splitlines()[0]
     assert "food_compression [m]" in header and "food_force [N]" in header and "food_broken [1]" in header
-    for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html"):
+    for name in ("force_time.png", "force_displacement.png", "tpa.html", "report.html", "task.csv"):
         assert (tmp_path / "tpa" / name).exists()
     # the hardness lies between the equilibrium and the instantaneous modulus' force (damping on top)
-    bread = load_food("bread")
-    elastic = float(bread.elastic(0.5 * bread.height))
-    instantaneous = elastic * (1 + bread.relaxation_modulus / bread.young_modulus) * (1 + 1.5 * bread.damping * 6e-3)
+    sample = load_food(food)
+    elastic = float(sample.elastic(0.5 * sample.height))
+    instantaneous = elastic * (1 + sample.relaxation_modulus / sample.young_modulus) * (1 + 1.5 * sample.damping * 8e-3)
     assert elastic * 0.99 < record["plant"]["hardness_N"] < instantaneous
+    # the same test from the robot's log (its angles and torques): the same "estimated" measures
+    import csv
+
+    with open(tmp_path / "tpa" / "results.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    columns = ["t [s]"] + [f"theta{i} [rad]" for i in range(1, 7)] + [f"tau{i} [N*m]" for i in range(1, 7)]
+    keep = [rows[0].index(c) for c in columns]
+    with open(tmp_path / "log.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([[row[j] for j in keep] for row in rows])
+    r = runner.invoke(app, ["tpa", "--log", str(tmp_path / "log.csv"), "--food", food, "--out", str(tmp_path / "logged"), "-q"])
+    assert r.exit_code == 0, r.output
+    logged = json.loads((tmp_path / "logged" / "tpa.json").read_text())
+    assert logged["plant"] is None
+    for key, value in record["estimated"].items():
+        if isinstance(value, float):
+            assert logged["estimated"][key] == pytest.approx(value, rel=1e-6, abs=1e-9), key
+
+
+def _smooth_step(t, t0, duration, size):
+    """A C^2 step of ``size`` from t0 over ``duration`` (quintic), with its rate and acceleration."""
+    u = np.clip((t - t0) / duration, 0, 1)
+    inside = (t > t0) & (t < t0 + duration)
+    return (size * (10 * u**3 - 15 * u**4 + 6 * u**5), np.where(inside, size * (30 * u**2 - 60 * u**3 + 30 * u**4) / duration, 0),
+            np.where(inside, size * (60 * u - 180 * u**2 + 120 * u**3) / duration**2, 0))
+
+
+def test_sliding_on_the_tooth(tmp_path):
+    """The sample compressed by 30 %, then slid 1 mm along x and back: the friction never exceeds mu F_n, opposes the
+    sliding, and reaches at least 0.89 mu F_n where the bite point slides faster than 2 mm/s (the regularised law at
+    twice its speed scale: 2 / sqrt(5)); the sliding velocity is taken from the kinematics' bite point (central
+    differences). Energy: the actuators' work equals the robot's change of energy plus the work done on the food,
+    -sum F . v_B dt, normal and tangential, to 1e-4 of the latter."""
+    m = model("target")
+    t = np.arange(0, 2.2001, 1e-3)
+    h0, mu = H0_MM * 1e-3, 0.4
+    close = _smooth_step(t, 0.1, 0.8, -(1e-3 + 0.3 * h0))
+    g = (close[0] + h0 + 1e-3, close[1], close[2])
+    there, back = _smooth_step(t, 1.0, 0.5, 1e-3), _smooth_step(t, 1.6, 0.5, -1e-3)
+    shift = tuple(np.column_stack([a + b, np.zeros(t.size)]) for a, b in zip(there, back))
+    task = molar_path_task(m, "left", t, *g, shift=shift)
+    result = compute(SimulateOptions(food=food_file(tmp_path, tooth_friction=mu),
+                                     gain_overrides={"computed_torque.frequency_Hz": 100.0}), task=task)
+    table, kin, sim = result.table, result.kinematics, result.simulation
+    F = np.column_stack([table["Fx"], table["Fy"], table["Fz"]])
+    Fn = table["food_force"]
+    v = np.gradient(kin.points["B_L"], sim.t, axis=0)
+    assert np.all(np.hypot(F[:, 0], F[:, 1]) <= mu * Fn + 1e-12)
+    sliding = np.abs(v[:, 0]) > 2e-3
+    assert sliding.sum() > 300
+    assert np.all(np.sign(F[sliding, 0]) == -np.sign(v[sliding, 0]))
+    assert np.all(np.abs(F[sliding, 0]) >= 0.89 * mu * Fn[sliding])
+    work = float(np.sum(sim.tau[:-1] * np.diff(kin.theta, axis=0)))
+    T, V, _ = energies(m, kin)
+    power = -np.sum(F * v, axis=1)
+    on_food = float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(sim.t)))
+    normal = float(np.sum(0.5 * (Fn[1:] + Fn[:-1]) * np.diff(table["food_compression"])))
+    assert on_food > 1.5 * normal > 0  # the friction did work too
+    assert work == pytest.approx((T[-1] + V[-1]) - (T[0] + V[0]) + on_food, abs=1e-4 * on_food)

@@ -46,7 +46,7 @@ def estimate_force(
       chewbot estimate-force log.csv --model identified.toml --side right --contact unilateral --out force.csv
     """
     from chewbot.commands.common import console
-    from chewbot.files import WRITTEN_FILE, atomic_file, check_output, marker_line
+    from chewbot.files import WRITTEN_FILE, atomic_file, check_output
     from chewbot.identification.force import estimate_log
     from chewbot.identification.log import read_log
     from chewbot.model.params import load_model
@@ -65,8 +65,8 @@ def estimate_force(
             args = [str(log), "--model", model, "--side", str(side), "--contact", str(contact), "--friction", str(friction),
                     "--window", f"{window:g}", "--out", str(out)]
             about = f"chewbot estimate-force {shlex.join(args)}; pooled sigma {result.sigma:.6g} N*m ({result.dof} dof)"
-            with atomic_file(out, force, inputs) as tmp:
-                result.table().to_csv(tmp, marker_line("#", about))
+            with atomic_file(out, force, inputs, about={out: about}) as tmp:
+                result.table().to_csv(tmp)  # plain CSV; chewbot's marker in the sidecar beside it
     for warning in result.warnings:
         console.print(f"[yellow]warning:[/] {warning}", highlight=False, markup=False)
     if not quiet:

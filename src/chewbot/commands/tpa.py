@@ -28,7 +28,7 @@ def tpa(
     model: str = typer.Option("target", "--model", help="The robot's model (built-in name or TOML file): the controller's and the plant's, and the estimator's."),
     gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain of the position control (computed torque; default here computed_torque.frequency_Hz=100, a stiff texture analyser; keys as chewbot simulate --gain); repeatable."),
     log: Path | None = typer.Option(None, "--log", show_default=False, help="A robot's logged two-bite test (chewbot identify's log: t, theta1..6, tau1..6; units in brackets): the measures from its angles and torques through the bite-force estimator, no simulation."),
-    out: Path = typer.Option(..., "--out", help="Folder to write: tpa.json, results.csv (simulated), force_time.png, force_displacement.png, tpa.html."),
+    out: Path = typer.Option(..., "--out", help="Folder to write: tpa.json, task.csv and results.csv (simulated), force_time.png, force_displacement.png, tpa.html."),
     force: bool = flag("--force", help=FORCE_HELP),
     quiet: bool = flag("--quiet", "-q", help="Print nothing but errors."),
 ) -> None:

@@ -79,15 +79,14 @@ def _path_functions(model: Model, side: str):
         pinned = ca.SX.sym("alpha", 3)  # the pinned angle, its rate and acceleration
 
         point_fn = ca.Function("molar", [s.q], [s.point(B)])
-        P = point_fn(ca.vertcat(u[0], u[1], pinned[0], u[2]))
-        target = ca.SX.sym("target", 3)
-        residual = ca.Function("molar_residual", [u, ca.vertcat(target, pinned)], [P - target])
-        solver = ca.rootfinder("molar_path", "newton", residual, {"abstol": PATH_TOLERANCE, "max_iter": 50,
-                                                                     "error_on_fail": False})
         qfull = ca.vertcat(u[0], u[1], pinned[0], u[2])
         vfull = ca.vertcat(du[0], du[1], pinned[1], du[2])
         afull = ca.vertcat(ddu[0], ddu[1], pinned[2], ddu[2])
         P_q = point_fn(qfull)
+        target = ca.SX.sym("target", 3)
+        residual = ca.Function("molar_residual", [u, ca.vertcat(target, pinned)], [P_q - target])
+        solver = ca.rootfinder("molar_path", "newton", residual, {"abstol": PATH_TOLERANCE, "max_iter": 50,
+                                                                     "error_on_fail": False})
         J = ca.jacobian(P_q, qfull)
         v = ca.mtimes(J, vfull)
         a = ca.mtimes(J, afull) + ca.jtimes(v, qfull, vfull)
@@ -97,9 +96,11 @@ def _path_functions(model: Model, side: str):
     return cached_graph(params, ("food-molar-path", side), build)
 
 
-def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture test", pin_values=None) -> Task:
+def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture test", pin_values=None,
+                    shift=None) -> Task:
     """The target's motion that moves the bite point of ``side`` along {S}'s z through gaps ``g`` (m) with rates
-    ``dg``, ``ddg`` at times ``t``, B_x and B_y held at home, alpha pinned (``pin_values``: its value, rate,
+    ``dg``, ``ddg`` at times ``t``, B_x and B_y held at home (``shift``: or moved from there by (N, 2) offsets, their
+    rates and accelerations, m, m/s, m/s^2: sliding on the tooth), alpha pinned (``pin_values``: its value, rate,
     acceleration (N,) each; default 0). Raises :class:`KinematicsError` naming the first sample the robot cannot
     reach (Newton did not converge, or the pose leaves the workspace)."""
     if not model.has_hkp:
@@ -110,10 +111,10 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
     g, dg, ddg = (np.asarray(x, float).reshape(n) for x in (g, dg, ddg))
     pins = np.zeros((n, 3)) if pin_values is None else np.column_stack([np.asarray(x, float).reshape(n) for x in pin_values])
     home = np.asarray(model.molar(side), float)
-    target = np.column_stack([np.full(n, home[0]), np.full(n, home[1]), home[2] - g])
+    xy, v_xy, a_xy = (np.zeros((n, 2)),) * 3 if shift is None else (np.asarray(x, float).reshape(n, 2) for x in shift)
+    target = np.column_stack([home[0] + xy[:, 0], home[1] + xy[:, 1], home[2] - g])
     solver, levels = _path_functions(model, side)
-    # Newton from the home pose on every sample at once; a second pass from the neighbours' answers for any that
-    # did not converge from there
+    # Newton from the home pose on every sample at once (the gaps of a texture test are within a few degrees of it)
     mapped = solver.map(n)
     u = np.asarray(mapped(np.zeros((3, n)), np.vstack([target.T, pins.T]))).T
     P, _, _, _ = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), pins)
@@ -125,8 +126,8 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
                               f"(position error {err[k]:.3g} m)", sample=k, time=float(t[k]))
     # rates: J du = v - (pinned angle's share), J ddu = a - J_dot du - (pinned share), from the exact derivatives
     J = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), pins)[3]
-    v_target = np.column_stack([np.zeros(n), np.zeros(n), -dg])
-    a_target = np.column_stack([np.zeros(n), np.zeros(n), -ddg])
+    v_target = np.column_stack([v_xy, -dg])
+    a_target = np.column_stack([a_xy, -ddg])
     _, v_pin, _, _ = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), np.column_stack([pins[:, 0], pins[:, 1], np.zeros(n)]))
     du = np.linalg.solve(J, (v_target - v_pin)[..., None])[..., 0]
     _, _, a_rest, _ = evaluate(levels, u, du, np.zeros((n, 3)), pins)

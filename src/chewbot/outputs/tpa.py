@@ -1,5 +1,6 @@
 """The folder of a texture test (``chewbot tpa``): tpa.json (Bourne's measures from the plant's force and from the
-torques), the simulation's own files (results.csv with the food's columns, run.json, its figures and report.html),
+torques), task.csv (the test's point path, zero bite force: a task for ``chewbot simulate --food``), the simulation's
+own files (results.csv with the food's columns, run.json, its figures and report.html),
 the force-time and force-displacement figures and tpa.html, written whole through :func:`chewbot.files.atomic_folder`
 and recognised later by tpa.json (key ``chewbot_tpa``). From a robot's log (``chewbot tpa --log``) the folder has
 tpa.json, the two figures and tpa.html.
@@ -15,18 +16,21 @@ from chewbot.food.tpa import MEASURES
 
 TPA_FOLDER = Marker("texture test folder", "tpa.json", "chewbot_tpa")
 TPA_FILE = "tpa.json"
+TASK_FILE = "task.csv"  # the test's point path, a task for chewbot simulate --food
 
 
 def write_tpa(result, out: Path, force: bool = False, progress=None) -> Path:
     """Write the folder of a simulated texture test (:class:`chewbot.simulation.texture.TpaResult`)."""
     from chewbot.outputs.simulation import write_into
     from chewbot.simulation.run import input_files
+    from chewbot.task.csvio import task_table
 
     out = Path(out)
     c = result.curves
     curves = {"plant": (c["t"], c["gap_plant"], c["force_plant"]), "estimated": (c["t"], c["gap_estimated"], c["force_estimated"])}
     with atomic_folder(out, force, TPA_FOLDER, inputs=input_files(result.simulation.options)) as tmp:
         write_into(result.simulation, tmp, progress)
+        task_table(result.simulation.task).to_csv(tmp / TASK_FILE)  # plain CSV: the folder's tpa.json is chewbot's marker
         record = result.record()
         _write_common(tmp, record, curves, result.food.height, result.food.name)
     return out

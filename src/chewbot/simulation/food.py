@@ -65,8 +65,9 @@ class FoodState:
     F_n: float
 
 
-def _food_sx(mechanism: str, q, dq, B, p, f, broken, F_m, z_home):
-    """The food's quantities at a state (SX): delta, its rate, b F_e, F_v, F_n, the force on the mandible (3)."""
+def _food_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
+    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e, the bite point's velocity,
+    cos of the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
@@ -93,7 +94,7 @@ def food_stage(mechanism: str) -> ca.Function:
         B, fl, p = s[:3], s[3], s[4:4 + N_P]
         f = s[4 + N_P:4 + N_P + N_FOOD]
         broken, F_m0, bFe0 = (s[4 + N_P + N_FOOD + i] for i in range(N_STATE))
-        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, broken, None, s[-1])
+        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, broken, s[-1])
         F_m = maxwell_force(CASADI, f, F_m0, bFe0, bFe, w[6])
         _, _, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
         r = residual_function(m)(q, v, a, N, w[:6], B, F, fl, p)
@@ -118,7 +119,7 @@ def food_function(mechanism: str) -> ca.Function:
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
         broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, F_m, z_home)
+        delta, ddelta, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, z_home], [delta, ddelta, bFe, F_v, F_n, F, cos_tilt],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "z_home"],

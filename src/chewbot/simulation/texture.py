@@ -24,8 +24,8 @@ from chewbot.simulation.run import SimulateOptions, SimulateResult, compute
 
 
 # A texture analyser's crosshead is stiff: the test's computed-torque controller has its error dynamics at this
-# frequency (gains.toml's 30 Hz leaves 0.05 to 0.5 mm of position error under the few newtons of the built-in foods,
-# 100 Hz under 10 um at 1 kHz control; --gain computed_torque.frequency_Hz=... overrides it).
+# frequency. Not told the food's force, it yields about 1 mm per 160 N along z at the molar (gains.toml's 30 Hz: 1 mm
+# per 14 N, half a millimetre under the cheddar); --gain computed_torque.frequency_Hz=... overrides it.
 TPA_FREQUENCY_HZ = 100.0
 
 
