@@ -229,9 +229,9 @@ def test_chewbots_home_torques_hold_the_home_pose_in_mujoco(target):
     The equilibrium is unstable (the mandible on its planes under constant torques): a disturbance grows as e^(lambda t)
     with lambda = 14.4 /s, in MuJoCo and in chewbot's plant alike (checked here: the growth of the last quarter second
     agrees within 5 %). chewbot's plant, started on the equilibrium, stays there; MuJoCo's first 10 ms move O_M by
-    1.8e-10 m (the same with RK4 or implicitfast, steps of 0.1 or 0.05 ms, any solref: what is left is the constraints'
-    impedance of 0.9999), which has grown to 0.105 mm after 1 s: O_M stays within 0.03 mm for 0.9 s and within 0.11 mm
-    for 1 s."""
+    1.8e-10 m (the same with RK4 or implicitfast, steps of 0.1 or 0.05 ms, any solref; 10 times more at an impedance
+    of 0.999 than at MuJoCo's largest, 0.9999: the constraints' softness), which has grown to 0.105 mm after 1 s: O_M
+    stays within 0.03 mm for 0.9 s and within 0.11 mm for 1 s."""
     from chewbot.simulation.plant import Plant
 
     tau = _home_torques(target)

@@ -112,10 +112,10 @@ class ResultsWriter:
         self._view.update(table)
 
     def record(self, record: dict) -> dict:
-        """Close results.csv and write run.json holding ``record``; the record as it reads back (NaN as null), what
-        the report is drawn from."""
+        """Close the rows' file and write run.json holding ``record`` and ``results_file``, the name of the rows' file;
+        the record as it reads back (NaN as null), what the report is drawn from."""
         self._csv.close()
-        text = to_json(record)
+        text = to_json({**record, "results_file": RESULTS_FILES[self.format]})
         (self.folder / RECORD_FILE).write_text(text)
         return json.loads(text)
 
@@ -159,7 +159,7 @@ def write_run(options: RunOptions, out: Path, force: bool = False, progress=None
             checks = totals.checks.results()
             step("writing run.json", done=task.n, stage="writing")
             copies = copy_inputs(tmp, {"model": model}, task)
-            record = writer.record(with_copies({**run_record(options, model, task, columns, checks, totals.info()), "results_file": name}, copies))
+            record = writer.record(with_copies(run_record(options, model, task, columns, checks, totals.info()), copies))
         finally:
             writer.close()
         view = writer.view()

@@ -49,7 +49,7 @@ def saturation(table: Table, path: Path, limit: float) -> Path:
 
 
 def comparison(tables: dict[str, Table], path: Path) -> Path:
-    """The controllers of a comparison together: the norm of the translational (mm) and of the angular (deg) tracking
+    """The simulations of a comparison (controllers, or engines) together: the norm of the translational (mm) and of the angular (deg) tracking
     errors, and the largest abs(tau_i) (N m), over time."""
     fig, axes = subplots(3, 1, figsize=(11, 8), sharex=True)
     for label, table in tables.items():
@@ -65,6 +65,6 @@ def comparison(tables: dict[str, Table], path: Path) -> Path:
         ax.set_yscale("log") if ax is not axes[2] else None
         ax.grid(alpha=0.3)
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    axes[0].set_title("Controllers compared: tracking error (norms over the coordinates) and torques")
+    axes[0].set_title("Simulations compared: tracking error (norms over the coordinates) and torques")
     axes[-1].set_xlabel("time t [s]")
     return save(fig, path)
