@@ -73,8 +73,8 @@ ITERATIONS = 60
 PENALTY = 10.0
 # Weight of the tracker's rotation away from the file's (residual units per deg^2): where the residual does not
 # tell the placements apart (the plane's symmetries, a rotation about a hinge axis), the search keeps the one
-# nearest to what the lab measured. Small beside the residual's curvature in the identified directions (about 1
-# per deg^2): it moves them by 1e-4 of the file's error.
+# nearest to what the lab measured. Small beside the residual's curvature in the identified directions: on the
+# tests' synthetic recording 1e-4 moved the plane's tilt by 0.57 deg, 1e-6 by 0.006 deg, 1e-8 by 2e-4 deg.
 PRIOR = 1e-8
 MM, DEG = 1e-3, np.pi / 180
 
