@@ -38,3 +38,17 @@ def random_states(name: str, count: int, seed: int):
     dq = ref.dq[k] + rng.normal(0, 1, (count, n)) * scale
     tau = rng.normal(0, 0.2, (count, 6))
     return m, ref.q[k], dq, tau, ref.force[k]
+
+
+def target_pose(m, q):
+    """p (N, 3), R (N, 3, 3) of target poses q (N, 4) (X, Y, alpha, beta in m and rad), gamma and Z from the HKP
+    planes, computed from the conventions (docs/conventions.md: R = Rx Ry Rz as SciPy's intrinsic "XYZ";
+    p1 R12 + R32 = 0 and the planes' sum), not from chewbot's graphs."""
+    from scipy.spatial.transform import Rotation
+
+    X, Y, a, b = q.T
+    h = m.hkp
+    g = np.arctan2(np.sin(a), h.p1 * np.cos(b) - np.cos(a) * np.sin(b))
+    R = Rotation.from_euler("XYZ", np.column_stack([a, b, g])).as_matrix()
+    Z = -(h.p1 * X + h.p2 + (h.p1 * R[:, 0, :] + R[:, 2, :]) @ np.array([h.T_L[0], 0.0, h.T_L[2]]))
+    return np.column_stack([X, Y, Z]), R

@@ -4,8 +4,7 @@ kinematics' own functions and against random admissible poses, not against the s
 from __future__ import annotations
 
 import numpy as np
-from support import model
-from scipy.spatial.transform import Rotation
+from support import model, target_pose
 from typer.testing import CliRunner
 
 from chewbot.cli import app
@@ -16,14 +15,7 @@ MM, DEG = 1e-3, np.pi / 180
 MARGIN = np.sin(np.radians(10.0))
 
 
-def pose(m, q):
-    """p, R of target poses q (N, 4) m and rad, gamma and Z from the HKP planes (docs/conventions.md)."""
-    X, Y, a, b = q.T
-    h = m.hkp
-    g = np.arctan2(np.sin(a), h.p1 * np.cos(b) - np.cos(a) * np.sin(b))
-    R = Rotation.from_euler("XYZ", np.column_stack([a, b, g])).as_matrix()
-    Z = -(h.p1 * X + h.p2 + (h.p1 * R[:, 0, :] + R[:, 2, :]) @ np.array([h.T_L[0], 0.0, h.T_L[2]]))
-    return np.column_stack([X, Y, Z]), R
+pose = target_pose
 
 
 def admissible(m, q, slack=0.0):

@@ -96,13 +96,14 @@ def write_c3d(path: Path, points: np.ndarray, names: list[str]) -> None:
     c.write(str(path))
 
 
-def registration_text(about: str) -> str:
+def registration_text(about: str, point: bool = False) -> str:
     R = FILE_ERROR_R @ TRACKER_R
     o = TRACKER_O + FILE_ERROR_O
     rows = ",\n            ".join("[" + ", ".join(f"{v:.4f}" for v in row) + "]" for row in R)
-    return (f"# {about}\n# The tracker's placement as the lab measured it (a few degrees and millimetres off); the rest\n"
-            "# frame is the first, and the search finds where it sits on the robot (--fit-registration).\n"
-            f'units = "mm"\nrest = "first"\n\n[tracker]\nrotation = [{rows}]\norigin = [{", ".join(f"{v:.2f}" for v in o)}]\n')
+    how = ('tracked = "incisor"', "the recorded point is the incisor") if point else ('rest = "first"', "the rest frame is the first")
+    return (f"# {about}\n# The tracker's placement as the lab measured it (a few degrees and millimetres off); {how[1]},\n"
+            "# and the search finds where it sits on the robot (--fit-registration).\n"
+            f'units = "mm"\n{how[0]}\n\n[tracker]\nrotation = [{rows}]\norigin = [{", ".join(f"{v:.2f}" for v in o)}]\n')
 
 
 def main() -> None:
@@ -118,6 +119,10 @@ def main() -> None:
     p, R = opening(t)
     write_csv(HERE / "opening.csv", t, seen(p, R, rng, spikes=False), names)
     (HERE / "opening.toml").write_text(registration_text("opening.csv: one maximal opening, 5 s at 50 Hz"))
+    # the same opening as an incisal-point recording: the incisor point alone, as a jaw tracker reports it
+    incisor = (np.einsum("nij,j->ni", R, INCISOR) + p - TRACKER_O) @ TRACKER_R + rng.normal(scale=0.05, size=p.shape)
+    write_csv(HERE / "opening_incisor.csv", t, incisor[:, None, :], ["I"])
+    (HERE / "opening_incisor.toml").write_text(registration_text("opening_incisor.csv: the incisal point of the maximal opening, 5 s at 50 Hz", point=True))
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
@@ -32,6 +33,11 @@ from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
 # --scale auto: bisection steps on the factor in [0, 1] (resolution 2^-14 = 6e-5).
 BISECTIONS = 14
+# An incisal-point recording gives no orientation: the fit weighs the rotation from the hinge guess this little
+# (per degree, against 1 per mm at the incisor), enough to choose among the poses that put the incisor on the
+# point (4 DOF for 3 coordinates), where the incisor can be put there exactly; orientation errors are then not a
+# tolerance.
+POINT_ORIENTATION_WEIGHT = 0.1
 # --scale auto: factors j / SCAN scanned from below first (a power of 2).
 SCAN = 16
 # --clip: the task starts at home, held HOLD_S, moves to the recording's first pose in RAMP_S (a quintic blend:
@@ -168,35 +174,42 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         reg = _placed_by_landmarks(model, reg, rec)
         notes.append(f"the markers placed on the mandible by the landmarks ({', '.join(reg.landmarks)})")
     found = None
+    tracked = reg.tracked == "incisor"
+    weights = (reg.position_weight_per_mm, POINT_ORIENTATION_WEIGHT if tracked else reg.orientation_weight_per_deg)
+    max_orientation = np.inf if tracked else options.max_orientation_deg
+    if options.fit_registration and tracked:
+        raise RecordingError(f"{reg.source}: --fit-registration does not search the placement of an incisal-point "
+                             "recording (tracked = \"incisor\"): give the tracker's placement, and use --clip or --scale auto")
     if options.fit_registration:
         step("searching the registration")
         found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.origin, reg.markers, reg.point,
-                                 (reg.position_weight_per_mm, reg.orientation_weight_per_deg),
-                                 (options.max_position_mm, options.max_orientation_deg), options.min_transmission_deg)
+                                 weights, (options.max_position_mm, max_orientation), options.min_transmission_deg)
         notes.extend(found.notes)
-        reg = replace(reg, markers=found.markers, rotation=found.rotation, origin=found.origin, scale=found.share,
+        reg = replace(reg, markers=found.markers or None, rotation=found.rotation, origin=found.origin, scale=found.share,
                       angle_scale=found.share, landmarks=None)
     else:
         step("registration as the file gives it")
     step("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
-    if reg.markers is None:
+    if tracked:
+        rigid = _tracked_point(model, points, rec.markers)
+    elif reg.markers is None:
         if collinear(points[0]):
             raise RecordingError(f"{rec.source}: {rec.where(0)}: the markers lie on one line (or nearly) and do not "
                                  "fix the mandible's rotation (rest = \"first\")")
         body = points[0]
     else:
         body = np.array([reg.markers[name] for name in rec.markers])
-    rigid = rigid_fit(body, points, rec.markers)
+    if not tracked:
+        rigid = rigid_fit(body, points, rec.markers)
     rigid_ok = rigid.max_mm <= options.max_rigid_mm
     scale = reg.scale if options.scale in (None, "auto") else float(options.scale)
     angle_scale = reg.angle_scale if options.angle_scale is None else float(options.angle_scale)
 
     def attempt(factor: float):
         p, R = scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
-        fit = fit_to_robot(model, p, R, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
-                           options.min_transmission_deg)
-        within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= options.max_orientation_deg)
+        fit = fit_to_robot(model, p, R, reg.point, *weights, options.min_transmission_deg)
+        within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= max_orientation)
         return fit, within & rigid_ok
 
     step("fit to the robot" + (" (searching the scale)" if options.scale == "auto" else ""))
@@ -239,6 +252,29 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         except KinematicsError as exc:
             raise exc.located(f"{recording}: the re-timed task") from None
     return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming)
+
+
+def hinge_angle(model: Model, drop):
+    """The rotation about the condylar axis (+y of {M} through the condyles' midpoint C) that moves the incisor I
+    by ``drop`` (N,) along z (m; negative: down), the condyles held: -|r| sin(beta - psi) = drop + r_z, r = I - C,
+    psi = atan2(r_z, r_x); beta = 0 at drop = 0 (the argument of arcsin clipped to [-1, 1])."""
+    r = model.incisor - 0.5 * (model.hkp.T_L + model.hkp.T_R)
+    size, psi = float(np.hypot(r[0], r[2])), float(np.arctan2(r[2], r[0]))
+    return psi + np.arcsin(np.clip(-(drop + r[2]) / size, -1.0, 1.0))
+
+
+def _tracked_point(model: Model, points: np.ndarray, names: tuple[str, ...]) -> RigidFit:
+    """An incisal-point recording: the markers' mean (in {S}) is the incisor; the mandible's orientation per frame
+    is a guess, the rotation about the condylar axis that lowers the incisor as far as it dropped below the first
+    frame (:func:`hinge_angle`), weighed little in the fit
+    (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts the model's incisor on the point. The markers' distances
+    from moving in parallel with their mean are the rigid-fit residual."""
+    mean = points.mean(axis=1)
+    offsets = points - mean[:, None]
+    distances = np.linalg.norm(offsets - offsets[:1], axis=2)
+    beta = hinge_angle(model, mean[:, 2] - mean[0, 2])
+    R = Rotation.from_euler("y", beta[:, None]).as_matrix()
+    return RigidFit(mean - R @ model.incisor, R, distances, names)
 
 
 def _placed_by_landmarks(model: Model, reg: Registration, rec: Recording) -> Registration:
@@ -396,7 +432,8 @@ def _failure_messages(result: MotionImport) -> list[str]:
     rigid_bad = rigid.max_mm > o.max_rigid_mm
     kinds = np.column_stack([np.where(rigid_bad, worst_marker, -1), ~fit.admissible,
                              fit.admissible & (fit.position_error_mm > o.max_position_mm),
-                             fit.admissible & (fit.orientation_error_deg > o.max_orientation_deg)])
+                             fit.admissible & (fit.orientation_error_deg > o.max_orientation_deg)
+                             & (result.registration.tracked is None)])
     failing = rigid_bad | kinds[:, 1:].any(axis=1)
     change = np.flatnonzero(np.any(np.diff(kinds, axis=0) != 0, axis=1) | np.diff(failing.astype(int)) != 0) + 1
     out = []

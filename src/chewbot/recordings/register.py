@@ -32,7 +32,8 @@ every transmission angle at least ``--min-transmission``). Found by bisection (:
    every marker within :data:`PLAUSIBLE_MM` of the model's incisor point (on the teeth, a bite fork or the chin),
    both as quadratic penalties; and a small pull (:data:`PRIOR`) toward the file's tracker rotation, which decides
    where residuals do not. Refined at s = 1, then, if the share falls short of 1, again at the share found;
-   the registration with the larger share is kept, and of equal shares the smaller residual.
+   the registration with the larger share is kept (the start's among them), and of equal shares the smaller
+   residual.
 
 **Identifiability.** On the target the HKPs put both condyles on one plane, p1 x + z + p2 = 0, which every
 motion of the robot keeps: moving the tracker by a rotation about the plane's normal or a translation along the
@@ -55,7 +56,7 @@ from chewbot.errors import RecordingError
 from chewbot.model import Model
 from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.reach import reach
-from chewbot.recordings.rigid import kabsch, scale_motion
+from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import fit_functions, registration_functions
 
 MAX_TRACKER_DEG = 30.0
@@ -72,8 +73,8 @@ ITERATIONS = 60
 PENALTY = 10.0
 # Weight of the tracker's rotation away from the file's (residual units per deg^2): where the residual does not
 # tell the placements apart (the plane's symmetries, a rotation about a hinge axis), the search keeps the one
-# nearest to what the lab measured. Small beside the residual's curvature in the identified directions (about 1
-# per deg^2): it moves them by 1e-4 of the file's error.
+# nearest to what the lab measured. Small beside the residual's curvature in the identified directions: on the
+# tests' synthetic recording 1e-4 moved the plane's tilt by 0.57 deg, 1e-6 by 0.006 deg, 1e-8 by 2e-4 deg.
 PRIOR = 1e-8
 MM, DEG = 1e-3, np.pi / 180
 
@@ -249,7 +250,8 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-9})
         return res.x
 
-    candidates = []
+    start_share, start_fit, _ = share_of(x0)
+    candidates = [(start_share, x0, start_fit)]  # the start itself: the search never ends below it
     x = refine(x0, 1.0)
     share, fit, ok = share_of(x)
     candidates.append((share, x, fit))

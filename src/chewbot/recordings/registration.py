@@ -74,6 +74,7 @@ class RegistrationFile(_Strict):
     units: str
     markers: dict[str, Vec3] | None = None
     rest: Literal["first"] | None = None
+    tracked: Literal["incisor"] | None = None
     landmarks: LandmarksSection | None = None
     tracker: TrackerSection = TrackerSection()
     scale: float = Field(1.0, gt=0)
@@ -94,7 +95,7 @@ class Registration:
     ``rotation`` (3, 3) and ``origin`` (3,) m with p_S = rotation p_T + origin; ``point`` (3,) m in {M} or None
     (the model's incisal point); weights per mm and per degree; ``landmarks``: digitised points of the mandible
     at the rest frame in the tracker's frame (m), by the name of the model's point they are (:data:`LANDMARKS`),
-    or None."""
+    or None; ``tracked``: "incisor" for an incisal-point recording, else None."""
 
     source: str
     units: str
@@ -107,6 +108,7 @@ class Registration:
     orientation_weight_per_deg: float
     point: np.ndarray | None
     landmarks: dict[str, np.ndarray] | None = None  # name: position (m) in the tracker's frame at the rest frame
+    tracked: str | None = None  # "incisor": the recording tracks the incisal point (its markers move in parallel)
 
 
 def load_registration(path: str | Path) -> Registration:
@@ -133,6 +135,13 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     def fail(key: str, reason: str):
         raise RecordingError(f"{source}: key '{key}': {reason}")
 
+    if f.tracked is not None:
+        if f.markers is not None or f.landmarks is not None or f.rest is not None or f.fit.point_mm is not None:
+            fail("tracked", "tracked = \"incisor\": the recording's markers are the incisal point, carried into {S} by "
+                 "[tracker]; it takes no [markers], [landmarks], rest or [fit] point_mm")
+        return Registration(source, f.units, None, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * length_factor(f.units, source),
+                            f.scale, f.angle_scale, f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
+                            None, None, "incisor")
     if (f.markers is None) == (f.rest is None):
         fail("markers" if f.markers is None else "rest", "give either a [markers] table (each marker's position in {M}) "
              "or rest = \"first\" (the first frame defines the markers and is the home pose), not both or neither")
@@ -152,15 +161,20 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
         markers = {name: np.array(v) * unit for name, v in f.markers.items()}
         if collinear(np.array(list(markers.values()))):
             fail("markers", "the markers lie on one line (or nearly): they do not fix a rotation about it")
-    rotation = np.array(f.tracker.rotation)
+    return Registration(source, f.units, markers, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
+                        f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3, landmarks)
+
+
+def _rotation(rows, fail) -> np.ndarray:
+    """The tracker's rotation, checked, as the nearest rotation (the rows are typically rounded)."""
+    rotation = np.array(rows)
     dev = np.abs(rotation.T @ rotation - np.eye(3)).max()
     if dev > ROTATION_TOLERANCE or np.linalg.det(rotation) <= 0:
         fail("tracker.rotation", f"not a rotation matrix (max |R^T R - I| = {dev:.3g}, det = {np.linalg.det(rotation):.4g}); "
              "its columns are the tracker's axes in {S}")
-    u, _, vt = np.linalg.svd(rotation)  # nearest rotation: the rows are typically rounded
-    return Registration(source, f.units, markers, u @ vt, np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
-                        f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3, landmarks)
+    u, _, vt = np.linalg.svd(rotation)
+    return u @ vt
 
 
 def collinear(points: np.ndarray) -> bool:
@@ -177,8 +191,11 @@ def registration_toml(reg: Registration, comment: str) -> str:
         return "[" + ", ".join(repr(float(x)) for x in v) + "]"
 
     lines = [f"# {line}" for line in comment.splitlines()]
-    lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}", "", "[markers]"]
-    lines += [f"{name} = {vec(np.asarray(p) / 1e-3)}" for name, p in (reg.markers or {}).items()]
+    lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}"]
+    if reg.tracked is not None:
+        lines += [f'tracked = "{reg.tracked}"']
+    else:
+        lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / 1e-3)}" for name, p in (reg.markers or {}).items()]
     lines += ["", "[tracker]", "rotation = [" + ",\n            ".join(vec(row) for row in reg.rotation) + "]",
               f"origin = {vec(reg.origin / 1e-3)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
               f"orientation_weight_per_deg = {float(reg.orientation_weight_per_deg)!r}"]
