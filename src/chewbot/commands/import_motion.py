@@ -74,7 +74,7 @@ def import_motion(
     """
     from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_UNREACHABLE, console, errors_reported, fail, progress, stdout
     from chewbot.errors import ChewbotError, FitError
-    from chewbot.files import WRITTEN_FILE, atomic_files, check_output
+    from chewbot.files import WRITTEN_FILE, atomic_files, check_output, marker_line
     from chewbot.recordings.importer import STEPS, ImportOptions, import_motion as run_import
     from chewbot.task.csvio import task_table
 
@@ -116,9 +116,10 @@ def import_motion(
                                                 f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path"),
                       "the incisor path of " + about))
         with atomic_files([path for path, _, _ in files], force, inputs, about={path: what for path, _, what in files}) as temporaries:
-            for (_, content, _), tmp in zip(files, temporaries):
-                if isinstance(content, str):
-                    Path(tmp).write_text(content, encoding="utf-8")
+            for (path, content, what), tmp in zip(files, temporaries):
+                if isinstance(content, str):  # the registration (TOML) and the figure (SVG) carry the marker line
+                    comment = "<!--" if path.suffix == ".svg" else "#"
+                    Path(tmp).write_text(marker_line(comment, what) + "\n" + content, encoding="utf-8")
                 else:
                     content.to_csv(tmp)
     for note in result.notes:
