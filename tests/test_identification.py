@@ -231,7 +231,7 @@ def test_the_command_writes_a_model_that_check_model_and_run_accept(tmp_path):
     assert data["friction"]["actuator_coulomb"] == pytest.approx(0.07, rel=1e-7)
     assert data["mandible"]["mass_g"] == pytest.approx(380.0, rel=1e-7)
     table = (tmp_path / "identified.identification.csv").read_text()
-    assert table.startswith("key,") and "standard_error" in table  # plain CSV: the marker and summary in its sidecar
+    assert table.startswith("parameter,key,") and "standard_error" in table  # plain CSV: the marker and summary in its sidecar
     side = json.loads((tmp_path / "identified.identification.csv.chewbot.json").read_text())
     assert side["chewbot_file"] == 1 and side["about"].startswith("estimates of chewbot identify") and side["summary"]
     assert "condition number" in r.output

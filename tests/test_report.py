@@ -201,10 +201,10 @@ def test_report_command_rebuilds_the_same_report_and_figures(tmp_path):
 def test_a_batch_run_gets_its_figures_and_report_later(tmp_path):
     out = tmp_path / "batch"
     assert runner.invoke(app, ["run", "--out", str(out), "--no-figures", "--no-report", "-q"]).exit_code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "run.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["model.toml", "results.csv", "run.json"]  # the data and the copy of the model, no drawing
     result = runner.invoke(app, ["report", str(out), "--no-figures"])
     assert result.exit_code == 0, result.output
-    assert sorted(p.name for p in out.iterdir()) == ["report.html", "results.csv", "run.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["model.toml", "report.html", "results.csv", "run.json"]
     assert 'href="task_space.png"' not in _page(out)
     assert runner.invoke(app, ["report", str(out), "--no-report"]).exit_code == 0  # the figures: none existed
     assert runner.invoke(app, ["report", str(out), "--no-figures", "--force"]).exit_code == 0

@@ -147,17 +147,22 @@ def run_record(options, model: Model, task: Task, columns: Table, checks: list[C
     }
 
 
-def read_record(folder: Path) -> dict:
-    """run.json of a results folder, of a format this chewbot reads (:data:`READABLE_FORMATS`); a
-    :class:`ChewbotError` names the file otherwise."""
-    folder = Path(folder)
+def _run_json(folder: Path):
+    """The content of ``folder``'s run.json; a :class:`ChewbotError` names the folder without one or the file."""
     path = folder / "run.json"
     try:
-        run = json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ChewbotError(f"{folder}: not a results folder (no run.json)") from None
     except (OSError, ValueError) as exc:
         raise ChewbotError(f"{path}: cannot read it ({exc})") from None
+
+
+def read_record(folder: Path) -> dict:
+    """run.json of a results folder, of a format this chewbot reads (:data:`READABLE_FORMATS`); a
+    :class:`ChewbotError` names the file otherwise."""
+    path = Path(folder) / "run.json"
+    run = _run_json(Path(folder))
     version = run.get("chewbot_run") if isinstance(run, dict) else None
     if version not in READABLE_FORMATS:
         raise ChewbotError(f"{path}: results format {version!r}; this chewbot reads {', '.join(map(str, READABLE_FORMATS))}")
@@ -200,12 +205,7 @@ def read_frame(folder: Path):
     if folder.name == "results.csv":
         folder = folder.parent
     path = folder / "run.json"
-    try:
-        record = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ChewbotError(f"{folder}: not a results folder of chewbot (no run.json)") from None
-    except (OSError, ValueError) as exc:
-        raise ChewbotError(f"{path}: cannot read it ({exc})") from None
+    record = _run_json(folder)
     if not isinstance(record, dict) or not any(key in record for key in RESULTS_RECORDS):
         raise ChewbotError(f"{path}: not the record of a run or a simulation (no key {' or '.join(RESULTS_RECORDS)}); "
                            "chewbot.read_results reads the folders of chewbot run and chewbot simulate")

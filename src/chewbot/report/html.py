@@ -427,7 +427,9 @@ def _run_section(record: dict, m: Model, view: RunView, files: list[str]) -> str
     t = view.stats["t"]
     rows = [
         ["model", f"{escape(m.name)} ({escape(m.mechanism)}, {m.dof} DOF): {escape(m.description)}"],
-        ["parameter file", f"<code>{escape(m.source)}</code> (sha256 {escape(m.sha256[:12])}…)"],
+        ["parameter file", f"<code>{escape(record['model'].get('file', m.source))}</code> "
+                           f"(sha256 {escape(record['model'].get('sha256', m.sha256)[:12])}…)"
+                           + (f"; its copy in this folder: <code>{escape(record['model']['copy'])}</code>" if record["model"].get("copy") else "")],
         ["task", f"{escape(task['name'])} from <code>{escape(task['source'])}</code>: {view.n} samples, "
                  f"{t.max - t.min:.3f} s, {(view.n - 1) / (t.max - t.min):.4g} Hz" if view.n > 1 else escape(task["name"])],
         ["options", f"bite side {escape(o['side'])}, orientation {escape(o['orientation'])}, {escape(dynamics_label(record, m))}, "
