@@ -798,7 +798,8 @@ Several bits may be set at once; the zeroing ones (ESTOP, WATCHDOG) win over hol
 
 ## Timing on the robot's CPU
 
-The step has a fixed cost (no loop depends on the data but the table search, which moves one row per tick). To time
+The step has a nearly fixed cost: no loop depends on the data but the table search, which moves one row per tick,
+and a reference outside the workspace evaluates the law twice (the second time on the held reference). To time
 it where it runs, build with the flags of the controller's build, pin the process to the core the loop will use,
 and give it the priority it will have:
 
