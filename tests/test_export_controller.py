@@ -99,18 +99,12 @@ def test_make_check_runs_the_example_and_a_changed_log_fails_it(exported, tmp_pa
     assert bad.returncode == 1 and "tau_cmd3" in bad.stderr
 
 
-# PD on the estimate needs the slower gains docs/simulation.md gives for the estimator (the default PD gains are too
-# fast for its lag: the robot leaves the workspace within 50 ms, in Python as in C).
-ESTIMATOR_PD_GAINS = {"pd.kp_Nm_per_rad": 2.0, "pd.kd_Nms_per_rad": 0.005, "estimator.cutoff_Hz": 200.0}
-
-
 @pytest.mark.parametrize("kind", ["computed-torque", "pd"])
 def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
     """On the default task: the C step's commanded torques equal the Python controller's with --sensor measured, on
     the ticks of the same run (both fed the same measured angles) and between two separate closed-loop runs."""
-    gains = ESTIMATOR_PD_GAINS if kind == "pd" else {}
-    c = compute(SimulateOptions(controller=kind, exported=True, gain_overrides=gains), exported=ExportedController)
-    py = compute(SimulateOptions(controller=kind, sensor="measured", gain_overrides=gains))
+    c = compute(SimulateOptions(controller=kind, exported=True), exported=ExportedController)  # the default gains
+    py = compute(SimulateOptions(controller=kind, sensor="measured"))
     assert c.metrics["stopped"] is None and py.metrics["stopped"] is None
     same_run = c.info["simulation"]["exported"]
     assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE and same_run["status_bits_seen"] == []
@@ -375,11 +369,15 @@ def test_outputs_pose_error_and_normal_forces_by_other_routes(step, exported):
 
 
 def test_export_refuses_a_log_of_a_failing_loop_and_takes_a_gains_file(tmp_path):
-    """PD with the default gains topples the robot on the measured state (docs/simulation.md): the export says so
-    (exit 2) instead of writing a log of a failing loop; --no-log exports it; a --gains file's values are the
-    library's defaults; an existing folder is not replaced without --force."""
+    """PD with gains tuned on the plant's own rate (chewbot's defaults before 0.2: k_p 10, k_d 0.01, cut-off 50 Hz)
+    topples the robot on the measured state (docs/simulation.md): the export says so (exit 2) instead of writing a
+    log of a failing loop; --no-log exports it; a --gains file's values are the library's defaults; an existing
+    folder is not replaced without --force."""
     out = tmp_path / "pd"
-    done = runner.invoke(app, ["export-controller", "--controller", "pd", "--out", str(out)])
+    unstable = tmp_path / "unstable.toml"
+    unstable.write_text("[pd]\nkp_Nm_per_rad = 10.0\nkd_Nms_per_rad = 0.01\n"
+                        "[computed_torque]\nfrequency_Hz = 30.0\ndamping = 1.0\n[estimator]\ncutoff_Hz = 50.0\n")
+    done = runner.invoke(app, ["export-controller", "--controller", "pd", "--gains", str(unstable), "--out", str(out)])
     assert done.exit_code == 2 and "leaves the workspace" in done.output and "--no-log" in done.output and not out.exists()
     gains = tmp_path / "gains.toml"
     gains.write_text("[pd]\nkp_Nm_per_rad = 2.0\nkd_Nms_per_rad = [0.005, 0.005, 0.006, 0.006, 0.007, 0.007]\n"
