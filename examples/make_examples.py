@@ -139,6 +139,30 @@ outputs = ["peak_tau_Nm", "rms_tau_Nm", "mean_MCI", "min_mu_deg", "failed_checks
 """
 
 
+def bite_file(model) -> None:
+    """bite.csv: a bite on the mild cheddar cube (h0 = 10 mm) for ``simulate --controller hybrid --food cheddar``: the
+    left molar point 12 mm from occlusion (2 mm above the sample), closing in 0.3 s to 8 mm (2 mm into it), holding,
+    opening again at 0.9 s; alpha pinned at 0; its Fz the hybrid controller's force reference: 0 until 0.35 s, a
+    ramp to 5 N in 0.1 s (the cube gives about 5 N at 4.4 mm), held 0.3 s, released in 0.1 s. 1 kHz, 1.2 s."""
+    from chewbot.food.geometry import molar_path_task
+
+    h0, press, peak = 10e-3, 2e-3, 5.0
+    t = np.arange(0.0, 1.2 + 1e-9, 1e-3)
+    g, dg, ddg = np.full_like(t, h0 + 2e-3), np.zeros_like(t), np.zeros_like(t)
+    for t0, t1, a, b in ((0.05, 0.35, h0 + 2e-3, h0 - press), (0.9, 1.15, h0 - press, h0 + 2e-3)):
+        s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)  # quintic smoothstep: rest to rest
+        f, df, ddf = 10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3
+        on, inside = t >= t0, (t >= t0) & (t <= t1)
+        g = np.where(on, a + (b - a) * f, g)
+        dg = np.where(inside, (b - a) * df / (t1 - t0), np.where(on, 0.0, dg))
+        ddg = np.where(inside, (b - a) * ddf / (t1 - t0) ** 2, np.where(on, 0.0, ddg))
+    task = molar_path_task(model, "left", t, g, dg, ddg, name="bite")
+    Fz = -np.interp(t, [0.0, 0.35, 0.45, 0.75, 0.85, 10.0], [0.0, 0.0, peak, peak, 0.0, 0.0])
+    q = task.q
+    _csv(HERE / "bite.csv", ["t[s]", "X[mm]", "Y[mm]", "alpha[deg]", "beta[deg]", "Fx[N]", "Fy[N]", "Fz[N]"],
+         [t, q[:, 0] / MM, q[:, 1] / MM, q[:, 2] / DEG, q[:, 3] / DEG, 0 * t, 0 * t, Fz], digits=10)
+
+
 def main() -> None:
     model = load_model("target")
     task = default_task(model, "left", CYCLE)
@@ -146,6 +170,7 @@ def main() -> None:
     marker_recording(model, task)
     robot_log()
     incisor_path(model, task)
+    bite_file(model)
     (HERE / "sweep.toml").write_text(SWEEP, encoding="utf-8")
     shutil.copyfile(HERE.parent / "src" / "chewbot" / "simulation" / "gains.toml", HERE / "gains.toml")
 

@@ -91,9 +91,9 @@ def simulate(
 
       chewbot simulate --method newton-euler --friction on --bite-unknown --out runs/ne-blind
 
-      chewbot simulate --food cheddar --task closing.csv --out runs/cheddar
+      chewbot simulate --food gummy --task runs/tpa-gummy/task.csv --out runs/gummy   (the task chewbot tpa wrote)
 
-      chewbot simulate --controller hybrid --food cheddar --task bite.csv --out runs/hybrid
+      chewbot simulate --controller hybrid --food cheddar --task examples/bite.csv --out runs/hybrid
 
       chewbot simulate --controller computed-torque --exported --out runs/ct-c
 
