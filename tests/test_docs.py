@@ -111,11 +111,13 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return [f"{out}/results.csv", f"{out}/run.json"] + ([] if "--no-report" in args else [f"{out}/report.html"])
     if sub == "simulate":
         out = out or "runs/simulation"
-        inside = [f"{c}/results.csv" for c in ("feedforward", "pd", "computed-torque")] if "--compare" in args else ["results.csv"]
+        inside = ([f"{c}/results.csv" for c in ("feedforward", "pd", "computed-torque")] if "--compare" in args
+                  else [f"{e}/results.csv" for e in ("chewbot", "mujoco")] if "--compare-engines" in args else ["results.csv"])
         return [f"{out}/run.json", f"{out}/report.html"] + [f"{out}/{p}" for p in inside]
     if sub in ("import-motion", "track-incisor"):
         stem = out[: -len(".csv")]
-        return [out, f"{stem}.residuals.csv"] if sub == "track-incisor" or "--no-residuals" not in args else [out]
+        found = [f"{stem}.registration.toml"] if "--fit-registration" in args else []
+        return ([out, f"{stem}.residuals.csv"] if sub == "track-incisor" or "--no-residuals" not in args else [out]) + found
     if sub == "identify":
         return [out, out[: -len(".toml")] + ".identification.csv"]
     if sub == "sweep":
@@ -124,6 +126,12 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return [f"{out}/study.json"] if out else []
     if sub == "export-c":
         return [f"{out}/chewbot-export.json"]
+    if sub == "export-controller":
+        return [f"{out}/chewbot-export.json", f"{out}/include/chewbot_ctrl.h", f"{out}/Makefile"]
+    if sub in ("export-model", "estimate-force"):
+        return [out or "robot.xml"]
+    if sub == "tpa":
+        return [f"{out}/tpa.json", f"{out}/results.csv", f"{out}/task.csv"]
     if sub == "bench":
         return [out] if out else []
     if sub == "report":
