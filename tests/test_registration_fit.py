@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.errors import RecordingError
+from chewbot.files import read_sidecar
 from chewbot.recordings.importer import ImportOptions, import_motion
 from chewbot.recordings.registration import load_registration
 from chewbot.task.default import ChewingParameters, default_task
@@ -103,7 +104,8 @@ def test_fit_registration_recovers_what_a_recording_identifies(tmp_path):
     assert about <= 10.0 + 0.1  # the unidentified turn stays within the file's error: the search does not wander
     residuals = pd.read_csv(tmp_path / "task.residuals.csv", comment="#")
     assert residuals["incisor_error [mm]"].max() < 1e-3
-    assert "share 1.0000" in (tmp_path / "task.residuals.csv").read_text()
+    summary = read_sidecar(tmp_path / "task.residuals.csv")["summary"]  # the printed summary, in the sidecar
+    assert summary[0].startswith("share 1.0000"), summary
     # not identified: a rotation about the plane's normal through a point of the plane and a shift along it map
     # every pose of the robot to a pose of the robot (condyles on the plane, p1 R12 + R32 = 0)
     n = np.array([m.hkp.p1, 0.0, 1.0]) / np.hypot(m.hkp.p1, 1.0)
