@@ -360,3 +360,37 @@ def test_fit_registration_of_an_incisal_point_reaches_a_reachable_motion(tmp_pat
     scaled = registered[0] + result.scale * (registered - registered[0])
     p_fit, R_fit = pose(m, result.fit.q)
     assert np.linalg.norm(p_fit + R_fit @ m.incisor - scaled, axis=1).max() <= 1.0 * MM
+
+
+def test_import_writes_a_report_page_with_the_measures_and_figures_with_units(tmp_path):
+    """import-motion writes TASK.report.html beside the task: chewbot's marker line first, the share, the in-step
+    r and the largest errors as the residuals file holds them (read back from the CSV, printed to 4 significant
+    digits), the two figures inline, every axis labelled with its unit; an existing page is not replaced without
+    --force (exit 5)."""
+    from chewbot.report.recording_figures import errors_over_time, incisor_paths
+
+    t, q, points, TR, TO, file_R, file_O = synthetic(tmp_path)
+    rec = write_csv(tmp_path / "rec.csv", t, points)
+    reg = write_registration(tmp_path / "reg.toml", file_R, file_O, markers=False)
+    out = tmp_path / "task.csv"
+    args = ["import-motion", rec, "--registration", reg, "--out", str(out), "--fit-registration", "--cutoff", "none", "--rate", "recording"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "task.report.html").read_text()
+    assert page.startswith("<!-- written by chewbot") and "<!DOCTYPE html>" in page and "<script" not in page
+    residuals = pd.read_csv(tmp_path / "task.residuals.csv")
+    share = read_sidecar(tmp_path / "task.residuals.csv")["summary"][0].split()[1]  # "share 1.0000 ..."
+    assert f"<td>{float(share):.4g}</td>" in page
+    for column, unit in (("incisor_error", "mm"), ("mandible_error", "mm"), ("mandible_rotation_error", "deg")):
+        values = residuals[f"{column} [{unit}]"].to_numpy()
+        assert f"{round(values.max(), 9) + 0.0:.4g} / {round(np.sqrt(np.mean(values**2)), 9) + 0.0:.4g} {unit}" in page, column
+    rec_exc, rep_exc = residuals["recorded_excursion [mm]"].to_numpy(), residuals["reproduced_excursion [mm]"].to_numpy()
+    assert f"<td>{round(np.corrcoef(rec_exc, rep_exc)[0, 1], 9):.4g}</td>" in page
+    assert page.count("<svg") == 2 and "t [s]" in page and "error [mm]" in page and "rotation error [deg]" in page
+    path, e = np.column_stack([t, 0 * t, -t]) * MM, np.abs(np.sin(t))
+    for fig in (incisor_paths(t, path, path, "x"), errors_over_time(t, e, e, e, t[:2], 1.0, "x")):
+        for ax in fig.axes:  # every y axis with its unit; every x axis with its unit where it has a label
+            assert ax.get_ylabel().endswith("]") and "[" in ax.get_ylabel(), ax.get_ylabel()
+            assert ax.get_xlabel() == "" or (ax.get_xlabel().endswith("]") and "[" in ax.get_xlabel()), ax.get_xlabel()
+        assert all(ax.get_xlabel() for ax in fig.axes if ax.get_subplotspec().is_last_row())
+    assert runner.invoke(app, args).exit_code == 5  # the outputs exist: not replaced without --force
