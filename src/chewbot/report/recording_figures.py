@@ -12,11 +12,7 @@ from chewbot.report.plotting import layout, subplots
 
 def incisor_paths_svg(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str) -> str:
     """:func:`incisor_paths` as SVG text without its XML declaration."""
-    fig = incisor_paths(t, recorded, reproduced, title)
-    out = io.StringIO()
-    fig.savefig(out, format="svg")
-    text = out.getvalue()
-    return text[text.index("?>") + 2:].lstrip() if text.startswith("<?xml") else text
+    return _svg(incisor_paths(t, recorded, reproduced, title), text_as_text=False)
 
 
 def incisor_paths(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str):
@@ -66,12 +62,13 @@ def errors_over_time(t: np.ndarray, incisor_mm: np.ndarray, mandible_mm: np.ndar
     return fig
 
 
-def _svg(fig) -> str:
-    """A figure as SVG text without its XML declaration, its text kept as text (searchable, smaller)."""
+def _svg(fig, text_as_text: bool = True) -> str:
+    """A figure as SVG text without its XML declaration; ``text_as_text``: its text kept as text (searchable,
+    smaller; shown in the reader's fonts) rather than drawn as paths."""
     from matplotlib import rc_context
 
     out = io.StringIO()
-    with rc_context({"svg.fonttype": "none"}):
+    with rc_context({"svg.fonttype": "none" if text_as_text else "path"}):
         fig.savefig(out, format="svg")
     text = out.getvalue()
     return text[text.index("?>") + 2:].lstrip() if text.startswith("<?xml") else text
