@@ -191,6 +191,8 @@ def _print_maxima(stdout, result) -> None:
         lines.append(f"the recorded motion leaves the workspace in {outside.sum()} frame(s) ({', '.join(names)}); there the "
                      "nearest pose on its boundary is used")
     if result.factor is not None:
-        lines.append(f"--scale auto: factor {result.factor:.4f} (scale {result.scale:.4g}, angle_scale {result.angle_scale:.4g})")
+        angle = "" if result.registration.tracked else f", angle_scale {result.angle_scale:.4g}"  # a point has no rotation to scale
+        what = "--scale auto" if result.options.scale == "auto" else "the task's factor of the share"
+        lines.append(f"{what}: factor {result.factor:.4f} (scale {result.scale:.4g}{angle})")
     for line in lines:
         stdout.print(line, highlight=False, markup=False)
