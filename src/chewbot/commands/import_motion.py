@@ -1,8 +1,9 @@
 """``chewbot import-motion``: a jaw-tracking recording in, a robot task and its residuals out.
 
-The command's options and files; the work is :func:`chewbot.recordings.importer.import_motion`. Both files are
-written together through :func:`chewbot.files.atomic_files` (all or none), each beginning with chewbot's marker
-line, which names the command; an existing file is replaced only with ``--force`` and only if chewbot wrote it.
+The command's options and files; the work is :func:`chewbot.recordings.importer.import_motion`, the report page
+:func:`chewbot.report.recording_figures.recording_report_html`. The files are written together through
+:func:`chewbot.files.atomic_files` (all or none): the CSVs with a sidecar, the others beginning with chewbot's
+marker line, which names the command; an existing file is replaced only with ``--force`` and only if chewbot wrote it.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def _number_or(word: str, what: str):
 def import_motion(
     recording: Path = typer.Argument(..., help="The recording: CSV (.csv: t, NAME_x, NAME_y, NAME_z, ...), C3D (.c3d) or ArtiSynth numeric probe text (any other suffix)."),
     registration: Path = typer.Option(..., "--registration", help="TOML file: units, the markers in {M} (or rest = \"first\"), the tracker's placement, scales and fit weights (docs/recordings.md)."),
-    out: Path = typer.Option(..., "--out", help="Task CSV to write (chewbot run --task reads it); the per-frame residuals go beside it, *.residuals.csv."),
+    out: Path = typer.Option(..., "--out", help="Task CSV to write (chewbot run --task reads it); beside it the per-frame residuals (*.residuals.csv), the incisor paths (*.incisor.svg) and the report of what the robot reproduces (*.report.html: errors in mm and deg, share, r)."),
     model: str = typer.Option("target", "--model", help="The robot: a built-in model (target, 6rss, ...) or a TOML parameter file."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts: recorded in the task's header; run the task with the same --side."),
     max_gap: float = typer.Option(0.1, "--max-gap", min=0.0, help="Longest gap (s) of a marker that is filled by a spline; longer ones are an error."),
@@ -82,6 +83,7 @@ def import_motion(
     side = side.value
     found_toml = out.with_name(out.stem + ".registration.toml")
     figure = out.with_name(out.stem + ".incisor.svg")
+    page = out.with_name(out.stem + ".report.html")
     if timing not in ("recording", "limits"):
         fail(ChewbotError(f"--timing must be recording or limits, not {timing!r}"), EXIT_BAD_INPUT)
     if fit_registration and (scale is not None or angle_scale is not None):
@@ -95,7 +97,7 @@ def import_motion(
                             timing=None if timing == "recording" else timing)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
-        for target in (out, residuals, figure) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
+        for target in (out, residuals, figure, page) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
             check_output(target, force, WRITTEN_FILE, inputs)
         with progress(False, "import-motion", total=STEPS) as step:
             result = run_import(recording, registration, options, progress=step)
@@ -115,10 +117,18 @@ def import_motion(
         files.append((figure, incisor_paths_svg(result.recording.t, m.recorded_incisor, m.reproduced_incisor,
                                                 f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path"),
                       "the incisor path of " + about))
+        from chewbot.report.recording_figures import recording_report_html
+
+        f = result.found
+        limiting_t = result.recording.t[f.limiting_frames] if f is not None else result.recording.t[:0]
+        files.append((page, recording_report_html(f"{recording.name}: what the robot reproduces", result.recording.t, m,
+                                                  f.share if f is not None else result.factor, f.limiting if f is not None else "",
+                                                  limiting_t, options.max_position_mm, summary, result.notes),
+                      "the report of " + about))
         with atomic_files([path for path, _, _ in files], force, inputs, about={path: what for path, _, what in files}) as temporaries:
             for (path, content, what), tmp in zip(files, temporaries):
                 if isinstance(content, str):  # the registration (TOML) and the figure (SVG) carry the marker line
-                    comment = "<!--" if path.suffix == ".svg" else "#"
+                    comment = "<!--" if path.suffix in (".svg", ".html") else "#"
                     Path(tmp).write_text(marker_line(comment, what) + "\n" + content, encoding="utf-8")
                 else:
                     content.to_csv(tmp)
@@ -134,7 +144,7 @@ def import_motion(
         shown = lines[:10] + ([f"... and {len(lines) - 10} more stretch(es): see {residuals}"] if len(lines) > 10 else [])
         fail(FitError(f"{(~result.passed).sum()} of {result.recording.n} frame(s) fail; {out} not written, "
                        f"residuals in {residuals}:\n" + "\n".join(shown)), EXIT_UNREACHABLE)
-    stdout.print(f"wrote {out} ({result.task.n} samples), {residuals} and {figure}; run it with: "
+    stdout.print(f"wrote {out} ({result.task.n} samples), {residuals}, {figure} and {page}; run it with: "
                  f"chewbot run --task {shlex.quote(str(out))} --model {shlex.quote(model)} --side {side}", highlight=False, markup=False)
 
 
@@ -181,6 +191,8 @@ def _print_maxima(stdout, result) -> None:
         lines.append(f"the recorded motion leaves the workspace in {outside.sum()} frame(s) ({', '.join(names)}); there the "
                      "nearest pose on its boundary is used")
     if result.factor is not None:
-        lines.append(f"--scale auto: factor {result.factor:.4f} (scale {result.scale:.4g}, angle_scale {result.angle_scale:.4g})")
+        angle = "" if result.registration.tracked else f", angle_scale {result.angle_scale:.4g}"  # a point has no rotation to scale
+        what = "--scale auto" if result.options.scale == "auto" else "the task's factor of the share"
+        lines.append(f"{what}: factor {result.factor:.4f} (scale {result.scale:.4g}{angle})")
     for line in lines:
         stdout.print(line, highlight=False, markup=False)

@@ -21,6 +21,7 @@ from chewbot.model.params import load_model
 from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
 from chewbot.recordings.measures import Measures, measure
 from chewbot.recordings.register import FoundRegistration, fit_registration
+from chewbot.recordings.register_point import fit_point_registration
 from chewbot.recordings.retime import Retiming, retime
 from chewbot.recordings.formats import Recording, read_recording
 from chewbot.recordings.prepare import fill_gaps, low_pass, spikes, trim
@@ -144,6 +145,9 @@ class MotionImport:
                 times = self.recording.t[f.limiting_frames]
                 shown = ", ".join(f"{t:.3f}" for t in times[:8]) + (" ..." if times.size > 8 else "")
                 lines.append(f"limited by {f.limiting} in {f.limiting_frames.size} frame(s) at t = {shown} s")
+            if self.factor is not None and self.factor < 1:
+                lines.append(f"the task is played at {self.factor:.4f} of the share (scale {self.scale:.4f}): the largest factor "
+                             "at which every frame passes and the resampled task stays in the workspace (as --scale auto)")
         elif self.factor is not None:
             lines.append(f"share {self.factor:.4f} (--scale auto)")
         lines.append(m.describe())
@@ -177,10 +181,17 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     tracked = reg.tracked == "incisor"
     weights = (reg.position_weight_per_mm, POINT_ORIENTATION_WEIGHT if tracked else reg.orientation_weight_per_deg)
     max_orientation = np.inf if tracked else options.max_orientation_deg
+    if tracked and (options.angle_scale not in (None, 1.0) or reg.angle_scale != 1.0):
+        raise RecordingError(f"{reg.source}: an incisal-point recording (tracked = \"incisor\") has no rotation to scale: "
+                             "its scale applies to the point's displacement, and the hinge guess follows it; leave out "
+                             "angle_scale and --angle-scale")
     if options.fit_registration and tracked:
-        raise RecordingError(f"{reg.source}: --fit-registration does not search the placement of an incisal-point "
-                             "recording (tracked = \"incisor\"): give the tracker's placement, and use --clip or --scale auto")
-    if options.fit_registration:
+        step("searching the registration of the incisal point")
+        found = fit_point_registration(model, rec.positions, reg.rotation, reg.origin, *weights, options.max_position_mm,
+                                       options.min_transmission_deg)
+        notes.extend(found.notes)
+        reg = replace(reg, rotation=found.rotation, origin=found.origin, scale=found.share, angle_scale=1.0)
+    elif options.fit_registration:
         step("searching the registration")
         found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.origin, reg.markers, reg.point,
                                  weights, (options.max_position_mm, max_orientation), options.min_transmission_deg)
@@ -206,18 +217,29 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     scale = reg.scale if options.scale in (None, "auto") else float(options.scale)
     angle_scale = reg.angle_scale if options.angle_scale is None else float(options.angle_scale)
 
+    def scaled(factor: float):
+        """The registered motion at ``factor`` times the scales: an incisal point's displacement, with the hinge
+        guess of the scaled point; a rigid body's displacement and rotation angle (:func:`scale_motion`)."""
+        if tracked:
+            moved = _tracked_point(model, points, rec.markers, factor * scale)
+            return moved.p, moved.R
+        return scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
+
     def attempt(factor: float):
-        p, R = scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
+        p, R = scaled(factor)
         fit = fit_to_robot(model, p, R, reg.point, *weights, options.min_transmission_deg)
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= max_orientation)
         return fit, within & rigid_ok
 
-    step("fit to the robot" + (" (searching the scale)" if options.scale == "auto" else ""))
+    # an incisal point's search ends with frames on the workspace's boundary, where the task's spline between them
+    # may leave it: the largest factor of the share at which the task builds, as --scale auto finds it
+    auto = options.scale == "auto" or (found is not None and tracked)
+    step("fit to the robot" + (" (searching the scale)" if auto else ""))
     factor = None
     fit, passed = attempt(1.0)
-    if options.scale == "auto" and not rigid_ok.all():
+    if auto and not rigid_ok.all():
         notes.append("--scale auto: no factor was searched, frames where a marker moves relative to the others fail at every scale")
-    elif options.scale == "auto":
+    elif auto:
         def builds(fit_f) -> bool:
             try:
                 _task(model, rec, reg, fit_f, options, Path(recording), [])
@@ -227,11 +249,13 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
 
         factor, fit, passed = (1.0, fit, passed) if passed.all() and builds(fit) else _largest_factor(attempt, builds)
         scale, angle_scale = factor * scale, factor * angle_scale
+        if found is not None:  # the registration written plays the task as imported
+            reg = replace(reg, scale=scale)
     step("resampling and checking the task")
     task = None
     if passed.all() or (options.clip and fit.admissible.all() and rigid_ok.all()):
         if options.clip and not passed.all():
-            p, R = scale_motion(rigid.p, rigid.R, scale, angle_scale)
+            p, R = scaled(1.0)
             _check_jumps(model, rec, p, R, fit)
             notes.append(_clip_note(rec, fit, passed))
         task = _task(model, rec, reg, fit, options, Path(recording), notes)
@@ -263,15 +287,16 @@ def hinge_angle(model: Model, drop):
     return psi + np.arcsin(np.clip(-(drop + r[2]) / size, -1.0, 1.0))
 
 
-def _tracked_point(model: Model, points: np.ndarray, names: tuple[str, ...]) -> RigidFit:
-    """An incisal-point recording: the markers' mean (in {S}) is the incisor; the mandible's orientation per frame
-    is a guess, the rotation about the condylar axis that lowers the incisor as far as it dropped below the first
-    frame (:func:`hinge_angle`), weighed little in the fit
-    (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts the model's incisor on the point. The markers' distances
-    from moving in parallel with their mean are the rigid-fit residual."""
+def _tracked_point(model: Model, points: np.ndarray, names: tuple[str, ...], scale: float = 1.0) -> RigidFit:
+    """An incisal-point recording: the markers' mean (in {S}) is the incisor, its displacement from the first
+    frame times ``scale``; the mandible's orientation per frame is a guess, the rotation about the condylar axis
+    that lowers the incisor as far as it dropped below the first frame (:func:`hinge_angle`), weighed little in
+    the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts the model's incisor on the point. The markers'
+    distances from moving in parallel with their mean are the rigid-fit residual."""
     mean = points.mean(axis=1)
     offsets = points - mean[:, None]
     distances = np.linalg.norm(offsets - offsets[:1], axis=2)
+    mean = mean[0] + scale * (mean - mean[0])
     beta = hinge_angle(model, mean[:, 2] - mean[0, 2])
     R = Rotation.from_euler("y", beta[:, None]).as_matrix()
     return RigidFit(mean - R @ model.incisor, R, distances, names)

@@ -336,3 +336,58 @@ def _build_registration(model: Model) -> RegistrationFunctions:
     placed = ca.vertcat(ca.reshape(A, 9, 1), t_B, ca.reshape(R_B, 9, 1))
     placement = ca.Function("reg_placement", [x, const], [placed, ca.jacobian(placed, x)])
     return RegistrationFunctions(12, targets, placement)
+
+
+@dataclass(frozen=True, eq=False)
+class PointRegistrationFunctions:
+    """The graphs of the registration search for an incisal-point recording (``tracked = "incisor"``,
+    :mod:`chewbot.recordings.register_point`), for one model.
+
+    The unknowns x (6,): a turn dr (deg) of the tracker's rotation, A = exp(dr) A_start, and the rest incisor's
+    offset o (mm) from the home incisor I_home in {S}. Frame k's tracked point, relative to the first frame in the
+    tracker's frame, is d_k (m); at the scale s the registered point is Q_k = I_home + o + s A d_k, and the pose the
+    fit is given is the hinge guess of :func:`chewbot.recordings.importer.hinge_angle` written again here: R_k the
+    rotation about y by beta_k = psi + asin(-(s (A d_k)_z + r_z) / abs(r_xz)) (r = I - C in {M}, C the condyles'
+    middle, psi = atan2(r_z, r_x)), p_k = Q_k - R_k I. Constants [A_start (9, columns first); s; I_home (3) m;
+    A_file (9)].
+    """
+
+    _targets: ca.Function
+    _turn: ca.Function
+
+    def targets(self, x, frames, const) -> tuple[np.ndarray, np.ndarray]:
+        """The recorded poses (N, 12) as the fit takes them, and their Jacobians (N, 12, 6) by x; ``frames`` (N, 3)."""
+        t, J = evaluate(self._targets, frames, x, const)
+        return t, J
+
+    def turn(self, x, const) -> tuple[np.ndarray, float, np.ndarray]:
+        """The tracker's rotation A (3, 3), its angle from the file's (deg) and that angle's gradient (6,) by x."""
+        a, angle, grad = evaluate(self._turn, x[None], const[None])
+        return a[0].reshape(3, 3).T, float(angle[0, 0]), grad[0]
+
+
+def point_registration_functions(model: Model) -> PointRegistrationFunctions:
+    """The incisal-point registration search's graphs for ``model`` (built once per process)."""
+    return cached_graph(folded(model), ("recordings", "point registration"), lambda: _build_point_registration(model))
+
+
+def _build_point_registration(model: Model) -> PointRegistrationFunctions:
+    x = ca.SX.sym("x", 6)
+    const = ca.SX.sym("const", 22)
+    d = ca.SX.sym("d", 3)
+    A = ca.mtimes(_expm(x[:3] * DEG), ca.reshape(const[:9], 3, 3))
+    s, home, A_file = const[9], const[10:13], ca.reshape(const[13:22], 3, 3)
+    v = s * ca.mtimes(A, d)
+    Q = home + x[3:6] * MM + v
+    incisor = ca.DM(model.incisor)
+    r = model.incisor - 0.5 * (model.hkp.T_L + model.hkp.T_R)
+    size, psi = float(np.hypot(r[0], r[2])), float(np.arctan2(r[2], r[0]))
+    beta = psi + ca.asin(ca.fmin(1, ca.fmax(-1, -(v[2] + r[2]) / size)))
+    c, s_ = ca.cos(beta), ca.sin(beta)
+    R = ca.vertcat(ca.horzcat(c, 0, s_), ca.horzcat(0, 1, 0), ca.horzcat(-s_, 0, c))
+    target = ca.vertcat(Q - ca.mtimes(R, incisor), ca.reshape(R, 9, 1))
+    targets = ca.Function("point_reg_targets", [d, x, const], [target, ca.jacobian(target, x)])
+    cos = ca.fmin(1, ca.fmax(-1, 0.5 * (ca.trace(ca.mtimes(A_file.T, A)) - 1)))
+    angle = ca.acos(cos) / DEG
+    turn = ca.Function("point_reg_turn", [x, const], [ca.reshape(A, 9, 1), angle, ca.gradient(angle, x)])
+    return PointRegistrationFunctions(targets, turn)
