@@ -117,6 +117,7 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
     if sub in ("import-motion", "track-incisor"):
         stem = out[: -len(".csv")]
         found = [f"{stem}.registration.toml"] if "--fit-registration" in args else []
+        found += [f"{stem}.report.html"] if sub == "import-motion" else []
         return ([out, f"{stem}.residuals.csv"] if sub == "track-incisor" or "--no-residuals" not in args else [out]) + found
     if sub == "identify":
         return [out, out[: -len(".toml")] + ".identification.csv"]
