@@ -250,6 +250,78 @@ def test_chewbots_home_torques_hold_the_home_pose_in_mujoco(target):
     assert np.linalg.norm(plant.data.site_xpos[site]) > 1e-3
 
 
+def _settle(plant, tau: np.ndarray) -> tuple[np.ndarray, float]:
+    """MuJoCo's own static equilibrium under the torques tau held (zero velocity, qacc = 0), found by Newton's
+    method from the plant's current state: MuJoCo's qpos and the largest abs(qacc) left there.
+
+    The Jacobian d qacc / d qpos is by central differences (steps of 1e-11 in MuJoCo's tangent coordinates: the
+    soft constraints' stiffness, 1/(2e-4 s)^2, makes qacc change by about 1e-3 per step, far above rounding, and a
+    step that small never moves a condyle off its plane); each Newton step halved until abs(qacc) decreases."""
+    import mujoco
+
+    m, d = plant.mj, plant.data
+
+    def qacc(qpos):
+        d.qpos[:], d.qvel[:] = qpos, 0
+        plant._load(tau, np.zeros(3))
+        mujoco.mj_forward(m, d)
+        return d.qacc.copy()
+
+    q = d.qpos.copy()
+    a = qacc(q)
+    for _ in range(8):
+        J = np.zeros((m.nv, m.nv))
+        for j in range(m.nv):
+            e = np.zeros(m.nv)
+            e[j] = 1e-11
+            qp, qm = q.copy(), q.copy()
+            mujoco.mj_integratePos(m, qp, e, 1.0)
+            mujoco.mj_integratePos(m, qm, e, -1.0)
+            J[:, j] = (qacc(qp) - qacc(qm)) / 2e-11
+        step = -np.linalg.lstsq(J, a, rcond=None)[0]
+        for frac in 0.5 ** np.arange(20):
+            qn = q.copy()
+            mujoco.mj_integratePos(m, qn, step, frac)
+            an = qacc(qn)
+            if np.abs(an).max() < np.abs(a).max():
+                q, a = qn, an
+                break
+        else:
+            break
+    qacc(q)
+    return q, float(np.abs(a).max())
+
+
+def test_home_torques_hold_mujocos_own_equilibrium_at_home(target):
+    """Started consistently, MuJoCo holds the home pose under chewbot's home torques: its own static equilibrium
+    under those torques (the soft constraints deflected to carry the load, qacc = 0) lies 0.42 nm from home, and
+    from there O_M moves 1.2e-11 m in 1 s (the issue asks at most 0.1 mm). Started instead on the rigid home pose
+    (the previous test), the constraints' missing deflection is the 1.8e-10 m seed that the unstable equilibrium
+    grows to 0.105 mm. With 1 % less torque there is no equilibrium near home: the search ends far from it or
+    with qacc left."""
+    import mujoco
+
+    tau = _home_torques(target)
+    plant = MujocoPlant(target, mjcf(target, friction=False))
+    site = plant.mj.site("O_M").id
+    plant.set_state(np.zeros(4), np.zeros(4))
+    q, residual = _settle(plant, tau)
+    start = plant.data.site_xpos[site].copy()
+    assert residual < 1e-6  # rad/s^2 or m/s^2: from 0.67 on the rigid home pose
+    assert np.linalg.norm(start) < 1e-9  # m: the soft constraints' deflection, not another pose
+    plant.data.qpos[:], plant.data.qvel[:] = q, 0
+    mujoco.mj_forward(plant.mj, plant.data)
+    state = plant._state(0.0)
+    held = np.vstack([np.repeat(tau[:, None], 3, axis=1), np.zeros((3, 3))])
+    for _ in range(100):  # 1 s in ticks of 10 ms
+        state = plant.advance(state, 0.01, lambda t0, h: held)
+    assert np.linalg.norm(plant.data.site_xpos[site] - start) <= 1e-4  # the issue's 0.1 mm over 1 s (measured 1.2e-11 m)
+    assert np.linalg.norm(plant.data.site_xpos[site]) <= 1e-4
+    plant.set_state(np.zeros(4), np.zeros(4))
+    q, residual = _settle(plant, 0.99 * tau)
+    assert residual > 1e-3 or np.linalg.norm(plant.data.site_xpos[site]) > 1e-6
+
+
 @pytest.mark.slow
 def test_computed_torque_tracks_the_default_task_in_mujoco():
     """Computed torque (Hessian method, 1 kHz, the exact model) on MuJoCo's plant: RMS tracking error at most 0.1 mm

@@ -29,6 +29,8 @@ import numpy as np
 import casadi as ca
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
+from chewbot.dynamics.base import householder_minimum_norm_sx
+from chewbot.dynamics.dalembert import reduced_kernel
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -83,6 +85,42 @@ def coupling_kernel(mechanism: str) -> KernelSpec:
         return ca.Function(name, [s.theta, s.q, *extra], [ca.densify(M_A), MCI], ["theta", "q", *names], ["M_A", "MCI"], {"cse": True})
 
     return KernelSpec(name, build, (mechanism,), mechanism)
+
+
+def torques_coupling_kernel(mechanism: str, method: str, rates) -> KernelSpec:
+    """Per-sample kernel (theta, q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> tau (6, N m), MCI (6): the minimum-norm
+    torques of Eq. (54) from the terms of Eq. (53) of the Lagrange-d'Alembert formulation ``method`` (its ``rates``,
+    :func:`chewbot.dynamics.dalembert.reduced_kernel`) and the coupling index of :func:`coupling_kernel`, in one
+    straight-line function (the mass matrix shared).
+
+    What a sweep computes when its outputs need only the torques and MCI: one call per evaluation instead of the
+    run's two kernels, the QR factors and the products in NumPy. The least-norm solution is by Householder QR
+    inside the graph (:func:`chewbot.dynamics.base.householder_minimum_norm_sx`), the algorithm of the run's
+    LAPACK route, so the two differ by rounding only (tests/test_sweep_fast.py: 1e-12 of max abs(tau)).
+    """
+    name = f"{c_name(method)}_coupling_{c_name(mechanism)}"
+
+    def build(params):
+        reduced = reduced_kernel(mechanism, method, rates).graph(params)
+        theta, q, dq, B, F, *extra = reduced.sx_in()
+        ddq = ca.SX.sym("ddq", q.size1())
+        J1, M_f, C_f, G_f, Q_B = reduced(theta, q, dq, B, F, *extra)
+        tau = householder_minimum_norm_sx(J1, ca.mtimes(M_f, ddq) + ca.mtimes(C_f, dq) + G_f - Q_B)
+        _, MCI = coupling_kernel(mechanism).graph(params)(theta, q, *extra)
+        _, names = parameter_input(params)
+        return ca.Function(name, [theta, q, dq, ddq, B, F, *extra], [tau, MCI], ["theta", "q", "dq", "ddq", "B", "F_B", *names],
+                           ["tau", "MCI"], {"cse": True})
+
+    return KernelSpec(name, build, (mechanism, method), mechanism)
+
+
+def torques_coupling(model: Model, kin: Kinematics, method: str, rates, side: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """tau (N, 6), N m, and MCI (N, 6) along the task by :func:`torques_coupling_kernel` (``side``: the bite side,
+    overriding the task's)."""
+    q, dq, ddq = generalised_state(kin)
+    fn = native(torques_coupling_kernel(model.mechanism, method, rates))
+    tau, MCI = evaluate(fn, q[:, :6], q[:, 6:], dq[:, 6:], ddq[:, 6:], model.molar(side or kin.side), kin.force, model.vector())
+    return tau, MCI
 
 
 def joint_space_inertia(model: Model, kin: Kinematics) -> np.ndarray:

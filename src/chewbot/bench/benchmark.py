@@ -508,15 +508,18 @@ SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (issue: 10,24
 @dataclass(frozen=True)
 class SweepTiming:
     """The scale study's evaluations on ``workers`` worker processes (``workers = 0``: in this process, without
-    Dask, the chunks one after the other): ``evaluations`` computed in ``evaluating_s``, wall time from the first
+    Dask, the evaluations one after the other): ``evaluations`` computed in ``evaluating_s``, wall time from the first
     chunk sent to the last one written, the workers warm (their kernels loaded and the task built, as after a
-    sweep's first chunks); ``startup_s``: starting the cluster and warming its workers."""
+    sweep's first chunks); ``startup_s``: starting the cluster and warming its workers; ``single_ms``: in this
+    process only (each evaluation then timed on its own), the median, 99th percentile and maximum of one
+    evaluation's time (ms)."""
 
     workers: int
     evaluations: int
     evaluating_s: float
     startup_s: float
     task_samples: int  # samples of the task per evaluation
+    single_ms: tuple[float, float, float] | None = None
 
     @property
     def per_sample_us(self) -> float:
@@ -557,11 +560,14 @@ def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk
     t0 = time.perf_counter()
     evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
     warm = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for a in range(0, design.n, chunk):
-        evaluate_chunk(spec, design.rows(a, min(a + chunk, design.n)))
+    single = []  # each evaluation timed on its own, one after the other
+    for a in range(design.n):
+        t0 = time.perf_counter()
+        evaluate_chunk(spec, design.rows(a, a + 1))
+        single.append(time.perf_counter() - t0)
     samples = default_task(None, spec.side or "left").t.size
-    out = [SweepTiming(0, design.n, time.perf_counter() - t0, warm, samples)]
+    single_ms = tuple(float(x) * 1e3 for x in (np.median(single), np.percentile(single, 99), np.max(single)))
+    out = [SweepTiming(0, design.n, float(np.sum(single)), warm, samples, single_ms)]
     for w in workers:
         step(f"{SCALE_SPEC}, {design.n} evaluations, {w} worker(s)")
         with tempfile.TemporaryDirectory() as tmp:
@@ -582,12 +588,14 @@ def sweep_markdown(timings: list[SweepTiming], total: int) -> str:
     lines = ["", f"Sweep throughput: the scale study (chewbot sweep sobol-scale: Sobol', 8 parameters, default task, Hessian "
              f"method, peak_tau_Nm and mean_MCI), {serial.evaluations} evaluations, warm workers:", "",
              "| workers | evaluations/s | per core (evaluations/s) | per task sample and core (us) | speed-up | "
-             f"evaluating (s) | cluster start and warm-up (s) | the whole study, {total:,} evaluations (min) |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"evaluating (s) | cluster start and warm-up (s) | the whole study, {total:,} evaluations (min) | "
+             "one evaluation: median, p99, max (ms) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for t in timings:
         who = "in this process, no Dask" if t.workers == 0 else str(t.workers)
+        single = "—" if t.single_ms is None else ", ".join(f"{x:.1f}" for x in t.single_ms)
         lines.append(f"| {who} | {t.per_s:.2f} | {t.per_s_per_core:.2f} | {t.per_sample_us:.1f} | {t.per_s / serial.per_s:.2f} | "
-                     f"{t.evaluating_s:.1f} | {t.startup_s:.1f} | {total / t.per_s / 60:.1f} |")
+                     f"{t.evaluating_s:.1f} | {t.startup_s:.1f} | {total / t.per_s / 60:.1f} | {single} |")
     return "\n".join(lines) + "\n"
 # --- the page ------------------------------------------------------------------------------------------------
 

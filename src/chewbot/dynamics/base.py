@@ -76,3 +76,29 @@ class Sample:
 def minimum_norm_sx(J_theta1, rhs, redundant: bool):
     """The least-norm tau with J_theta1' tau = rhs (Eq. 54; the unique solution where J_theta1 is square)."""
     return ca.mtimes(J_theta1, ca.solve(ca.mtimes(J_theta1.T, J_theta1), rhs)) if redundant else ca.solve(J_theta1.T, rhs)
+
+
+def householder_minimum_norm_sx(J_theta1, rhs):
+    """The least-norm tau with J_theta1' tau = rhs (m x n, m >= n, full column rank; Eq. 54) by Householder QR
+    unrolled in the graph: J_theta1 = Q [R; 0], tau = Q [R'^-1 rhs; 0], as :func:`chewbot.dynamics.dalembert.minimum_norm`
+    computes it with LAPACK. Backward stable without pivoting (its rounding grows with the condition number of
+    J_theta1, not with its square as the normal equations of :func:`minimum_norm_sx` and CasADi's symbolic solve do);
+    each reflection's sign is chosen against cancellation (v = x + sign(x_1) abs(x) e_1)."""
+    A = ca.SX(J_theta1)
+    m, n = A.shape
+    reflections = []
+    for k in range(min(n, m - 1)):  # a last column of one entry (m = n) is already triangular
+        x = A[k:, k]
+        sign = ca.if_else(x[0] >= 0, 1, -1)
+        v = ca.vertcat(x[0] + sign * ca.norm_2(x), x[1:])
+        v = v / ca.norm_2(v)
+        A[k:, k:] = A[k:, k:] - 2 * ca.mtimes(v, ca.mtimes(v.T, A[k:, k:]))
+        reflections.append(v)
+    y = []  # R' y = rhs, R' lower triangular: forward substitution
+    for i in range(n):
+        y.append((rhs[i] - sum((A[j, i] * y[j] for j in range(i)), ca.SX(0))) / A[i, i])
+    tau = ca.vertcat(*y, ca.SX(m - n, 1))
+    for k in reversed(range(len(reflections))):  # tau = H_0 H_1 ... H_(n-1) [y; 0]
+        v = reflections[k]
+        tau[k:] = tau[k:] - 2 * v * ca.mtimes(v.T, tau[k:])
+    return tau

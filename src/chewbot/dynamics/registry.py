@@ -35,7 +35,11 @@ class Formulation:
     **kernel options)``: the compiled kernels it uses; ``sample_torques(mechanism, **sample options)``: a CasADi
     function (q, dq, ddq, B, F_B, p) -> tau of one sample in Euler angles (a controller's inverse dynamics);
     ``orientations``: the parametrisations of q_EE it is written for; ``options``: the keyword options ``solve``
-    takes (besides ``carry`` and ``check``); ``kernel_options``: those that choose its kernels and its per-sample
+    takes (besides ``carry`` and ``check``); ``rates``: where the formulation is a Lagrange-d'Alembert reduction
+    (:mod:`chewbot.dynamics.dalembert`), its :class:`~chewbot.dynamics.dalembert.Rates` derivation: its torques
+    under the bilateral contact model (which do not depend on the normal forces) are then the minimum-norm
+    solution of Eq. (53) with these rates alone, which a sweep that needs only the torques computes in one fused
+    kernel (:func:`chewbot.analysis.coupling.torques_coupling_kernel`); ``kernel_options``: those that choose its kernels and its per-sample
     graph; ``carries``: a sample depends on the one before (a warm start), so a task given in chunks passes the
     previous chunk's ``Dynamics.carry`` on; ``checks``: its loops call a library that may swallow a signal, so it
     takes the command line's ``check``; ``defaults``: the values of its options where a run does not give them."""
@@ -52,15 +56,18 @@ class Formulation:
     carries: bool = False
     checks: bool = False
     defaults: tuple[tuple[str, object], ...] = ()
+    rates: Callable[..., object] | None = None
 
 
 FORMULATIONS: dict[str, Formulation] = {f.name: f for f in (
     Formulation("hessian", hessian.hessian, hessian.kernels, hessian.sample_torques,
-                "Lagrange-d'Alembert with the rates from Hessians (seed 000, Sect. 5.1), minimum-norm torques"),
+                "Lagrange-d'Alembert with the rates from Hessians (seed 000, Sect. 5.1), minimum-norm torques",
+                rates=hessian.hessian_rates),
     Formulation("lagrange", lagrange.lagrange, lagrange.kernels, lagrange.sample_torques,
                 "Lagrange's equations of the first kind with the closure multipliers (seed 000, Sect. 5.2)"),
     Formulation("liang", liang.liang, liang.kernels, liang.sample_torques,
-                "Lagrange-d'Alembert with the rates by Liang's derivative method (seed 000, Eq. 61)"),
+                "Lagrange-d'Alembert with the rates by Liang's derivative method (seed 000, Eq. 61)",
+                rates=liang.liang_rates),
     Formulation("6rss-core", core6rss.core6rss, core6rss.kernels, core6rss.sample_torques,
                 "the 6RSS core in X_EE with the HKPs projected out (Eq. 53), one compiled kernel per sample"),
     Formulation("newton-euler", newton_euler.newton_euler, newton_euler.kernels, g1.sample_torques,
@@ -96,3 +103,10 @@ def formulation_kernels(mechanism: str, orientation: str, method: str, **options
     ``orientation``; ``options``: those of its :attr:`Formulation.kernel_options` that are given."""
     f = formulation(method)
     return f.kernels(mechanism, orientation, **{k: v for k, v in options.items() if k in f.kernel_options and v is not None})
+
+
+def reduction_rates(method: str, contact: str):
+    """The :attr:`Formulation.rates` of ``method`` where its torques under the ``contact`` model are the
+    minimum-norm solution of Eq. (53) alone (bilateral contact), else None."""
+    f = formulation(method)
+    return f.rates if contact == "bilateral" else None

@@ -9,6 +9,7 @@ sockets, parallel singularity, the parasitic e3's denominator) then read its out
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -44,7 +45,10 @@ class Kinematics:
     ``theta``, ``dtheta``, ``ddtheta``: actuator angles (rad) and rates; ``twist``, ``twist_rate``:
     [v_OM; omega] in {S} and its time derivative; ``force``: bite force F_B (N) at the molar of ``side``;
     ``points``: positions (N, 3) in {S} of T_L, T_R, I, B_L, B_R; ``transmission``: (N, 6) sin of each
-    chain's transmission angle (0 at a singularity).
+    chain's transmission angle (0 at a singularity); ``J_theta1_angles``: (N, 6, n) the chains' Jacobian J_theta1 in
+    Euler angles whatever the orientation, from which ``kappa`` (its reciprocal condition number,
+    :mod:`chewbot.kinematics.conditioning`) is computed when first asked (a sweep whose outputs do not need it
+    does not pay for the singular values).
     """
 
     model: Model
@@ -69,7 +73,12 @@ class Kinematics:
     side: str
     points: dict
     transmission: np.ndarray
-    kappa: np.ndarray | None = None
+    J_theta1_angles: np.ndarray | None = None
+
+    @cached_property
+    def kappa(self) -> np.ndarray | None:
+        """kappa (N,) of the chains' Jacobian (columns scaled; 1 best, 0 singular); None without the Jacobian."""
+        return None if self.J_theta1_angles is None else reciprocal_condition(self.J_theta1_angles)
 
     @property
     def n(self) -> int:
@@ -163,7 +172,7 @@ def check_parallel_singularity(J_theta1: np.ndarray, J_unit: np.ndarray | None, 
     J1 = J_theta1 if J_unit is None else J_theta1 @ _unit_norm_tangent(J_unit)
     J1 = J1 / np.linalg.norm(J1, axis=1, keepdims=True)
     n = J1.shape[2]
-    gram = np.einsum("nki,nkj->nij", J1, J1)
+    gram = np.swapaxes(J1, 1, 2) @ J1
     candidates = np.flatnonzero(np.linalg.det(gram) < PARALLEL_SINGULAR_TOLERANCE**2 * float(n) ** n)
     if not candidates.size:
         return
@@ -237,5 +246,5 @@ def solve_kinematics(model: Model, task: Task, orientation: str = "euler-angles"
         side=task.side,
         points={k: out[k] for k in ("T_L", "T_R", "I", "B_L", "B_R")},
         transmission=out["transmission"],
-        kappa=reciprocal_condition(out["J_theta1_angles"]),
+        J_theta1_angles=out["J_theta1_angles"],
     )

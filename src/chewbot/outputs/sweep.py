@@ -71,6 +71,10 @@ def prepare(spec: Spec) -> None:
         from chewbot.sweep.maps import map_kernels
 
         kernels += map_kernels(load_model(spec.model).mechanism)
+    else:
+        from chewbot.sweep.evaluate import Evaluator
+
+        kernels += Evaluator(spec).kernels(load_model(spec.model))
     prepare_kernels(kernels)
 
 

@@ -140,18 +140,12 @@ class Chunk:
         return self.part.n
 
     @cached_property
-    def _kinematic_stage(self) -> tuple[Kinematics, Table]:
+    def kinematics(self) -> Kinematics:
         self.step("kinematics", done=self.offset)
         t0 = time.perf_counter()
         kin = _kinematics(self.model, self.task, self.part, self.offset, self.options.orientation, self.theta_before)
-        table = kinematics_table(kin)
-        singularity_columns(table, kin)
         self.timings["kinematics_s"] = time.perf_counter() - t0
-        return kin, table
-
-    @property
-    def kinematics(self) -> Kinematics:
-        return self._kinematic_stage[0]
+        return kin
 
     @cached_property
     def dynamics(self) -> Dynamics | None:
@@ -167,10 +161,17 @@ class Chunk:
         self.timings[f"dynamics_{o.method}_s"] = time.perf_counter() - t0
         return dyn
 
-    @property
+    @cached_property
     def kinematic_columns(self) -> Table:
-        """The kinematics' columns of results.csv with the transmission angles and kappa_J (no inverse dynamics)."""
-        return self._kinematic_stage[1]
+        """The kinematics' columns of results.csv with the transmission angles and kappa_J (no inverse dynamics);
+        built when first asked (a sweep whose outputs need only the torques or the coupling never builds it), its
+        time counted in the kinematics stage's."""
+        kin = self.kinematics
+        t0 = time.perf_counter()
+        table = kinematics_table(kin)
+        singularity_columns(table, kin)
+        self.timings["kinematics_s"] += time.perf_counter() - t0
+        return table
 
     @cached_property
     def columns(self) -> Table:

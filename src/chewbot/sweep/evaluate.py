@@ -38,6 +38,29 @@ class Evaluator:
                 self._raw[name] = (path, raw.pop("__sha256__"), raw)
         self._tasks: dict = {}
         self.options = spec.run_options()
+        # the formulation's Rates where the fused kernel gives what the outputs need (Evaluation.fused)
+        self.rates = None
+        if self.options.method and not any(OUTPUTS[name].whole for name in spec.computed_outputs):
+            from chewbot.dynamics.registry import reduction_rates
+
+            self.rates = reduction_rates(self.options.method, self.options.contact)
+
+    def fused(self, model, kin) -> tuple[np.ndarray, np.ndarray] | None:
+        """tau and MCI of the kinematics ``kin`` of ``model`` by the fused kernel, or None where it does not apply
+        (:attr:`Evaluation.fused`)."""
+        if self.rates is None:
+            return None
+        from chewbot.analysis.coupling import torques_coupling
+
+        return torques_coupling(model, kin, self.options.method, self.rates)
+
+    def kernels(self, model) -> list:
+        """The compiled kernels the evaluations of ``model`` use besides the run's (prepared before the sweep)."""
+        if self.rates is None:
+            return []
+        from chewbot.analysis.coupling import torques_coupling_kernel
+
+        return [torques_coupling_kernel(model.mechanism, self.options.method, self.rates)]
 
     def model(self, overrides: dict[str, float], name: str | None = None):
         """The model (``name``: the SPEC's by default) with ``overrides``, as ``load_model(name, overrides)`` gives it."""
@@ -128,6 +151,20 @@ class Evaluation:
         return self.run.dynamics
 
     @cached_property
+    def fused(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(tau (N, 6), MCI (N, 6)) by one fused kernel (:func:`chewbot.analysis.coupling.torques_coupling_kernel`)
+        where the SPEC's outputs need only these (no output reads the formulation's other columns or the checks)
+        and the formulation's torques are the minimum-norm solution of Eq. (53) alone (a Lagrange-d'Alembert
+        reduction under the bilateral contact model: :func:`chewbot.dynamics.registry.reduction_rates`); None
+        otherwise (the run's stages compute them)."""
+        return self.evaluator.fused(self.model, self.kinematics)
+
+    @property
+    def tau(self) -> np.ndarray:
+        """The run's torques (N, 6), N m."""
+        return self.dynamics.tau if self.fused is None else self.fused[0]
+
+    @cached_property
     def mu(self) -> np.ndarray:
         """Transmission angles (N, 6), rad: results.csv's mu1..mu6."""
         columns = self.run.kinematic_columns
@@ -135,7 +172,7 @@ class Evaluation:
 
     @property
     def mci(self) -> np.ndarray:
-        return self.run.coupling.MCI
+        return self.run.coupling.MCI if self.fused is None else self.fused[1]
 
     @cached_property
     def mean_mci(self) -> np.ndarray:

@@ -21,13 +21,16 @@ NAN = float("nan")
 @dataclass(frozen=True)
 class Output:
     """One output: ``name`` (its column), ``unit``, ``description``, ``value(evaluation) -> float``;
-    ``target_only``: NaN on the 6RSS (no HKPs)."""
+    ``target_only``: NaN on the 6RSS (no HKPs); ``whole``: it reads more of the inverse dynamics than the torques
+    (the formulation's columns or info, or the run's checks), so an evaluation runs the whole formulation
+    rather than its torques alone."""
 
     name: str
     unit: str
     description: str
     value: Callable
     target_only: bool = False
+    whole: bool = False
 
 
 def _max_abs(a: np.ndarray) -> float:
@@ -71,13 +74,13 @@ def _ratio(i: int | None, reduce=None):
 
 def _outputs() -> dict[str, Output]:
     out = [
-        Output("peak_tau_Nm", "N*m", "largest abs(tau_i) over the samples and joints", lambda ev: _max_abs(ev.dynamics.tau)),
+        Output("peak_tau_Nm", "N*m", "largest abs(tau_i) over the samples and joints", lambda ev: _max_abs(ev.tau)),
         *[Output(f"peak_tau{i + 1}_Nm", "N*m", f"largest abs(tau_{i + 1}) over the samples",
-                 lambda ev, i=i: _max_abs(ev.dynamics.tau[:, i])) for i in range(6)],
+                 lambda ev, i=i: _max_abs(ev.tau[:, i])) for i in range(6)],
         Output("rms_tau_Nm", "N*m", "root mean square of tau over the samples and joints",
-               lambda ev: float(np.sqrt(np.mean(ev.dynamics.tau ** 2)))),
+               lambda ev: float(np.sqrt(np.mean(ev.tau ** 2)))),
         Output("peak_power_W", "W", "largest abs(tau_i theta_dot_i) over the samples and joints",
-               lambda ev: _max_abs(ev.dynamics.tau * ev.kinematics.dtheta)),
+               lambda ev: _max_abs(ev.tau * ev.kinematics.dtheta)),
         Output("peak_speed_rad_per_s", "rad/s", "largest abs(theta_dot_i) over the samples and joints",
                lambda ev: _max_abs(ev.kinematics.dtheta)),
         Output("min_mu_deg", "deg", "smallest transmission angle over the samples and chains (docs/conventions.md)",
@@ -94,21 +97,21 @@ def _outputs() -> dict[str, Output]:
         Output("min_ratio_MCI", "1", "smallest of ratio_MCI1..6", _ratio(None, np.min)),
         Output("max_ratio_MCI", "1", "largest of ratio_MCI1..6", _ratio(None, np.max)),
         Output("peak_N_L", "N", "largest normal force of the left plane on its condyle (NaN where the formulation "
-               "gives no N_L, and on the 6RSS)", _column("N_L", np.max), target_only=True),
-        Output("peak_N_R", "N", "largest normal force of the right plane on its condyle", _column("N_R", np.max), target_only=True),
-        Output("min_N_L", "N", "smallest normal force of the left plane (negative: the plane pulls)", _column("N_L", np.min), target_only=True),
-        Output("min_N_R", "N", "smallest normal force of the right plane", _column("N_R", np.min), target_only=True),
+               "gives no N_L, and on the 6RSS)", _column("N_L", np.max), target_only=True, whole=True),
+        Output("peak_N_R", "N", "largest normal force of the right plane on its condyle", _column("N_R", np.max), target_only=True, whole=True),
+        Output("min_N_L", "N", "smallest normal force of the left plane (negative: the plane pulls)", _column("N_L", np.min), target_only=True, whole=True),
+        Output("min_N_R", "N", "smallest normal force of the right plane", _column("N_R", np.min), target_only=True, whole=True),
         Output("contact_pull_share", "1", "share of the task's samples where a plane pulls its condyle: the contact-pull "
                "check's failing samples (N below 0, or below contact.preload_N under the unilateral contact model)",
-               _share("contact-pull"), target_only=True),
+               _share("contact-pull"), target_only=True, whole=True),
         Output("feasible", "1", "1 where no validity check that makes chewbot run exit 4 fails, else 0",
-               lambda ev: float(not ev.fails)),
-        Output("failed_checks", "1", "number of validity checks that fail the run", lambda ev: float(len(ev.failed_checks))),
+               lambda ev: float(not ev.fails), whole=True),
+        Output("failed_checks", "1", "number of validity checks that fail the run", lambda ev: float(len(ev.failed_checks)), whole=True),
         Output("violation_share", "1", "sum over the failed checks of their failing samples over the task's samples "
                "(0 where feasible; the optimiser's measure of how far a design is from feasible)",
-               lambda ev: float(sum(c.samples or 0 for c in ev.failed_checks) / ev.kinematics.n)),
+               lambda ev: float(sum(c.samples or 0 for c in ev.failed_checks) / ev.kinematics.n), whole=True),
         *[Output(name, unit, f"performance index {name} (seed 001, Sect. 5.3; newton-euler only, else NaN)", _index(name),
-                 target_only=name in ("F3", "F7")) for name, unit in INDEX_UNITS.items()],
+                 target_only=name in ("F3", "F7"), whole=True) for name, unit in INDEX_UNITS.items()],
     ]
     return {o.name: o for o in out}
 
