@@ -369,7 +369,7 @@ def test_outputs_pose_error_and_normal_forces_by_other_routes(step, exported):
 
 
 def test_export_refuses_a_log_of_a_failing_loop_and_takes_a_gains_file(tmp_path):
-    """PD with gains tuned on the plant's own rate (chewbot's defaults before 0.2: k_p 10, k_d 0.01, cut-off 50 Hz)
+    """PD with gains tuned on the plant's own rate (chewbot's earlier defaults: k_p 10, k_d 0.01, cut-off 50 Hz)
     topples the robot on the measured state (docs/simulation.md): the export says so (exit 2) instead of writing a
     log of a failing loop; --no-log exports it; a --gains file's values are the library's defaults; an existing
     folder is not replaced without --force."""
