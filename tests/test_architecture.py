@@ -80,3 +80,15 @@ def test_at_most_eight_modules_at_the_top_of_the_package():
     top = sorted(p.name for p in PACKAGE.glob("*.py"))
     assert len(top) <= 8, top
     assert {"__init__.py", "__main__.py", "cli.py"} <= set(top)
+
+
+def test_no_test_module_imports_another():
+    """What tests share lives in conftest.py (fixtures) and in modules that are not collected (support.py,
+    recording_support.py), never in a test module another one imports."""
+    found = []
+    for path in Path(__file__).resolve().parent.glob("test_*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [node.module or ""] if isinstance(node, ast.ImportFrom) else \
+                [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            found += [f"{path.name}: {n}" for n in names if n.split(".")[0].startswith("test_")]
+    assert found == []

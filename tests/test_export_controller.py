@@ -15,7 +15,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from test_recordings import chewing_recording, registration
+from recording_support import chewing_recording, registration
 from typer.testing import CliRunner
 
 from chewbot.cli import app
