@@ -244,19 +244,19 @@ class Gains:
     ct_frequency: np.ndarray
     ct_damping: np.ndarray
     cutoff: float
-    imp_stiffness: np.ndarray = field(default_factory=lambda: np.full(3, 2000.0))
-    imp_damping: np.ndarray = field(default_factory=lambda: np.full(3, 20.0))
-    imp_angle_stiffness: np.ndarray = field(default_factory=lambda: np.full(1, 5.0))
-    imp_angle_damping: np.ndarray = field(default_factory=lambda: np.full(1, 0.05))
-    hy_frequency: np.ndarray = field(default_factory=lambda: np.full(4, 30.0))
-    hy_damping: np.ndarray = field(default_factory=lambda: np.full(4, 1.0))
-    hy_force_frequency: float = 15.0
-    hy_force_damping: float = 1.0
-    hy_threshold: float = 0.2
-    hy_stiffness_min: float = 100.0
-    hy_stiffness_max: float = 1e5
-    hy_speed_limit: float = 0.05
-    observer_cutoff: float = 200.0
+    imp_stiffness: np.ndarray
+    imp_damping: np.ndarray
+    imp_angle_stiffness: np.ndarray
+    imp_angle_damping: np.ndarray
+    hy_frequency: np.ndarray
+    hy_damping: np.ndarray
+    hy_force_frequency: float
+    hy_force_damping: float
+    hy_threshold: float
+    hy_stiffness_min: float
+    hy_stiffness_max: float
+    hy_speed_limit: float
+    observer_cutoff: float
     source: str = ""
     overrides: dict = field(default_factory=dict)
     defaulted: tuple = ()
