@@ -132,7 +132,7 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
     if sub in ("export-model", "estimate-force"):
         return [out or "robot.xml"]
     if sub == "tpa":
-        return [f"{out}/tpa.json", f"{out}/results.csv", f"{out}/task.csv"]
+        return [f"{out}/tpa.json"] + ([] if "--log" in args else [f"{out}/results.csv", f"{out}/task.csv"])
     if sub == "bench":
         return [out] if out else []
     if sub == "report":

@@ -41,9 +41,9 @@ def estimate_force(
 
     Examples:
 
-      chewbot estimate-force robot_log.csv --model target --out force.csv
+      chewbot estimate-force examples/robot_log.csv --model target --out force.csv
 
-      chewbot estimate-force log.csv --model identified.toml --side right --contact unilateral --out force.csv
+      chewbot estimate-force examples/robot_log.csv --model target --side right --contact unilateral --out force.csv
     """
     from chewbot.commands.common import console
     from chewbot.files import WRITTEN_FILE, atomic_file, check_output

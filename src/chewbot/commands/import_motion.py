@@ -67,9 +67,9 @@ def import_motion(
 
     Examples:
 
-      chewbot import-motion chewing.c3d --registration subject3.toml --out task.csv && chewbot run --task task.csv
+      chewbot import-motion examples/markers/chewing.c3d --registration examples/markers/subject.toml --out task.csv && chewbot run --task task.csv
 
-      chewbot import-motion probe.txt --registration reg.toml --out task.csv --model 6rss --scale auto
+      chewbot import-motion examples/markers/chewing.csv --registration examples/markers/subject.toml --out task6.csv --model 6rss --scale auto
 
       chewbot import-motion examples/recordings/chewing.csv --registration examples/recordings/chewing.toml --fit-registration --out task.csv
     """

@@ -48,7 +48,7 @@ def tpa(
 
       chewbot tpa --food peanut --compression 60 --speed 1 --out runs/tpa-peanut
 
-      chewbot tpa --log robot_tpa.csv --food gummy --out runs/tpa-logged
+      chewbot tpa --log runs/tpa-cheddar/results.csv --food cheddar --out runs/tpa-logged   (a logged test: here the simulated one)
     """
     from chewbot.errors import ChewbotError
     from chewbot.files import check_output
