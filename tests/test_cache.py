@@ -66,8 +66,8 @@ def test_key_follows_the_source_the_kernel_is_built_from(tmp_path):
     of them changes the key (an editable install never reuses a stale kernel), an edit of the report does not; a
     function handed to a shared builder (a formulation's derivation) counts with its module."""
     from chewbot.compiled.cache import KernelCache
-    from chewbot.dynamics.dalembert import reduced_kernel
-    from chewbot.dynamics.hessian import hessian_rates
+    from chewbot.dynamics.formulations.dalembert import reduced_kernel
+    from chewbot.dynamics.formulations.hessian import hessian_rates
     from chewbot.kinematics.functions import kinematics_kernel
 
     package = Path(casadi_tools.__file__).parent.parent
@@ -81,7 +81,7 @@ def test_key_follows_the_source_the_kernel_is_built_from(tmp_path):
     assert KernelCache().source_digest(modules, copy) == digest
     (copy / "kinematics" / "symbolic.py").write_text((copy / "kinematics" / "symbolic.py").read_text() + "\n# edited\n")
     assert KernelCache().source_digest(modules, copy) != digest
-    assert "chewbot.dynamics.hessian" in reduced_kernel("target", "hessian", hessian_rates).modules()
+    assert "chewbot.dynamics.formulations.hessian" in reduced_kernel("target", "hessian", hessian_rates).modules()
 
 
 def test_a_library_built_for_this_processor_is_keyed_by_it(monkeypatch):

@@ -86,7 +86,7 @@ def test_the_warm_start_is_carried_across_chunks(monkeypatch):
     """A chunk that starts at a sample the SQP solves, after one it solved too, gives the whole task's results,
     and the distribution of each chunk is warm-started from the previous chunk's last solution (N_L, N_R of the
     sample before), as the whole task's SQP is from the sample before."""
-    import chewbot.dynamics.newton_euler as ne
+    import chewbot.dynamics.formulations.newton_euler as ne
 
     options = OPTIONS[-3]  # the torque limit below the peaks
     whole = compute(options, chunk=None)

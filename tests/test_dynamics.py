@@ -17,10 +17,10 @@ from support import default_kinematics, model
 from chewbot.compiled.cache import folded
 from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics.registry import inverse_dynamics
-from chewbot.dynamics.dalembert import reduced_rhs, reduced_terms
+from chewbot.dynamics.formulations.dalembert import reduced_rhs, reduced_terms
 from chewbot.dynamics.energy import energies, energy, generalised_state
-from chewbot.dynamics.hessian import hessian_rates
-from chewbot.dynamics.liang import liang_rates
+from chewbot.dynamics.formulations.hessian import hessian_rates
+from chewbot.dynamics.formulations.liang import liang_rates
 from chewbot.errors import ChewbotError
 
 METHODS = ("hessian", "lagrange", "liang")

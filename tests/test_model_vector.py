@@ -11,7 +11,7 @@ import pytest
 from support import default_kinematics, model
 
 from chewbot.compiled.kernels import c_compiler, evaluate, native
-from chewbot.dynamics.core6rss import torque_kernel
+from chewbot.dynamics.formulations.core6rss import torque_kernel
 from chewbot.model.vector import BLOCKS, N_P, block_slice, parameter_index, parameter_names
 from chewbot.model.symbolic import SymbolicModel
 from chewbot.model.params import BUILTIN_MODELS, builtin_model_path, load_model

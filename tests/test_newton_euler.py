@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from chewbot.dynamics.registry import inverse_dynamics
-from chewbot.dynamics.newton_euler import DELTA_N, EPS_V_T
+from chewbot.dynamics.formulations.newton_euler import DELTA_N, EPS_V_T
 from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
 from chewbot.rotation import matrix_from_euler_angles
@@ -209,7 +209,7 @@ def test_actuator_friction_matches_its_law(name):
     """tau_f = R mu_c |F_G| sgn(theta_dot) + mu_v theta_dot (MODEL.md), rebuilt from the bearing-force columns
     FG1_x.. and theta_dot: the smoothing changes it by at most R mu_c (delta + |F_G| eps^2 / (2 theta_dot^2))
     where the crank turns faster than 100 eps; elsewhere (at rest) the Coulomb part is regularised to zero."""
-    from chewbot.dynamics.newton_euler import DELTA_F_G, EPS_THETA_DOT
+    from chewbot.dynamics.formulations.newton_euler import DELTA_F_G, EPS_THETA_DOT
 
     dyn = ne(name)
     m, kin = model(name), default_kinematics(name)

@@ -18,10 +18,10 @@ from typer.testing import CliRunner
 from chewbot.compiled.kernels import NativeFunction, c_compiler, evaluate
 from chewbot.cli import app
 from chewbot.dynamics.registry import inverse_dynamics
-from chewbot.dynamics.core6rss import core_terms, dynamics_kernel, torque_kernel
-from chewbot.dynamics.dalembert import reduced_terms
+from chewbot.dynamics.formulations.core6rss import core_terms, dynamics_kernel, torque_kernel
+from chewbot.dynamics.formulations.dalembert import reduced_terms
 from chewbot.dynamics.energy import energies, generalised_state
-from chewbot.dynamics.hessian import hessian_rates
+from chewbot.dynamics.formulations.hessian import hessian_rates
 from chewbot.export.c import export_c
 from chewbot.kinematics.functions import jacobians_function
 from chewbot.dynamics.g1 import g1_distribution
@@ -276,7 +276,7 @@ def test_example_inputs_sample_is_inside_a_bite():
 def test_numpy_reference_with_friction_reproduces_the_newton_euler_torques():
     """At the solver's normal forces, the plain NumPy Newton-Euler with friction (written independently of the
     CasADi model) gives the same torques: an independent check of the friction model and the force chain."""
-    from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
+    from chewbot.dynamics.formulations.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
     from chewbot.bench.reference import _equations, _sample_torques
 
     assert DELTA_N == DELTA_F_G  # the reference smooths both magnitudes with one delta

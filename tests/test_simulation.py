@@ -13,9 +13,9 @@ from scipy.interpolate import BPoly
 from chewbot.compiled.cache import symbols
 from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics.contact import normal_forces
-from chewbot.dynamics.dalembert import reduced_kernel
+from chewbot.dynamics.formulations.dalembert import reduced_kernel
 from chewbot.dynamics.energy import energies
-from chewbot.dynamics.hessian import hessian_rates
+from chewbot.dynamics.formulations.hessian import hessian_rates
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model.params import load_model
 from chewbot.simulation.controllers import Gains, ModelBasedController, inverse_dynamics_function

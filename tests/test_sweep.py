@@ -415,8 +415,8 @@ def test_force_capability_of_the_6rss_by_its_closed_form(sixrss):
     """The 6RSS's torques are unique: tau = J_theta1^-T (G_f - s Q_B(d)), so the largest s is where the first
     abs(tau_i) reaches the limit: the linear program must give that."""
     from chewbot.compiled.kernels import evaluate, native
-    from chewbot.dynamics.dalembert import REDUCED_OUTPUTS, reduced_kernel
-    from chewbot.dynamics.hessian import hessian_rates
+    from chewbot.dynamics.formulations.dalembert import REDUCED_OUTPUTS, reduced_kernel
+    from chewbot.dynamics.formulations.hessian import hessian_rates
     from chewbot.kinematics.motion import solve_kinematics
     from chewbot.sweep.maps import _task, force_capability
 

@@ -30,7 +30,7 @@ import casadi as ca
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import householder_minimum_norm_sx
-from chewbot.dynamics.dalembert import reduced_kernel
+from chewbot.dynamics.formulations.dalembert import reduced_kernel
 from chewbot.dynamics.energy import energy, generalised_state
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -90,7 +90,7 @@ def coupling_kernel(mechanism: str) -> KernelSpec:
 def torques_coupling_kernel(mechanism: str, method: str, rates) -> KernelSpec:
     """Per-sample kernel (theta, q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> tau (6, N m), MCI (6): the minimum-norm
     torques of Eq. (54) from the terms of Eq. (53) of the Lagrange-d'Alembert formulation ``method`` (its ``rates``,
-    :func:`chewbot.dynamics.dalembert.reduced_kernel`) and the coupling index of :func:`coupling_kernel`, in one
+    :func:`chewbot.dynamics.formulations.dalembert.reduced_kernel`) and the coupling index of :func:`coupling_kernel`, in one
     straight-line function (the mass matrix shared).
 
     What a sweep computes when its outputs need only the torques and MCI: one call per evaluation instead of the

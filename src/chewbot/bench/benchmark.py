@@ -172,7 +172,7 @@ def _dynamics(method: str, **options):
 
 
 def _core_terms(model, kin):
-    from chewbot.dynamics.core6rss import core_terms
+    from chewbot.dynamics.formulations.core6rss import core_terms
 
     return core_terms(model, kin)
 

@@ -6,7 +6,7 @@ solved sample by sample with ``scipy.optimize.minimize(method="SLSQP")`` with th
 limits, each sample warm-started from the previous one's solution.
 It serves two purposes: an independent route for the tests, and the baseline of ``chewbot bench``.
 
-The equations (seed 001, Sects. 4.1–4.4; :mod:`chewbot.dynamics.newton_euler` has the derivation):
+The equations (seed 001, Sects. 4.1–4.4; :mod:`chewbot.dynamics.formulations.newton_euler` has the derivation):
 coupler i (thin rod, mass m, length L, axis u from S to M) carries an axial force k_i and a transverse force fixed
 by its two transverse Euler equations, u x g = u x c, c = -(m/2)(a_E - g_vec) - (m L/12) u_ddot, where g is its
 force on the mandible; the crank pushes it at S with F_S = g + m (a_E - g_vec); the mandible's six equations

@@ -80,7 +80,7 @@ def minimum_norm_sx(J_theta1, rhs, redundant: bool):
 
 def householder_minimum_norm_sx(J_theta1, rhs):
     """The least-norm tau with J_theta1' tau = rhs (m x n, m >= n, full column rank; Eq. 54) by Householder QR
-    unrolled in the graph: J_theta1 = Q [R; 0], tau = Q [R'^-1 rhs; 0], as :func:`chewbot.dynamics.dalembert.minimum_norm`
+    unrolled in the graph: J_theta1 = Q [R; 0], tau = Q [R'^-1 rhs; 0], as :func:`chewbot.dynamics.formulations.dalembert.minimum_norm`
     computes it with LAPACK. Backward stable without pivoting (its rounding grows with the condition number of
     J_theta1, not with its square as the normal equations of :func:`minimum_norm_sx` and CasADi's symbolic solve do);
     each reflection's sign is chosen against cancellation (v = x + sign(x_1) abs(x) e_1)."""

@@ -3,14 +3,14 @@
 Given the motion of the mandible (angles, rates and accelerations of every sample) and the six measured torques
 tau_m, the unknowns are u = (F_B, N) = (Fx, Fy, Fz, N_L, N_R): the food's force on the mandible at the molar B of
 ``side`` (in {S}) and the normal forces of the two planes on the condyles (:mod:`chewbot.dynamics.contact`). The
-model is the Newton-Euler model of :mod:`chewbot.dynamics.newton_euler` with the model's friction (the one the
+model is the Newton-Euler model of :mod:`chewbot.dynamics.formulations.newton_euler` with the model's friction (the one the
 plant of ``chewbot simulate`` integrates, with the same smoothing of sgn and abs), so the equations are
 
     r(u) = tau_NE(q, q_dot, q_ddot, F_B, N) - tau_m = 0          (6 equations, 5 unknowns)
 
 and u is their least-squares solution, min |r(u)|^2. Without friction r is affine in u (one linear least-squares
 solve). With friction it is not: the HKP friction grows with |N_j| and the actuators' with |F_G,i|. As the
-distribution of the redundant torques does (:func:`chewbot.dynamics.newton_euler.start_sx`), the kink of |N_j| is
+distribution of the redundant torques does (:func:`chewbot.dynamics.formulations.newton_euler.start_sx`), the kink of |N_j| is
 handled by its sign pattern: on each pattern s of (N_L, N_R), |N_j| = s_j N_j and r is affine in u but for the
 smooth actuator term, so a few Gauss-Newton steps (:data:`PATTERN_STEPS`) reach that piece's minimiser. Of the
 pieces whose minimiser has the pattern's signs, the one of least |r| is kept, and :data:`POLISH_STEPS` damped
@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.dynamics.newton_euler import DELTA_N, coefficients_kernel, forces_sx, n_unknowns
+from chewbot.dynamics.formulations.newton_euler import DELTA_N, coefficients_kernel, forces_sx, n_unknowns
 from chewbot.dynamics.options import check_contact
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model

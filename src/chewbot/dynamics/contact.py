@@ -5,7 +5,7 @@ unit normal n = (p1, 0, 1)/sqrt(p1^2 + 1) (up, the side of the mandible): N_j > 
 condyle, N_j < 0 where it pulls it (which only a ball held in a slot allows). Seed 001 writes the same force as
 N_j n with n not normalised, N_j its component along Z_S; the signs agree.
 
-**Normal forces from tau and the motion.** The 6RSS core (:mod:`chewbot.dynamics.core6rss`) has six equations in
+**Normal forces from tau and the motion.** The 6RSS core (:mod:`chewbot.dynamics.formulations.core6rss`) has six equations in
 x = X_EE; with the normal forces on the condyles they read
 
     J_6' tau + P N = f_6 = M_6 x_ddot + C_6 x_dot + G_6 - Q_6,    P = [dT_L/dx' n, dT_R/dx' n]   (6 x 2),
@@ -71,7 +71,7 @@ def bound_names(preload: float) -> list[str]:
 
 def contact_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (q_EE, q_EE_dot, q_EE_ddot, B, F_B, p) -> N0 (2), K (2 x 6), J_theta1 (6 x 4) of the
-    target, inputs as :func:`chewbot.dynamics.core6rss.torque_kernel`: N = N0 + K tau (N) for any tau that solves
+    target, inputs as :func:`chewbot.dynamics.formulations.core6rss.torque_kernel`: N = N0 + K tau (N) for any tau that solves
     Eq. (53) (module docstring)."""
     name = f"contact_{c_name(mechanism)}"
 

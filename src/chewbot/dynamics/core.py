@@ -1,5 +1,5 @@
 """The 6RSS core: the robot as a 6RSS in X_EE, per sample, the graph that the 6RSS-core formulation
-(:mod:`chewbot.dynamics.core6rss`) and the normal-force map of every formulation (:mod:`chewbot.dynamics.contact`)
+(:mod:`chewbot.dynamics.formulations.core6rss`) and the normal-force map of every formulation (:mod:`chewbot.dynamics.contact`)
 are built on.
 
 The 6RSS's dynamics are written once in the six coordinates x = X_EE = [X, Y, Z, alpha, beta, gamma], with the
@@ -30,7 +30,7 @@ M_6_dot - 2 C_6 is skew-symmetric (the property passivity-based controllers use)
 takes the left-hand side through the bodies' accelerations instead, without forming M_6 or C_6.
 
 Everything, the inverse kinematics included, is one CasADi graph per sample, compiled to C: the per-sample
-kernels of :func:`chewbot.dynamics.core6rss.torque_kernel` and :func:`chewbot.dynamics.core6rss.dynamics_kernel`
+kernels of :func:`chewbot.dynamics.formulations.core6rss.torque_kernel` and :func:`chewbot.dynamics.formulations.core6rss.dynamics_kernel`
 are what ``chewbot export-c`` writes for the robot's controller.
 """
 

@@ -6,7 +6,7 @@ p the model's parameters: ``residual`` r, whose squared norm is the goal (minimi
 (the unilateral contact's N >= preload, :mod:`chewbot.dynamics.contact`). Each sample is solved in two stages:
 
 1. Unconstrained, all samples at once: x starts at the problem's ``start`` (for the Newton–Euler goals the
-   best of the piecewise least-squares minimisers, :func:`chewbot.dynamics.newton_euler.start_sx`), or at
+   best of the piecewise least-squares minimisers, :func:`chewbot.dynamics.formulations.newton_euler.start_sx`), or at
    the friction-free optimum (r is affine in x then: one Newton step from 0 gives it), then damped Newton on the
    exact Hessian (Gauss-Newton where the exact one is not positive definite) with an Armijo backtracking
    line search, vectorised over the samples that have not converged.

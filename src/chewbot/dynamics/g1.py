@@ -1,7 +1,7 @@
 """The optimal distribution of the target's redundant torques at a fixed cost, as one CasADi graph per sample: the
 friction-aware goal-G1 kernel and what a controller's Newton–Euler inverse dynamics runs (seed 001, Sect. 4.5).
 
-``g1_target`` is the Newton–Euler model with friction (:mod:`chewbot.dynamics.newton_euler`) with the G1 problem
+``g1_target`` is the Newton–Euler model with friction (:mod:`chewbot.dynamics.formulations.newton_euler`) with the G1 problem
 solved inside the kernel on its two unknowns: the best piecewise least-squares start, then a fixed number
 (:data:`G1_ITERATIONS`) of safeguarded Newton steps: a fixed cost, as a real-time loop needs. The kernel returns its
 last step and the gradient of |tau|^2 at its answer (both ~0 at the optimum: the step is the one Newton proposes
@@ -17,7 +17,7 @@ import numpy as np
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.base import Sample
 from chewbot.dynamics.distribution import MEASURABLE
-from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, goal_residual, n_unknowns, start_sx
+from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forces_sx, goal_residual, n_unknowns, start_sx
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.options import Orientation
 from chewbot.model import Model
@@ -41,7 +41,7 @@ def g1_kernel(mechanism: str = "target", orientation: str = G1_ORIENTATION,
     of the Newton step proposed at the answer (N; tiny only at the optimum), limits (24: tau, power, axial,
     radial load per actuator, in N m, W, N, N). q_EE in ``orientation``.
 
-    It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.newton_euler.start_sx`)
+    It starts from the best piecewise least-squares candidate (:func:`chewbot.dynamics.formulations.newton_euler.start_sx`)
     and takes ``iterations`` safeguarded Newton steps: the exact Hessian where it is positive definite, else
     Gauss-Newton's, and the longest of the steps 1, 1/2, ..., 1/2^(HALVINGS-1) that satisfies Armijo's
     condition (none: stay). Fixed cost, no branches in the C code. No p for a model (its numbers folded in).
@@ -70,7 +70,7 @@ def distribution_function(params: SymbolicModel, orientation: str, goal: str, fr
     """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
     (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
     ``orientation``), ``friction`` 0.0 or 1.0 (a constant of the graph). The best piecewise least-squares start
-    (:func:`chewbot.dynamics.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
+    (:func:`chewbot.dynamics.formulations.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
     |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values."""
     def build():
         model = params

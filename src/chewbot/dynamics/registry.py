@@ -18,7 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from chewbot.dynamics import core6rss, g1, hessian, lagrange, liang, newton_euler
+from chewbot.dynamics import g1
+from chewbot.dynamics.formulations import core6rss, hessian, lagrange, liang, newton_euler
 from chewbot.dynamics.base import Dynamics
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.options import Orientation
@@ -36,7 +37,7 @@ class Formulation:
     function (q, dq, ddq, B, F_B, p) -> tau of one sample in Euler angles (a controller's inverse dynamics);
     ``orientations``: the parametrisations of q_EE it is written for; ``options``: the keyword options ``solve``
     takes (besides ``carry`` and ``check``); ``rates``: where the formulation is a Lagrange-d'Alembert reduction
-    (:mod:`chewbot.dynamics.dalembert`), its :class:`~chewbot.dynamics.dalembert.Rates` derivation: its torques
+    (:mod:`chewbot.dynamics.formulations.dalembert`), its :class:`~chewbot.dynamics.formulations.dalembert.Rates` derivation: its torques
     under the bilateral contact model (which do not depend on the normal forces) are then the minimum-norm
     solution of Eq. (53) with these rates alone, which a sweep that needs only the torques computes in one fused
     kernel (:func:`chewbot.analysis.coupling.torques_coupling_kernel`); ``kernel_options``: those that choose its kernels and its per-sample

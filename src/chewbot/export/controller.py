@@ -39,7 +39,7 @@ import numpy as np
 
 from chewbot.compiled.cache import KERNELS, c_compiler, folded, symbols
 from chewbot.dynamics.g1 import distribution_function
-from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, limit_bounds, n_unknowns
+from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forces_sx, limit_bounds, n_unknowns
 from chewbot.files import EXPORT_FOLDER, VERSION, atomic_folder, to_json
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model

@@ -11,7 +11,7 @@ Every kernel takes the model's parameter vector p last (:meth:`chewbot.model.Mod
 kernel serves every model of its mechanism; :func:`kernels` gives them with one model's numbers folded in (no p,
 :meth:`chewbot.compiled.kernels.KernelSpec.folded`), as ``chewbot export-c`` writes them for a robot's controller.
 
-The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.core6rss`), the coupling kernels
+The torque kernels are the 6RSS-core formulation (:mod:`chewbot.dynamics.formulations.core6rss`), the coupling kernels
 :func:`chewbot.analysis.coupling.coupling_kernel`, and ``g1_target`` the Newton–Euler model with friction with the
 G1 problem solved inside the kernel at a fixed cost (:mod:`chewbot.dynamics.g1`).
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from chewbot.analysis.coupling import coupling_kernel
 from chewbot.compiled.kernels import FLAGS, KernelSpec, native
-from chewbot.dynamics.core6rss import dynamics_kernel, torque_kernel
+from chewbot.dynamics.formulations.core6rss import dynamics_kernel, torque_kernel
 from chewbot.dynamics.g1 import G1_ITERATIONS, G1_ORIENTATION, g1_kernel
 from chewbot.export.c import Kernel
 from chewbot.model import Model

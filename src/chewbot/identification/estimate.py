@@ -26,7 +26,7 @@ from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from chewbot.compiled.kernels import evaluate, native
-from chewbot.dynamics.newton_euler import coefficients_kernel, n_unknowns
+from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, n_unknowns
 from chewbot.identification import MAX_RELATIVE_SE, RCOND
 from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel

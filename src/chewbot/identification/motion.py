@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chewbot.compiled.kernels import evaluate, native
-from chewbot.dynamics.newton_euler import EPS_THETA_DOT
+from chewbot.dynamics.formulations.newton_euler import EPS_THETA_DOT
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.identification.log import RobotLog
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel

@@ -1,8 +1,8 @@
 """The torque model of one log sample and its exact derivatives, as compiled kernels.
 
 The residual of sample k is r_k = tau(sample, N_k, x) - tau_measured,k (6 entries, N*m): tau from the
-Newton-Euler model with friction (:func:`chewbot.dynamics.newton_euler.coefficients_kernel` and
-:func:`~chewbot.dynamics.newton_euler.forces_sx`, with its smoothing of the non-smooth terms), N_k = (N_L, N_R)
+Newton-Euler model with friction (:func:`chewbot.dynamics.formulations.newton_euler.coefficients_kernel` and
+:func:`~chewbot.dynamics.formulations.newton_euler.forces_sx`, with its smoothing of the non-smooth terms), N_k = (N_L, N_R)
 the normal forces of the HKPs at the sample (free unknowns; none on the 6RSS) and x the identified parameters
 (:mod:`chewbot.identification.parameters`) put in place in the model's vector p.
 
@@ -25,7 +25,7 @@ from __future__ import annotations
 import casadi as ca
 
 from chewbot.compiled.kernels import KernelSpec
-from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
+from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.identification.parameters import N_X, p_entries
 from chewbot.model.vector import N_P
 from chewbot.model.symbolic import SymbolicModel, c_name
@@ -41,7 +41,7 @@ def _with_x(p: ca.SX, x: ca.SX) -> ca.SX:
 
 def normal_force_kernel(mechanism: str) -> KernelSpec:
     """Per-sample kernel (D, N, tau_measured, friction, p) -> r, dr_dN (6 x nN), H_NN (nN x nN): the residual at
-    given normal forces from the Newton-Euler data D (:func:`~chewbot.dynamics.newton_euler.coefficients_kernel`
+    given normal forces from the Newton-Euler data D (:func:`~chewbot.dynamics.formulations.newton_euler.coefficients_kernel`
     at p with x in place), and what Newton's method on N needs; ``friction`` 0 or 1 switches friction off or on
     (off, r is affine in N)."""
     name = f"identify_{c_name(mechanism)}_normal_forces"

@@ -1,6 +1,6 @@
 """PNG figures of a Newton–Euler run, after seed 001's Figs. 10–13. Every axis says its unit.
 
-Each takes a run's results table (columns of :func:`chewbot.dynamics.newton_euler.newton_euler`: ``tau1..6``,
+Each takes a run's results table (columns of :func:`chewbot.dynamics.formulations.newton_euler.newton_euler`: ``tau1..6``,
 ``tau_f1..6``, ``N_L``, ``N_R``, ``fT_L_x..``, ``friction_share1..6``, ``FS1_x..``, ``MG1_x..``); the HKP
 panels are left out for a mechanism without HKPs (6RSS).
 """

@@ -32,7 +32,7 @@ from scipy.optimize import brentq
 
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.dynamics.newton_euler import n_unknowns
+from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
 from chewbot.food.law import CASADI, N_FOOD, NUMPY, Food, breaking, elastic_force, maxwell_force, normal_force, tangential_force
 from chewbot.model.vector import N_P

@@ -1,6 +1,6 @@
 """Forward dynamics of both robots: the Newton–Euler model with friction solved for the accelerations.
 
-The inverse dynamics of :mod:`chewbot.dynamics.newton_euler` gives the six torques from the motion and the HKP normal
+The inverse dynamics of :mod:`chewbot.dynamics.formulations.newton_euler` gives the six torques from the motion and the HKP normal
 forces N = (N_L, N_R) (Eqs. 33-50): tau = tau_NE(q, q_dot, q_ddot, N). The forward dynamics solves the same six
 equations the other way round. With the state (q, q_dot) in the independent coordinates (Euler angles: X, Y, alpha,
 beta for the target, X_EE for the 6RSS), the torques tau and the bite force F_B given, the unknowns are
@@ -13,9 +13,9 @@ closed-form inverse kinematics): nothing can drift. Without friction r is affine
 bodies' accelerations linearly, N the mandible's equations linearly), so one Newton step from any z is exact. With
 friction r is not: the HKP friction grows with abs(N), the actuator friction with abs(F_G,i), and F_G,i is affine in
 q_ddot and N. These magnitudes are smoothed exactly as the inverse dynamics smooths them (sqrt(x^2 + delta^2),
-:data:`~chewbot.dynamics.newton_euler.DELTA_N`, :data:`~chewbot.dynamics.newton_euler.DELTA_F_G`), and the directions
+:data:`~chewbot.dynamics.formulations.newton_euler.DELTA_N`, :data:`~chewbot.dynamics.formulations.newton_euler.DELTA_F_G`), and the directions
 of the velocities (known here: the state) regularised with the same constants
-(:data:`~chewbot.dynamics.newton_euler.EPS_THETA_DOT`, :data:`~chewbot.dynamics.newton_euler.EPS_V_T`), so that the
+(:data:`~chewbot.dynamics.formulations.newton_euler.EPS_THETA_DOT`, :data:`~chewbot.dynamics.formulations.newton_euler.EPS_V_T`), so that the
 forward and the inverse model are one model: the inverse dynamics evaluated at the forward's accelerations and normal
 forces returns the applied torques (tested). The smoothed r is differentiable; :func:`forward_kernel` starts from the
 friction-free solution and takes at most :data:`NEWTON_ITERATIONS` Newton steps with the exact Jacobian dr/dz (a bounded
@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
-from chewbot.dynamics.newton_euler import coefficients_kernel, forces_sx, n_unknowns
+from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forces_sx, n_unknowns
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.compiled.cache import cached_graph
@@ -140,7 +140,7 @@ FORWARD_OUTPUTS = {"target": ("ddq", "N", "residual"), "6rss": ("ddq", "residual
 
 
 def forward_data_function(params: SymbolicModel) -> ca.Function:
-    """The sample's Newton-Euler data D (:func:`chewbot.dynamics.newton_euler.coefficients_kernel`) split into what
+    """The sample's Newton-Euler data D (:func:`chewbot.dynamics.formulations.newton_euler.coefficients_kernel`) split into what
     does not depend on the accelerations and what multiplies them: (q, dq, B, F_B, p) -> D0, Dq with
     D(q_ddot) = D0 + Dq q_ddot exactly (the bodies' accelerations are affine in q_ddot; checked when built). The
     whole cost of the kinematics and of the bodies' equations is here, once per sample."""
@@ -174,7 +174,7 @@ def forward_kernel(mechanism: str) -> KernelSpec:
     model (its numbers folded in, as ``chewbot export-c`` writes it).
 
     The kinematics and the bodies' equations are evaluated once (:func:`forward_data_function`: D = D0 + Dq q_ddot);
-    the Newton iteration then works on the torques of D0 + Dq q_ddot and N (:func:`chewbot.dynamics.newton_euler.forces_sx`),
+    the Newton iteration then works on the torques of D0 + Dq q_ddot and N (:func:`chewbot.dynamics.formulations.newton_euler.forces_sx`),
     a small graph: without friction one step from 0 is exact, with it each step and each trial of its step length
     costs a few hundred operations.
     """

@@ -1,6 +1,6 @@
 """The simulated robot: a model (the plant's own numbers), friction on or off, and its compiled integrator step.
 
-The plant is the Newton–Euler model of :mod:`chewbot.dynamics.newton_euler` with its friction (or none), integrated
+The plant is the Newton–Euler model of :mod:`chewbot.dynamics.formulations.newton_euler` with its friction (or none), integrated
 by :mod:`chewbot.simulation.integrator` in its independent coordinates (Euler angles: X, Y, alpha, beta for the
 target, X_EE for the 6RSS). Both HKP contacts stay closed (bilateral, the papers' model): N_L, N_R of either sign
 are reported, and the ``contact-pull`` check says where a plane pulls its condyle.
@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, native
-from chewbot.dynamics.newton_euler import n_unknowns
+from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model

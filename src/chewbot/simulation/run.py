@@ -454,7 +454,7 @@ def simulation_info(sim: Simulation, plant, controller: ModelBasedController, se
     """What run.json says about the loop: the integrator, the control rate, the controller's model, the plant's."""
     if not isinstance(plant, Plant):
         return {**_loop_info(sim, controller, sensor), "plant": mujoco_info(plant)}
-    from chewbot.dynamics.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
+    from chewbot.dynamics.formulations.newton_euler import DELTA_F_G, DELTA_N, EPS_THETA_DOT, EPS_V_T
     from chewbot.simulation.integrator import TOLERANCE
     from chewbot.simulation.plant import MAX_STEP
 

@@ -38,7 +38,7 @@ from chewbot.simulation.plant import Plant, PlantState, plant_step_kernel, stage
 from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
 from chewbot.dynamics.bite_force import residual_kernel
-from chewbot.dynamics.newton_euler import n_unknowns
+from chewbot.dynamics.formulations.newton_euler import n_unknowns
 
 DEFAULT_RATE = 1000.0  # Hz
 

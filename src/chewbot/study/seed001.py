@@ -20,7 +20,7 @@ import numpy as np
 from chewbot.analysis.checks import PULL_TOLERANCE_N
 from chewbot.dynamics.indices import INDEX_UNITS
 from chewbot.bench.benchmark import compare, interleaved
-from chewbot.dynamics.newton_euler import newton_euler
+from chewbot.dynamics.formulations.newton_euler import newton_euler
 from chewbot.dynamics.options import GOALS
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.options import ORIENTATIONS

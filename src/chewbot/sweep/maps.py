@@ -56,8 +56,8 @@ def map_columns(spec: Spec) -> dict[str, tuple[str, str]]:
 
 def map_kernels(mechanism: str) -> list:
     """The compiled kernels of the maps: the kinematics and the terms of Eq. 53."""
-    from chewbot.dynamics.dalembert import reduced_kernel
-    from chewbot.dynamics.hessian import hessian_rates
+    from chewbot.dynamics.formulations.dalembert import reduced_kernel
+    from chewbot.dynamics.formulations.hessian import hessian_rates
     from chewbot.kinematics.functions import kinematics_kernel
 
     return [kinematics_kernel(mechanism, "euler-angles"), reduced_kernel(mechanism, "hessian", hessian_rates)]
@@ -186,8 +186,8 @@ def force_capability(model, names, q: np.ndarray, side: str, directions: dict) -
     from scipy.optimize import linprog
 
     from chewbot.compiled.kernels import evaluate, native
-    from chewbot.dynamics.dalembert import REDUCED_OUTPUTS, reduced_kernel
-    from chewbot.dynamics.hessian import hessian_rates
+    from chewbot.dynamics.formulations.dalembert import REDUCED_OUTPUTS, reduced_kernel
+    from chewbot.dynamics.formulations.hessian import hessian_rates
     from chewbot.kinematics.motion import solve_kinematics
 
     kin = solve_kinematics(model, _task(names, q, side), "euler-angles")

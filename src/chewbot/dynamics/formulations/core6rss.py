@@ -82,7 +82,7 @@ def core_terms(model: Model, kin: Kinematics, side: str | None = None, matrices:
 
 def core6rss(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm torques from the 6RSS core with the HKPs projected out (see the module docstring), the
-    target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`. ``side``
+    target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.formulations.hessian.hessian`. ``side``
     overrides the bite side of ``kin``."""
     require_euler_angles(kin, "6rss-core")
     tau = core_terms(model, kin, side, matrices=False)["tau"]

@@ -1,6 +1,6 @@
 """Inverse dynamics with Liang's derivative method (seed 000, Eq. 61; Liang et al. 2017).
 
-Same Lagrange-d'Alembert model as the Hessian method (:mod:`chewbot.dynamics.dalembert`), but the rates come from
+Same Lagrange-d'Alembert model as the Hessian method (:mod:`chewbot.dynamics.formulations.dalembert`), but the rates come from
 the partial derivatives of the matrices themselves:
 
     J_dot = dJ/dq' (q_dot kron I_c)                                  (c: columns of J)
@@ -17,7 +17,7 @@ import casadi as ca
 
 from chewbot.dynamics.base import Dynamics
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
-from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
+from chewbot.dynamics.formulations.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -45,7 +45,7 @@ def liang_rates(e: Energy) -> Rates:
 
 def liang(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm actuator torques (Eq. 54) with J_dot and C by Liang's method (Eq. 61), the target's normal
-    forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`. ``side`` overrides the bite side
+    forces and the ``contact`` model as :func:`chewbot.dynamics.formulations.hessian.hessian`. ``side`` overrides the bite side
     of ``kin``."""
     require_euler_angles(kin, "liang")
     tau = reduced_torques(model, kin, "liang", liang_rates, side)
@@ -59,5 +59,5 @@ def kernels(mechanism: str, orientation: str) -> list:
 
 
 def sample_torques(mechanism: str):
-    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.dalembert.reduced_sample_torques`)."""
+    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.formulations.dalembert.reduced_sample_torques`)."""
     return reduced_sample_torques(mechanism, "liang", liang_rates)

@@ -11,7 +11,7 @@ equations of motion need: H12 q_dot = M_dot q_dot and 1/2 H12' q_dot = dT/dq. He
     C = H12 - 1/2 H12'      (Eq. 52 with H12 for M_dot),
 
 whose C q_dot = d/dt(dT/dq_dot) - M q_ddot - dT/dq is exact. The torques follow from Eqs. (53)-(54),
-:mod:`chewbot.dynamics.dalembert`.
+:mod:`chewbot.dynamics.formulations.dalembert`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import casadi as ca
 
 from chewbot.dynamics.base import Dynamics
 from chewbot.dynamics.contact import contact_kernels, frictionless_dynamics
-from chewbot.dynamics.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
+from chewbot.dynamics.formulations.dalembert import Rates, reduced_kernel, reduced_sample_torques, reduced_torques
 from chewbot.dynamics.energy import Energy, require_euler_angles
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -54,5 +54,5 @@ def kernels(mechanism: str, orientation: str) -> list:
 
 
 def sample_torques(mechanism: str):
-    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.dalembert.reduced_sample_torques`)."""
+    """A controller's inverse dynamics of one sample (:func:`chewbot.dynamics.formulations.dalembert.reduced_sample_torques`)."""
     return reduced_sample_torques(mechanism, "hessian", hessian_rates)

@@ -85,7 +85,7 @@ def solve_multipliers(terms: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndar
 
 def lagrange(model: Model, kin: Kinematics, *, side: str | None = None, contact: str = "bilateral") -> Dynamics:
     """Minimum-norm torques and the closure multipliers lambda1..6 (N/m: h_i is in m^2) by Lagrange's equations of
-    the first kind, the target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.hessian.hessian`.
+    the first kind, the target's normal forces and the ``contact`` model as :func:`chewbot.dynamics.formulations.hessian.hessian`.
     ``side`` overrides the bite side of ``kin``."""
     require_euler_angles(kin, "lagrange")
     terms = lagrange_terms(model, kin, side)
