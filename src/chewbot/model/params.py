@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, Field, ValidationError, field_validator
 
+from chewbot.config import Strict, format_validation_error
 from chewbot.errors import ParameterError
 from chewbot.model.model import Contact, Friction, HKPGeometry, Limits, Model
 
@@ -55,12 +56,7 @@ def _not_nan(value: float) -> float:
 MaybeInfinite = Annotated[float, Field(allow_inf_nan=True), AfterValidator(_not_nan)]
 
 
-class _Strict(BaseModel):
-    # strict: a quoted number is an error, not silently converted; no NaN or infinity anywhere
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
-
-
-class ChainsSection(_Strict):
+class ChainsSection(Strict):
     G_mm: Six3
     S0_mm: Six3
     M_mm: Six3
@@ -81,7 +77,7 @@ def _all_positive(v: list[float]) -> list[float]:
     return v
 
 
-class CranksSection(_Strict):
+class CranksSection(Strict):
     inertia_g_mm2: Six
     mass_g: Six
 
@@ -91,17 +87,17 @@ class CranksSection(_Strict):
         return _all_positive(v)
 
 
-class CouplersSection(_Strict):
+class CouplersSection(Strict):
     density_g_per_mm3: float = Field(gt=0)
     area_mm2: float = Field(gt=0)
 
 
-class MandibleSection(_Strict):
+class MandibleSection(Strict):
     mass_g: float = Field(gt=0)
     inertia_g_mm2: Mat3
 
 
-class HKPSection(_Strict):
+class HKPSection(Strict):
     p1: float
     p2_mm: float
     x_range_mm: Range
@@ -122,13 +118,13 @@ def _interval(v: list[float]) -> list[float]:
     return v
 
 
-class PointsSection(_Strict):
+class PointsSection(Strict):
     incisor_mm: Vec3
     molar_left_mm: Vec3
     molar_right_mm: Vec3
 
 
-class FrictionSection(_Strict):
+class FrictionSection(Strict):
     hkp_coulomb: float = Field(ge=0)
     hkp_viscous_Ns_per_m: float = Field(ge=0)
     actuator_arm_mm: float = Field(ge=0)
@@ -136,7 +132,7 @@ class FrictionSection(_Strict):
     actuator_viscous_Nms_per_rad: float = Field(ge=0)
 
 
-class LimitsSection(_Strict):
+class LimitsSection(Strict):
     torque_Nm: float = Field(gt=0)
     power_W: float = Field(gt=0)
     axial_load_N: float = Field(gt=0)
@@ -152,11 +148,11 @@ class LimitsSection(_Strict):
         return _interval(v)
 
 
-class ContactSection(_Strict):
+class ContactSection(Strict):
     preload_N: float = Field(default=0.0, ge=0)
 
 
-class ParameterFile(_Strict):
+class ParameterFile(Strict):
     """The whole TOML file, as written (papers' units)."""
 
     schema_: Literal[1] = Field(alias="schema")
@@ -224,24 +220,6 @@ def read_parameter_file(path: Path) -> dict:
         raise ParameterError(f"{path}: not valid TOML ({exc})") from None
     raw["__sha256__"] = hashlib.sha256(raw_bytes).hexdigest()
     return raw
-
-
-def format_validation_error(source: str, exc: ValidationError) -> str:
-    """pydantic's errors as chewbot words them: one line per problem, ``SOURCE: key 'a.b[2]': reason``."""
-    lines = []
-    for err in exc.errors():
-        key = ""
-        for part in err["loc"]:  # list positions 1-based, as chains and rows are counted everywhere else
-            key += f"[{part + 1}]" if isinstance(part, int) else (f".{part}" if key else str(part))
-        key = key or "(top level)"
-        if err["type"] == "missing":
-            reason = "missing key"
-        elif err["type"] == "extra_forbidden":
-            reason = "unknown key"
-        else:
-            reason = err["msg"].removeprefix("Value error, ")
-        lines.append(f"{source}: key '{key}': {reason}")
-    return "\n".join(lines)
 
 
 def _nearest_rotation(a: np.ndarray) -> np.ndarray:

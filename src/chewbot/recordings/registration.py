@@ -28,10 +28,11 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import Field, ValidationError, field_validator
 
 from chewbot.errors import RecordingError
-from chewbot.model.params import ROTATION_TOLERANCE, format_validation_error
+from chewbot.config import Strict, format_validation_error
+from chewbot.model.params import ROTATION_TOLERANCE
 from chewbot.recordings.formats import known_length_units, length_factor
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -41,16 +42,12 @@ Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 COLLINEAR_TOLERANCE = 1e-3
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
-
-
-class TrackerSection(_Strict):
+class TrackerSection(Strict):
     rotation: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
     origin: Vec3 = [0.0, 0.0, 0.0]
 
 
-class FitSection(_Strict):
+class FitSection(Strict):
     position_weight_per_mm: float = Field(1.0, gt=0)
     orientation_weight_per_deg: float = Field(1.0, gt=0)
     point_mm: Vec3 | None = None
@@ -60,7 +57,7 @@ class FitSection(_Strict):
 LANDMARKS = ("incisor", "molar_left", "molar_right", "condyle_left", "condyle_right")
 
 
-class LandmarksSection(_Strict):
+class LandmarksSection(Strict):
     incisor: Vec3 | None = None
     molar_left: Vec3 | None = None
     molar_right: Vec3 | None = None
@@ -68,7 +65,7 @@ class LandmarksSection(_Strict):
     condyle_right: Vec3 | None = None
 
 
-class RegistrationFile(_Strict):
+class RegistrationFile(Strict):
     """The TOML file as written."""
 
     units: str
