@@ -7,7 +7,7 @@ which must take over SIGINT before anything heavy loads: :mod:`chewbot.__main__`
 from __future__ import annotations
 
 __all__ = ["BUILTIN_MODELS", "ChewbotError", "KinematicsError", "Model", "ParameterError", "TaskError", "__version__",
-           "load_model", "read_results"]
+           "load_model", "read_results", "simulate"]
 
 
 def __getattr__(name: str):
@@ -27,6 +27,10 @@ def __getattr__(name: str):
         from chewbot.model import params
 
         return getattr(params, name)
+    if name == "simulate":
+        from chewbot.api.simulation import simulate
+
+        return simulate
     if name == "read_results":
         from chewbot.outputs.record import read_frame
 

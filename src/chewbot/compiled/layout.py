@@ -72,7 +72,8 @@ class Layout:
 
     def pack(self, columns: int | None = None, **values) -> np.ndarray:
         """The vector of these blocks (every block given by name; a scalar fills its block), or with ``columns``
-        the matrix whose rows are laid out so (a block's value broadcast across the columns)."""
+        the matrix whose rows are laid out so: a block's value is (size, columns), or its size (the same in every
+        column), or for a block of one row its row (columns,)."""
         missing, unknown = set(self.names) - set(values), set(values) - set(self.names)
         if missing or unknown:
             raise ValueError(f"pack {', '.join(self.names)}: missing {sorted(missing)}, unknown {sorted(unknown)}")
@@ -80,7 +81,9 @@ class Layout:
         out = np.empty(shape)
         for name, s in self.slices().items():
             value = np.asarray(values[name], float)
-            out[s] = value[:, None] if columns is not None and value.ndim == 1 else value
+            if columns is not None and value.ndim == 1:  # a block's values for every column, or a one-row block's row
+                value = value[:, None] if value.size == s.stop - s.start else value[None, :]
+            out[s] = value
         return out
 
     def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:

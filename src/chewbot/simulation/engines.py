@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class EngineRow:
-    """One engine: ``name`` (``--plant-engine``), ``help``, ``module`` (of its plant, in this package); ``closes_loop``: its plant integrates a controller's law
+    """One engine: ``name`` (``--plant-engine``), ``help``, ``module`` (of its plant's ``build``, in this package: chewbot's
+    is :mod:`chewbot.simulation.food`, which builds the plant with a food or without); ``closes_loop``: its plant integrates a controller's law
     inside its steps (``--rate continuous``); ``food``: its plant can hold a food (``--food``); ``mjcf``: it simulates
     the model's MJCF text (``write_mjcf``, handed down from the export layer)."""
 
@@ -30,7 +31,7 @@ class EngineRow:
 
 
 ENGINES: dict[str, EngineRow] = {e.name: e for e in (
-    EngineRow("chewbot", "its Newton-Euler equations, Radau IIA", "plant", closes_loop=True, food=True),
+    EngineRow("chewbot", "its Newton-Euler equations, Radau IIA", "food", closes_loop=True, food=True),
     EngineRow("mujoco", "MuJoCo's simulation of the model's MJCF, as chewbot export-model writes it; steps of 0.1 ms, "
               "unilateral condyle contacts; docs/mujoco.md", "mujoco_plant", mjcf=True),
 )}

@@ -276,6 +276,14 @@ class FoodPlant(Plant):
                          "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
 
 
+def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
+    """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
+    :class:`FoodPlant`."""
+    if food is None:
+        return Plant(model, friction=friction, side=side)
+    return FoodPlant(model, friction=friction, side=side, food=food)
+
+
 def start_gap(plant_model, side: str, q0, dq0) -> float:
     """The gap (m) at a task's first sample."""
     return float(gap(plant_model, side, q0, dq0)["gap"][0])

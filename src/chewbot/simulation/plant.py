@@ -318,16 +318,6 @@ class ClosedLoop:
         return self.plant.steps(state, h, self._step)
 
 
-def build(model: Model, friction: bool, side: str, food=None, write_mjcf=None) -> Plant:
-    """chewbot's plant (the engine table's builder): a :class:`Plant`, or with ``food`` a
-    :class:`~chewbot.simulation.food.FoodPlant`."""
-    if food is None:
-        return Plant(model, friction=friction, side=side)
-    from chewbot.simulation.food import FoodPlant
-
-    return FoodPlant(model, friction=friction, side=side, food=food)
-
-
 def stage_times(t0: float, h: float) -> np.ndarray:
     """The three stage times of a step from t0 to t0 + h."""
     return t0 + C * h

@@ -77,6 +77,15 @@ class SimulateResult:
         """run.json's ``"options"``, with the side in effect (the task's)."""
         return self.options.record(self.task.side)
 
+    def frame(self):
+        """results.csv's columns as a pandas DataFrame: plain names (``tau1``), units in ``frame.attrs["units"]``,
+        descriptions in ``frame.attrs["descriptions"]`` (as :func:`chewbot.read_results` reads a folder)."""
+        import pandas as pd
+
+        frame = pd.DataFrame(dict(self.table.columns))
+        frame.attrs["units"], frame.attrs["descriptions"] = dict(self.table.units), dict(self.table.descriptions)
+        return frame
+
 
 @dataclass(frozen=True)
 class Parts:
@@ -96,26 +105,33 @@ class Parts:
     observer: ForceObserver | None
 
 
-def load_models(options: SimulationOptions) -> tuple[Model, Model, dict[str, float]]:
+def load_models(options: SimulationOptions, models: tuple[Model | None, Model | None] = (None, None)) -> tuple[Model, Model, dict[str, float]]:
     """The controller's model (``--model`` with ``--set``), the plant's (``--plant`` or the controller's file, with
-    ``--set`` when the plant is the same file, then ``--plant-set``), and the default task's overrides."""
+    ``--set`` when the plant is the same file, then ``--plant-set``), and the default task's overrides. ``models``:
+    the controller's and the plant's models given in memory instead of read (None: read; the plant defaults to the
+    controller's)."""
     model_overrides, task_overrides = split_overrides(options.overrides)
-    model = load_model(options.model, model_overrides)
+    model = models[0] or load_model(options.model, model_overrides)
     plant_base = model_overrides if options.plant_file is None else {}
-    plant_model = load_model(options.plant_file or options.model, {**plant_base, **options.plant_overrides})
+    if models[1] is not None:
+        plant_model = models[1]
+    elif models[0] is not None and options.plant_file is None:
+        plant_model = models[0]
+    else:
+        plant_model = load_model(options.plant_file or options.model, {**plant_base, **options.plant_overrides})
     if plant_model.mechanism != model.mechanism:
         raise ChewbotError(f"--plant {options.plant_file}: a {plant_model.mechanism} model, but the controller's model "
                            f"{options.model} is a {model.mechanism}; the plant must be the same kind of robot")
     return model, plant_model, task_overrides
 
 
-def build(options: SimulationOptions, task: Task | None = None, write_mjcf=None) -> Parts:
+def build(options: SimulationOptions, task: Task | None = None, write_mjcf=None, models=(None, None)) -> Parts:
     """The parts of a simulation (:class:`Parts`). ``task``: a task built in memory instead of ``options.task``
     (``chewbot tpa``). ``write_mjcf(model, friction) -> str``: the MJCF text of a model (:func:`chewbot.export.mjcf.mjcf`,
-    handed down by the caller), for an engine that simulates MJCF. Refuses, with a food, a task that carries a bite
+    handed down by the caller), for an engine that simulates MJCF; ``models`` as :func:`load_models`. Refuses, with a food, a task that carries a bite
     force (unless the controller reads it as its force reference) and a task whose gap at its start is smaller than
     the sample."""
-    model, plant_model, task_overrides = load_models(options)
+    model, plant_model, task_overrides = load_models(options, models)
     if task is None:
         task = load_task(options.task, model, options.side, task_overrides)
     reference = Reference.from_task(model, task)
@@ -154,17 +170,17 @@ def load_food_for(options: SimulationOptions, plant_model: Model, task: Task, re
 
 
 def compute(options: SimulationOptions, progress=None, check=None, task: Task | None = None, exported=None,
-            write_mjcf=None) -> SimulateResult:
+            write_mjcf=None, models=(None, None)) -> SimulateResult:
     """Simulate in memory (no files). ``progress(message, stage=None)`` is told each stage (the loop as the stage
     ``simulation``); ``check()`` is called in the loop and raises to stop it; ``task`` a task built in memory
     instead of ``options.task``. ``exported(controller, rate)``: with ``options.exported``, makes the controller
     that runs the exported C step in place of the built-in ``controller``
     (:class:`chewbot.export.controller.ExportedController`; the layer above passes it); what it adds to run.json
     (:meth:`~chewbot.simulation.interfaces.Controller.info`: its comparison with the Python controller) goes there.
-    ``write_mjcf`` as :func:`build`."""
+    ``write_mjcf`` and ``models`` as :func:`build`."""
     step = progress or (lambda msg, stage=None: None)
     step("models and task")
-    parts = build(options, task, write_mjcf)
+    parts = build(options, task, write_mjcf, models)
     model, plant_model, task, reference, plant = parts.model, parts.plant_model, parts.task, parts.reference, parts.plant
     loop_controller = parts.controller
     if options.exported:
@@ -331,10 +347,12 @@ def loop_info(sim: Simulation, options: SimulationOptions, parts: Parts) -> dict
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}
 
 
-def compare(options: SimulationOptions, progress=None, check=None, write_mjcf=None) -> dict[str, SimulateResult]:
+def compare(options: SimulationOptions, progress=None, check=None, write_mjcf=None, task: Task | None = None,
+            models=(None, None)) -> dict[str, SimulateResult]:
     """The simulations of :meth:`~chewbot.simulation.options.SimulationOptions.runs`: the compared controllers on the
-    same task and plant (``--compare``), or one controller on each engine (``--compare-engines``)."""
-    return {label: compute(o, progress, check, write_mjcf=write_mjcf) for label, o in options.runs().items()}
+    same task and plant (``--compare``), or one controller on each engine (``--compare-engines``); the other arguments
+    as :func:`compute`'s."""
+    return {label: compute(o, progress, check, task, write_mjcf=write_mjcf, models=models) for label, o in options.runs().items()}
 
 
 def input_files(options: SimulationOptions) -> list[Path]:

@@ -10,14 +10,11 @@ from __future__ import annotations
 
 from typing import Annotated, ClassVar
 
-import numpy as np
-
-from chewbot.compiled.layout import Layout
-from chewbot.simulation.controllers.gains import COORDINATES, Entries, Gain, Section
+from chewbot.simulation.controllers.gains import COORDINATES, Entries, ErrorDynamics, Gain
 from chewbot.simulation.controllers.law import CompiledLaw, inverse_function
 
 
-class Gains(Section):
+class Gains(ErrorDynamics):
     """``[computed_torque]``: the error dynamics' natural frequency (Hz) and damping ratio, per coordinate."""
 
     frequency_Hz: Annotated[Gain, Entries(COORDINATES)]
@@ -25,14 +22,6 @@ class Gains(Section):
 
     # the exported step's comment on its gains vector
     VECTOR: ClassVar[str] = "kp (1/s^2) of each coordinate, then kd (1/s): ddq = ddq_ref + kd e_dot + kp e"
-
-    @classmethod
-    def layout(cls, n: int) -> Layout:
-        return Layout.of(kp=n, kd=n)
-
-    def vector(self) -> np.ndarray:
-        w = 2 * np.pi * np.array(self.frequency_Hz)
-        return self.layout(w.size).pack(kp=w**2, kd=2 * np.array(self.damping) * w)
 
 
 def law(x: dict, mechanism: str, inverse):

@@ -101,6 +101,20 @@ class Section(Strict):
         return np.zeros(0)
 
 
+class ErrorDynamics(Section):
+    """A section whose law reads, per coordinate, the stiffness and damping of second-order error dynamics given by
+    the fields ``frequency_Hz`` and ``damping`` (each subclass declares them with their entries): kp = (2 pi f)^2,
+    kd = 2 zeta (2 pi f), e_ddot + kd e_dot + kp e = 0."""
+
+    @classmethod
+    def layout(cls, n: int) -> Layout:
+        return Layout.of(kp=n, kd=n)
+
+    def vector(self) -> np.ndarray:
+        w = 2 * np.pi * np.array(self.frequency_Hz)
+        return self.layout(w.size).pack(kp=w**2, kd=2 * np.array(self.damping) * w)
+
+
 class EstimatorGains(Section):
     """The crank sensor's velocity estimate (:class:`chewbot.simulation.sensor.CrankSensor`)."""
 

@@ -35,10 +35,9 @@ from pydantic import model_validator
 
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, native
-from chewbot.compiled.layout import Layout
 from chewbot.model.symbolic import c_name
 from chewbot.model.vector import N_P
-from chewbot.simulation.controllers.gains import Entries, Gain, Positive, Section
+from chewbot.simulation.controllers.gains import Entries, ErrorDynamics, Gain, Positive
 from chewbot.simulation.controllers.law import (CONTROL_INPUTS, ControllerParts, control_name, control_sizes, inverse_function,
                                                 task_space_sx)
 from chewbot.simulation.options import InverseDynamics
@@ -55,7 +54,7 @@ STIFFNESS_MEMORY_S = 0.05
 STIFFNESS_SPREAD_M = 5e-6
 
 
-class Gains(Section):
+class Gains(ErrorDynamics):
     """``[hybrid]``: the task-space position loop (x, y, z, alpha: Hz, damping ratio), the force loop along z (Hz,
     damping ratio), the force that switches z to force control (N), the bounds of the food stiffness the loop
     estimates (N/m), the fastest the loop moves the molar point along z (m/s)."""
@@ -78,14 +77,6 @@ class Gains(Section):
                              f"({self.stiffness_max_N_per_m:g})")
         return self
 
-    @classmethod
-    def layout(cls, n: int) -> Layout:
-        return Layout.of(kp=n, kd=n)
-
-    def vector(self) -> np.ndarray:
-        w = 2 * np.pi * np.array(self.frequency_Hz)
-        return self.layout(w.size).pack(kp=w**2, kd=2 * np.array(self.damping) * w)
-
 
 def hybrid_function(mechanism: str, inverse: InverseDynamics) -> ca.Function:
     """The law as one CasADi function of :data:`HYBRID_INPUTS` -> :data:`HYBRID_OUTPUTS`: computed torque in the task
@@ -93,7 +84,7 @@ def hybrid_function(mechanism: str, inverse: InverseDynamics) -> ca.Function:
     ``force_mode`` is 1, where z's acceleration is ``a_force`` (the force loop's); q_ddot = J^-1 (y_ddot - J_dot q_dot)
     and tau = ID(q, q_dot, q_ddot, F_B), F_B the bite force the controller knows (the observer's). Also returns y,
     y_dot and the reference's."""
-    return cached_graph(symbols(mechanism), ("hybrid", *inverse.key), lambda: _hybrid(mechanism, inverse))
+    return cached_graph(symbols(mechanism), ("hybrid-law", *inverse.key), lambda: _hybrid(mechanism, inverse))
 
 
 def _hybrid(mechanism: str, inverse: InverseDynamics) -> ca.Function:
