@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class EngineRow:
-    """One engine: ``name`` (``--plant-engine``), ``help``, ``module`` (of its plant's ``build``, in this package: chewbot's
-    is :mod:`chewbot.simulation.food`, which builds the plant with a food or without); ``closes_loop``: its plant integrates a controller's law
-    inside its steps (``--rate continuous``); ``food``: its plant can hold a food (``--food``); ``mjcf``: it simulates
-    the model's MJCF text (``write_mjcf``, handed down from the export layer)."""
+    """One engine: ``name`` (``--plant-engine``), ``help``, ``module`` (of its plant's ``build``, in this package:
+    chewbot's is :mod:`chewbot.simulation.food`, which builds the plant with a food or without); ``closes_loop``: its
+    plant integrates a controller's law inside its steps (``--rate continuous``); ``food``: its plant can hold a food
+    (``--food``); ``mjcf``: it simulates the model's MJCF text (``write_mjcf``, handed down from the export layer)."""
 
     name: str
     help: str

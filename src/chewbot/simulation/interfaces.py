@@ -109,9 +109,13 @@ class Plant(Protocol):
         """The state ``h`` seconds after ``state`` (the last one it returned) under ``inputs``."""
 
     def outputs(self, t: np.ndarray, q: np.ndarray, dq: np.ndarray, force: np.ndarray,
-                internal: list) -> tuple[np.ndarray, list[Column]]:
-        """The bite force on the plant at the rows (``force``: the task's) and its own columns, from the rows' states
-        and their :attr:`PlantState.internal`."""
+                internal: list) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The bite force on the plant at the rows (``force``: the task's) and its own quantities per row by name (a
+        food's compression, force, ...; empty where it has none), from the rows' states and their
+        :attr:`PlantState.internal`."""
+
+    def columns(self, quantities: dict[str, np.ndarray]) -> list[Column]:
+        """Its own columns of results.csv, from the quantities of :meth:`outputs`."""
 
     def forward(self, q, dq, tau, force):
         """The accelerations, normal forces and residual (:class:`~chewbot.simulation.forward.Forward`) at states."""
@@ -120,8 +124,9 @@ class Plant(Protocol):
         """How far the first ``rows`` states are from the mechanism's constraints (m), by column name, given the
         kinematics of the simulated motion."""
 
-    def info(self) -> dict:
-        """What run.json says about the plant (its engine, settings, and what happened in it)."""
+    def info(self, sim) -> dict:
+        """What run.json says about the plant after the simulation ``sim``, by run.json's top-level key: under
+        ``"simulation"`` its engine and settings, and sections of its own (a food's)."""
 
     def files(self) -> dict[str, str]:
         """Files of the results folder that describe it, by name (MuJoCo's robot.xml)."""

@@ -20,8 +20,9 @@ The two sides meet in the independent coordinates (Euler angles: X, Y, alpha, be
 Between two control ticks the torques are held on the motors ``crank1..6`` and the bite force acts at the molar
 (``xfrc_applied`` on the mandible, as the force and its moment about the mass centre), averaged over each MuJoCo
 step with the Radau weights of the stage values the simulator hands out; MuJoCo steps at
-the file's timestep. Its own state (:class:`MujocoState`) is MuJoCo's qpos and qvel. The workspace margin is chewbot's (:func:`chewbot.simulation.plant.state_function`
-at the state read back): MuJoCo's planes are unbounded, and the robot is stopped where a condyle leaves its socket.
+the file's timestep. Its own state (:class:`MujocoState`) is MuJoCo's qpos and qvel. The workspace margin is
+chewbot's (:func:`chewbot.simulation.plant.state_function` at the state read back): MuJoCo's planes are unbounded,
+and the robot is stopped where a condyle leaves its socket.
 """
 
 from __future__ import annotations

@@ -8,8 +8,8 @@ bite point in {M}, p the controller's model. :class:`CompiledLaw` evaluates it c
 closes the loop puts the same function inside its integrator's stages (``--rate continuous``). The controller's model
 is its own (``--model`` with ``--set``), which may differ from the plant's.
 
-The inverse dynamics (ID) a law uses is the controller's (:class:`~chewbot.simulation.options.InverseDynamics`, resolved like ``chewbot run
---method --goal``): each formulation's own per-sample graph from the formulation table
+The inverse dynamics (ID) a law uses is the controller's (:class:`~chewbot.simulation.options.InverseDynamics`,
+resolved like ``chewbot run --method --goal``): each formulation's own per-sample graph from the formulation table
 (:attr:`chewbot.dynamics.registry.Formulation.sample_torques`).
 """
 
