@@ -107,9 +107,8 @@ def simulate(
                                          stdout)
     from chewbot.files import check_output
     from chewbot.outputs.simulation import SIMULATION_FOLDER
-    from chewbot.simulation.run import input_files
-
     from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import input_files
 
     gain_overrides = set_overrides(gain, "--gain")
     with resolved():

@@ -50,7 +50,7 @@ class InverseDynamics:
     (where the formulation takes friction, and the plant has it)."""
 
     method: str
-    goal: str | None = None
+    goal: Goal | None = None
     friction: bool = False
 
     @classmethod
@@ -61,7 +61,7 @@ class InverseDynamics:
         from chewbot.dynamics.registry import formulation
 
         d = resolve_dynamics(method, Orientation.euler_angles.value, goal, None, has_hkp=has_hkp)
-        return cls(d.method, d.goal, bool(friction) and "friction" in formulation(d.method).options)
+        return cls(d.method, _enum("goal", d.goal, Goal), bool(friction) and "friction" in formulation(d.method).options)
 
     @property
     def key(self) -> tuple:
@@ -277,7 +277,7 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
                           "changes the plant's model only: the task is the controller's and the plant's; change it with --set")
     from chewbot.dynamics.registry import formulation
 
-    inverse = InverseDynamics(d.method, d.goal, friction and "friction" in formulation(d.method).options)
+    inverse = InverseDynamics(d.method, _enum("goal", d.goal, Goal), friction and "friction" in formulation(d.method).options)
     return SimulationOptions(row, model, task, side, inverse, bool(friction), Contact(d.contact), rate, float(noise_rad), int(seed),
                              plant_file, overrides, plant_overrides, bool(bite_unknown), gains_file, gain_overrides, food,
                              measured, bool(exported), engine, bool(compare), bool(compare_engines))
