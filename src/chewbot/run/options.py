@@ -63,7 +63,7 @@ class RunOptions:
     task: str = "default"
     side: str | None = None
     orientation: str = Orientation.euler_angles.value
-    method: str = field(default_factory=lambda: default_method(Orientation.euler_angles.value))
+    method: str = "hessian"
     goal: str | None = None
     friction: str | None = None
     contact: str = Contact.bilateral.value
@@ -85,13 +85,6 @@ class DynamicsOptions:
     goal: str | None
     friction: str | None
     contact: str
-
-
-def default_method(orientation: str) -> str:
-    """The formulation a run uses where it names none (the formulation table's, per orientation)."""
-    from chewbot.dynamics.registry import DEFAULT_METHOD
-
-    return DEFAULT_METHOD[orientation]
 
 
 def _choice(option: str, value, kind) -> str | None:
