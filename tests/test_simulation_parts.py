@@ -363,6 +363,7 @@ def test_the_options_are_frozen_and_typed():
     (dict(controller="bang-bang"), "controller must be one of"),
     (dict(engine="bullet"), "plant-engine must be one of"),
     (dict(friction="maybe"), "friction must be one of on, off"),
+    (dict(sensor="both"), "sensor must be one of exact, measured"),
 ])
 def test_each_refusal_is_the_resolver_s(options, words):
     with pytest.raises(OptionError) as err:

@@ -15,6 +15,7 @@ from chewbot.kinematics.options import Side
 from chewbot.run.options import Switch
 from chewbot.simulation.controllers import table as controllers
 from chewbot.simulation import engines
+from chewbot.simulation.options import Sensor
 
 SIMULATE_STEPS = 8  # models and task, simulation, kinematics, checks, results.csv, figures, report (and the compile)
 
@@ -57,7 +58,7 @@ def simulate(
     rate: str = typer.Option("1000", "--rate", callback=_rate, help="Control rate in Hz (torques held between ticks), or 'continuous': the controller evaluated at every integrator stage, rows at the task's samples (for verification)."),
     noise: float = typer.Option(0.0, "--noise", min=0.0, help="Standard deviation (rad) of Gaussian noise on the measured crank angles; the controller then gets its state from an estimator (docs/simulation.md). 0: it sees the plant's state."),
     seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
-    sensor: str | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
+    sensor: Sensor | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
     exported: bool = typer.Option(False, "--exported", help="Run the controller as the exported C step (chewbot export-controller), compiled and called through ctypes at each tick (pd or computed-torque, --sensor measured); run.json records how far its torques are from the Python controller's on the same ticks (N m)."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not the controller's (built-in name or TOML file)."),
     plant_engine: str = typer.Option(engines.DEFAULT_ENGINE, "--plant-engine", callback=_engine, help="What simulates the plant's model: " + " or ".join(f"{e.name} ({e.help})" for e in engines.ENGINES.values()) + ". Only an engine whose plant closes the loop takes --rate continuous (chewbot's)."),

@@ -31,6 +31,7 @@ the contact model; ``--set`` keys that change nothing):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 
 from chewbot.dynamics.options import Contact, Goal
 from chewbot.kinematics.options import Orientation, Side
@@ -39,8 +40,15 @@ from chewbot.simulation.controllers.table import CONTROLLERS, DEFAULT_CONTROLLER
 from chewbot.simulation.engines import DEFAULT_ENGINE, ENGINES, EngineRow, engine_row
 
 DEFAULT_RATE = 1000.0  # Hz
-# The gains sections of the parts other than the controllers, and what uses them.
+# The gains section of the crank sensor's estimator (chewbot.simulation.controllers.gains.PARTS).
 ESTIMATOR_SECTION = "estimator"
+
+
+class Sensor(StrEnum):
+    """What the controller is given: the plant's state (exact) or its estimate from the crank angles (measured)."""
+
+    exact = "exact"
+    measured = "measured"
 
 
 @dataclass(frozen=True)
@@ -132,13 +140,13 @@ class SimulationOptions:
                 "contact": self.contact.value, "rate": self.rate, "noise_rad": self.noise_rad, "seed": self.seed,
                 "plant": self.plant_file, "overrides": dict(self.overrides), "plant_overrides": dict(self.plant_overrides),
                 "bite_unknown": self.bite_unknown, "gains": self.gains_file, "gain_overrides": dict(self.gain_overrides),
-                "food": self.food, "sensor": "measured" if self.measured else "exact", "exported": self.exported,
+                "food": self.food, "sensor": (Sensor.measured if self.measured else Sensor.exact).value, "exported": self.exported,
                 "engine": self.engine.name}
 
 
-def _row(value, table: str):
-    """A row of the controllers' or engines' table given as itself or by name; OptionError names the choices."""
-    rows, option = (CONTROLLERS, "controller") if table == "controller" else (ENGINES, "plant-engine")
+def _row(value, rows: dict, option: str):
+    """A row of ``rows`` (the controllers' or the engines' table) given as itself or by name; OptionError names the
+    choices."""
     name = value if isinstance(value, str) else value.name
     if name not in rows:
         raise OptionError(option, f"must be one of {', '.join(rows)}, not {name!r}")
@@ -159,14 +167,14 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
             friction: bool | Switch | str = False, contact: Contact | str = Contact.bilateral, rate: float | str | None = DEFAULT_RATE,
             noise_rad: float = 0.0, seed: int = 0, plant_file: str | None = None, overrides: dict[str, float] | None = None,
             plant_overrides: dict[str, float] | None = None, bite_unknown: bool = False, gains_file: str | None = None,
-            gain_overrides: dict[str, float] | None = None, food: str | None = None, sensor: str | None = None,
+            gain_overrides: dict[str, float] | None = None, food: str | None = None, sensor: Sensor | str | None = None,
             exported: bool = False, engine: EngineRow | str = DEFAULT_ENGINE, compare: bool = False,
             compare_engines: bool = False, *, has_hkp: bool | None = None) -> SimulationOptions:
     """The options of a simulation, complete and consistent (the module docstring's rules); :class:`OptionError`
     names the option that does not apply. ``rate``: Hz, or None or "continuous"; ``friction``: the plant's, a bool or
-    "on"/"off"; ``sensor``: "exact", "measured" or None (the default of the rules). ``has_hkp``: whether the
+    "on"/"off"; ``sensor``: :class:`Sensor` or its value, or None (the default of the rules). ``has_hkp``: whether the
     controller's model is the target (None: read from its file, only where a rule needs it)."""
-    row, engine = _row(controller, "controller"), _row(engine, "engine")
+    row, engine = _row(controller, CONTROLLERS, "controller"), _row(engine, ENGINES, "plant-engine")
     side, goal, contact = _enum("side", side, Side), _enum("goal", goal, Goal), _enum("contact", contact, Contact)
     if isinstance(friction, str):
         friction = _enum("friction", friction, Switch) == Switch.on
@@ -197,9 +205,8 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
                           f"({' or '.join(r.name for r in CONTROLLERS.values() if r.exportable)}), --compare {len(runs)}")
 
     # the sensor
-    if sensor is not None and sensor not in ("exact", "measured"):
-        raise OptionError("sensor", f"must be one of exact, measured, not {sensor!r}")
-    measured = sensor == "measured" if sensor is not None else (noise_rad > 0 or exported)
+    sensor = _enum("sensor", sensor, Sensor)
+    measured = sensor == Sensor.measured if sensor is not None else (noise_rad > 0 or exported)
     if not measured and noise_rad > 0:
         raise OptionError("sensor", "exact gives the controller the plant's state: noise on the encoders needs --sensor measured")
     if not measured and exported:

@@ -41,6 +41,7 @@ from chewbot.simulation.controllers.law import ControllerParts
 from chewbot.simulation.controllers.table import CONTROLLERS
 from chewbot.simulation.engines import ENGINES, make_plant
 from chewbot.simulation.forward import ORIENTATION, plant_outputs_kernel
+from chewbot.simulation.interfaces import Controller, Plant
 from chewbot.simulation.plant import DRIFT_DESCRIPTIONS
 from chewbot.simulation.observer import ForceObserver
 from chewbot.simulation.options import SimulationOptions
@@ -99,8 +100,8 @@ class Parts:
     task: Task
     reference: Reference
     gains: Gains
-    controller: object
-    plant: object
+    controller: Controller
+    plant: Plant
     sensor: CrankSensor | None
     observer: ForceObserver | None
 
