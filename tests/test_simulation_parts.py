@@ -360,6 +360,7 @@ def test_the_options_are_frozen_and_typed():
     (dict(plant_overrides={"task.cycles": 2}), "plant-set task.cycles=2 changes the plant's model only"),
     (dict(overrides={"friction.hkp_coulomb": 0.2}), "used by the plant with --friction on"),
     (dict(rate=-5.0), "rate must be a positive number"),
+    (dict(rate="fast"), "rate must be a positive number of Hz or 'continuous', not 'fast'"),
     (dict(controller="bang-bang"), "controller must be one of"),
     (dict(engine="bullet"), "plant-engine must be one of"),
     (dict(friction="maybe"), "friction must be one of on, off"),

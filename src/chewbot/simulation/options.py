@@ -30,6 +30,7 @@ the contact model; ``--set`` keys that change nothing):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
@@ -178,10 +179,16 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
     side, goal, contact = _enum("side", side, Side), _enum("goal", goal, Goal), _enum("contact", contact, Contact)
     if isinstance(friction, str):
         friction = _enum("friction", friction, Switch) == Switch.on
-    rate = None if rate in (None, "continuous") else float(rate)
+    if rate is not None and rate != "continuous":
+        given = rate
+        try:
+            rate = float(rate)
+        except ValueError:
+            rate = math.nan
+        if not (math.isfinite(rate) and rate > 0):
+            raise OptionError("rate", f"must be a positive number of Hz or 'continuous', not {given!r}")
+    rate = None if rate == "continuous" else rate
     overrides, plant_overrides, gain_overrides = dict(overrides or {}), dict(plant_overrides or {}), dict(gain_overrides or {})
-    if rate is not None and not rate > 0:
-        raise OptionError("rate", f"must be a positive number of Hz or 'continuous', not {rate:g}")
     if noise_rad < 0:
         raise OptionError("noise", f"is a standard deviation (rad): not negative, not {noise_rad:g}")
 
