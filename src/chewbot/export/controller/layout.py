@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from string import Template
 
-PREFIX = "CHEWBOT_CTRL_"  # of the dimensions' macros
+MACRO_PREFIX = "CHEWBOT_CTRL_"  # of the dimensions' macros
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ class Field:
     def declarator(self) -> str:
         if self.length is None:
             return self.name
-        return f"{self.name}[{self.length if isinstance(self.length, int) else PREFIX + self.length}]"
+        return f"{self.name}[{self.length if isinstance(self.length, int) else MACRO_PREFIX + self.length}]"
 
 
 @dataclass(frozen=True)
