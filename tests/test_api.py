@@ -18,6 +18,7 @@ from chewbot import api
 from chewbot.dynamics.registry import DEFAULT_METHOD
 from chewbot.errors import KinematicsError
 from chewbot.kinematics import ik
+from chewbot.model.params import load_model
 from chewbot.run.options import OptionError, resolve
 from chewbot.run.pipeline import compute
 from support import model, target_pose
@@ -99,6 +100,16 @@ def test_the_result_offers_the_formulation_s_columns_by_name():
         result["tau7"]
     with pytest.raises(AttributeError):  # frozen
         result.tau = None
+
+
+def test_samples_without_admissible_torques_are_named():
+    """A preload no torques within the actuators' limits give (200 N on each condyle): newton-euler's distribution
+    names both samples infeasible, as run's check distribution-infeasible does; the default preload leaves none."""
+    q = np.array([[0.002, 0.001, 0.02, 0.1], [0.001, 0.0005, 0.01, 0.05]])
+    heavy = load_model("target", {"contact.preload_N": 200})
+    result = chewbot.inverse_dynamics(heavy, q, 0 * q, 0 * q, method="newton-euler", contact="unilateral")
+    assert result.infeasible == (0, 1) and "torque (actuator 1)" in result.info["infeasible"][0]["limits"]
+    assert chewbot.inverse_dynamics(model("target"), q, 0 * q, 0 * q, method="newton-euler", contact="unilateral").infeasible == ()
 
 
 def test_the_default_method_is_the_registry_s_for_the_orientation():
@@ -346,7 +357,6 @@ def test_import_chewbot_stays_cheap_and_lists_the_verbs():
     assert set(api.__all__) <= set(chewbot.__all__) and set(api.__all__) <= set(dir(chewbot))
     for name in api.__all__:
         assert getattr(chewbot, name) is getattr(api, name)
-    from chewbot.model.params import load_model
     from chewbot.outputs.record import read_frame
 
     assert chewbot.load_model is load_model and chewbot.read_results is read_frame

@@ -76,6 +76,14 @@ class InverseDynamics(Columns):
     units: Mapping[str, str] = field(repr=False)
     info: Mapping[str, object] = field(repr=False)
 
+    @property
+    def infeasible(self) -> tuple[int, ...]:
+        """The samples where the formulation found no torques within its bounds (the unilateral contact's
+        N >= contact.preload_N, newton-euler's actuator limits; ``info["infeasible"]`` says which bounds): their
+        torques break one, as ``chewbot run``'s check distribution-infeasible reports. Empty where every sample is
+        admissible."""
+        return tuple(int(entry["sample"]) for entry in self.info.get("infeasible", ()))
+
 
 @dataclass(frozen=True, eq=False)
 class ForwardDynamics:

@@ -13,7 +13,7 @@ import numpy as np
 from chewbot.api.samples import Argument, batch, coordinates, kinematics
 from chewbot.errors import KinematicsError
 from chewbot.kinematics import ik
-from chewbot.kinematics.options import Orientation
+from chewbot.kinematics.options import Orientation, Side
 from chewbot.model import Model
 
 # Forward kinematics answers a pose whose crank angles, solved back on the working branch, differ from the given ones
@@ -37,7 +37,7 @@ def inverse_kinematics(model: Model, q, *, orientation: str = Orientation.euler_
     b = batch(coordinates(model, orientation, "q", q))
     q = b.arrays[0]
     zero = np.zeros_like(q)
-    kin = kinematics(model, orientation, q, zero, zero, np.zeros((b.n, 3)), "left")
+    kin = kinematics(model, orientation, q, zero, zero, np.zeros((b.n, 3)), Side.left.value)
     return b.out(wrapped(kin.theta))
 
 
