@@ -278,6 +278,10 @@ def test_kinematics_refuse_what_no_robot_reaches():
     m = model("target")
     with pytest.raises(KinematicsError, match="sample 1: the left condyle leaves its socket"):
         chewbot.inverse_kinematics(m, [[0, 0, 0, 0], [0.02, 0, 0, 0]])
+    with pytest.raises(KinematicsError, match="sample 1: the left condyle leaves its socket"):
+        chewbot.forward_dynamics(m, [[0, 0, 0, 0], [0.02, 0, 0, 0]], np.zeros(4), np.zeros(6))
+    with pytest.raises(KinematicsError, match="sample 1: the left condyle leaves its socket"):
+        chewbot.inverse_dynamics(m, [[0, 0, 0, 0], [0.02, 0, 0, 0]], np.zeros(4), np.zeros(4))
     with pytest.raises(KinematicsError, match="sample 0"):
         chewbot.forward_kinematics(m, [0.3, 0, 0, 0, 0, 0])  # the target's four coordinates cannot close six chains so
 

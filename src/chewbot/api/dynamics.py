@@ -18,6 +18,7 @@ import numpy as np
 from chewbot.analysis.checks import PULL_TOLERANCE_N
 from chewbot.api.samples import Argument, batch, bite_force as bite_force_argument, coordinates, kinematics
 from chewbot.dynamics import registry
+from chewbot.dynamics.options import Contact
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.options import Orientation, Side
 from chewbot.model import Model
@@ -105,7 +106,7 @@ class ForwardDynamics:
 
 
 def inverse_dynamics(model: Model, q, dq, ddq, *, method: str | None = None, goal: str | None = None,
-                     friction: bool | None = None, contact: str = "bilateral", side: str = Side.left.value,
+                     friction: bool | None = None, contact: str = Contact.bilateral.value, side: str = Side.left.value,
                      bite_force=None, orientation: str = EA) -> InverseDynamics:
     """The actuator torques (and the formulation's other columns) at the samples (q, dq, ddq) of a motion of
     ``model`` with the bite force ``bite_force`` ((3,) or (N, 3), N, in {S}, on the mandible at the molar of
@@ -137,7 +138,7 @@ def inverse_dynamics(model: Model, q, dq, ddq, *, method: str | None = None, goa
                            units=MappingProxyType(dict(dyn.table.units)), info=MappingProxyType(dict(dyn.info)))
 
 
-def forward_dynamics(model: Model, q, dq, tau, *, friction: bool | None = None, contact: str = "bilateral",
+def forward_dynamics(model: Model, q, dq, tau, *, friction: bool | None = None, contact: str = Contact.bilateral.value,
                      side: str = Side.left.value, bite_force=None) -> ForwardDynamics:
     """The accelerations ddq (and the planes' normal forces N) of ``model`` at the states (q, dq) under the actuator
     torques ``tau`` ((6,) or (N, 6), N*m) and the bite force ``bite_force`` ((3,) or (N, 3), N, in {S}, at the molar
@@ -147,6 +148,8 @@ def forward_dynamics(model: Model, q, dq, tau, *, friction: bool | None = None, 
     their rates): the plant of ``chewbot simulate`` computes in them. ``friction``: the model's HKP and actuator
     friction (True), or none (False; None: none, as ``chewbot simulate --friction off``); ``contact``:
     ``"unilateral"`` marks the samples where a plane would pull (:attr:`ForwardDynamics.pulls`), on the target only.
+    The states are checked as :func:`inverse_dynamics` checks its samples (a
+    :class:`~chewbot.errors.KinematicsError` names the first one out of the sockets, out of reach or singular).
     Equations without a solution (a residual above :data:`RESIDUAL_TOLERANCE`) are a
     :class:`~chewbot.errors.ChewbotError` naming the first such sample."""
     if friction not in (None, True, False):
@@ -155,6 +158,7 @@ def forward_dynamics(model: Model, q, dq, tau, *, friction: bool | None = None, 
     b = batch(coordinates(model, EA, "q", q), coordinates(model, EA, "dq", dq, 1),
               Argument("tau", tau, 6, "the actuator torques tau1..tau6 in N*m"), bite_force_argument(bite_force))
     q, dq, tau, force = b.arrays
+    kinematics(model, EA, q, dq, np.zeros_like(q), force, options.side)  # the states' checks, as inverse_dynamics'
     out = forward.forward_dynamics(model, q, dq, tau, force, options.side, friction=bool(friction))
     bad = np.flatnonzero(~(out.residual <= RESIDUAL_TOLERANCE))
     if bad.size:
@@ -162,7 +166,7 @@ def forward_dynamics(model: Model, q, dq, tau, *, friction: bool | None = None, 
         raise ChewbotError(f"sample {k}: the equations of motion have no solution under these torques (residual "
                            f"{out.residual[k]:.3g} N*m after Newton's method; {bad.size} sample(s) affected)")
     N = out.N if model.has_hkp else None
-    pulls = None if options.contact != "unilateral" else (N < -PULL_TOLERANCE_N).any(axis=1)
+    pulls = None if options.contact != Contact.unilateral else (N < -PULL_TOLERANCE_N).any(axis=1)
     return ForwardDynamics(b.out(out.ddq), None if N is None else b.out(N), b.out(force), b.out(out.residual),
                            None if pulls is None else b.out(pulls))
 
