@@ -3,13 +3,15 @@
 - A folder that holds chewbot-export.json (what export-controller writes) is compared byte for byte, every file.
 - Elsewhere: CSV cell by cell, JSON value by value, Parquet cell by cell (and its schema with the units), every
   other text file (TOML, XML, Markdown, exits.txt) line by line; comment lines are compared too. Numbers, in
-  cells and inside text, are equal to 1e-12 relative; other text is equal exactly.
+  cells and inside text, are equal to 1e-12 relative; other text (and a hexadecimal digest) is equal exactly.
 - Left out: figures and reports (.png, .svg, .html), the consoles (.log), times.txt, the JSON keys of timings,
-  versions, the platform, start and finish dates and the command line (IGNORED below, by exact name); inside
-  every string, an absolute path is reduced to its file name (the install's and the recording's folders differ,
-  the file named must not), a version after "chewbot" and the port of a local Dask scheduler are masked.
+  versions, the platform, start and finish dates and the command line (IGNORED below, by exact name); in every
+  string and JSON key, an absolute path is reduced to its file name (the install's and the recording's folders
+  differ, the file named must not), a version after "chewbot", the port of a local Dask scheduler and the fit's
+  search time are masked. A sweep's spec_sha256, a digest over absolute paths, is checked on each side instead.
 """
 import csv
+import hashlib
 import json
 import math
 import re
@@ -19,6 +21,9 @@ from pathlib import Path
 RTOL = 1e-12
 IGNORED = {"timings", "versions", "version", "mujoco_version", "platform", "created", "started", "finished",
            "written", "elapsed_s", "wall_s", "command", "argv", "cwd", "host", "environment"}
+# a sweep's SHA-256 of its SPEC and input files, keyed by the files' absolute paths: checked on each side against
+# the record's "spec" and "inputs" (which are compared) instead of between the sides (spec_digest)
+DIGESTS = {"spec_sha256"}
 SKIPPED = {".png", ".svg", ".html", ".log"}
 SKIPPED_FILES = {"times.txt"}
 EXPORT_MARK = "chewbot-export.json"
@@ -28,6 +33,7 @@ NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?:nan|inf)
 ABSOLUTE = re.compile(r"(?<![\w.~])/(?:[^/\s'\"`,;:()\[\]{}<>=|]+/)+([^/\s'\"`,;:()\[\]{}<>=|]*)")
 LOCAL_PORT = re.compile(r"(://(?:127\.0\.0\.1|localhost|\[::1\])):\d+")
 VERSION = re.compile(r"\b(chewbot) \d+(?:\.\d+)+(?:[.+-]?[A-Za-z0-9]+)*")
+DIGEST = re.compile(r"[0-9a-f]{32,}")
 WALL_TIME = re.compile(r"(\d+ evaluations), [0-9.eE+-]+ s\b")    # import-motion --fit-registration's search time
 
 
@@ -52,6 +58,8 @@ def same_text(a: str, b: str) -> bool:
     """Equal text between the numbers, numbers equal to RTOL."""
     if a == b:
         return True
+    if DIGEST.fullmatch(a):
+        return False
     a, b = normal(a), normal(b)
     if a == b:
         return True
@@ -80,10 +88,21 @@ class File:
             self.found.append(f"{self.name}: {self.count} differences in all")
 
 
+def keyed(d: dict) -> dict:
+    """The dictionary with its keys normalised (a sweep's inputs are keyed by absolute path); a key met again
+    after normalising gets its order of appearance."""
+    out = {}
+    for k, v in d.items():
+        n = normal(k)
+        out[n if n not in out else f"{n} #{sum(1 for m in out if m.startswith(n))}"] = v
+    return out
+
+
 def values(a, b, where: str, f: File) -> None:
     if isinstance(a, dict) and isinstance(b, dict):
+        a, b = keyed(a), keyed(b)
         for k in sorted(set(a) | set(b)):
-            if k in IGNORED:
+            if k in IGNORED or k in DIGESTS:
                 continue
             if k not in a or k not in b:
                 f.add(f"{where}.{k}", "(absent)" if k not in a else "present", "(absent)" if k not in b else "present")
@@ -106,6 +125,17 @@ def values(a, b, where: str, f: File) -> None:
             f.add(where, a, b)
     elif a != b:
         f.add(where, a, b)
+
+
+def spec_digest(record: dict, side: str, f: File) -> None:
+    """A sweep's spec_sha256 is the SHA-256 of its SPEC's values (without "source") and its input files' digests
+    (chewbot.sweep.spec.SweepSpec.digest), the one value that holds the install's absolute paths."""
+    if "spec_sha256" in record:
+        d = {k: v for k, v in record["spec"].items() if k != "source"}
+        d["files"] = dict(sorted(record["inputs"].items()))
+        digest = hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()
+        if digest != record["spec_sha256"]:
+            f.add(f".spec_sha256 ({side})", f"SHA-256 of spec and inputs {digest}", f"recorded {record['spec_sha256']}")
 
 
 def lines(a: list[str], b: list[str], f: File) -> None:
@@ -169,7 +199,11 @@ def main() -> int:
         elif fb.suffix == ".csv":
             cells(fb, fa, f)
         elif fb.suffix == ".json":
-            values(json.loads(fb.read_text()), json.loads(fa.read_text()), "", f)
+            b, a = json.loads(fb.read_text()), json.loads(fa.read_text())
+            values(b, a, "", f)
+            for record, side in ((b, "before"), (a, "after")):
+                if isinstance(record, dict):
+                    spec_digest(record, side, f)
         elif fb.suffix == ".parquet":
             parquet(fb, fa, f)
         else:
