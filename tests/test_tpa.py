@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from chewbot.food.calibration import FRACTIONS, calibrations, compare, fit, reference_table, table
 from chewbot.food.law import food_from_dict
 from chewbot.food.tpa import (BLEND, DEFINITIONS, HOLD, MEASURES, RATIO_TOLERANCE, Protocol, TpaError, analyse, ideal_test,
                               protocol_checks, settings)
@@ -277,3 +278,42 @@ def test_ideal_analyser_refuses_a_sample_that_never_triggers():
 
 def test_definitions_cover_the_measures():
     assert set(DEFINITIONS) == set(MEASURES)
+
+
+# ---------------------------------------------------------------------------------------- the built-in foods' calibration
+
+
+def test_builtin_foods_give_their_published_values():
+    """The ideal analyser with each published protocol gives the published values to 1e-4 (the fitted values are
+    written with five significant digits, which moves them by up to 3e-5)."""
+    entries = calibrations()
+    assert {e.name for e in entries} >= {"carrot", "cheddar", "gelatin-gel", "peanut"}
+    for e in entries:
+        for key, rel in compare(e).relative.items():
+            assert abs(rel) < 1e-4, (e.name, key, rel)
+
+
+@pytest.mark.parametrize("name", ["carrot", "cheddar", "gelatin-gel", "peanut"])
+def test_fitted_values_are_the_fit(name):
+    """Fitted from 20 % off, the fit returns to the food file's values (to 1e-3: the fit's residuals are below 1e-9,
+    the file's values rounded to five digits); the file marks them, and only them, fitted."""
+    from chewbot.food.law import builtin_foods
+
+    entry = next(e for e in calibrations() if e.name == name)
+    here = compare(entry).values
+    fitted, _ = fit(entry, start={k: v * (0.8 if v * 1.2 > 1 or k not in FRACTIONS else 1.2) for k, v in here.items()})
+    for k, v in here.items():
+        assert fitted.values[k] == pytest.approx(v, rel=1e-3), k
+    lines = builtin_foods()[name].read_text().splitlines()
+    marked = {line.split("=")[0].strip() for line in lines if "# fitted" in line}
+    assert marked == set(entry.fitted)
+
+
+def test_docs_show_the_calibration():
+    """docs/food.md's tables, published values beside chewbot's and the built-in foods under a texture analyser's
+    default protocol, are the ones chewbot.food.calibration computes."""
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "food.md").read_text(encoding="utf-8")
+    for row in table() + reference_table():
+        assert row in page, row
