@@ -48,6 +48,7 @@ def curve(protocol=Protocol(pause=1.0), start=0.011, trigger=None):
     ({"post_test_speed_mm_s": float("nan")}, "--post-test-speed nan"),
     ({"trigger_force_N": 0.0}, "--trigger-force 0"),
     ({"pause_s": -1.0}, "--pause -1"),
+    ({"compression_percent": None}, "give one"),
 ])
 def test_settings_refuse_what_a_texture_analyser_would_not_run(kwargs, message):
     with pytest.raises(TpaError, match=message.replace("?", r"\?")):
@@ -269,6 +270,26 @@ def test_ideal_analysers_maxwell_branch_is_its_ode():
 
     sol = solve_ivp(rhs, (0, r.t[-1]), [0.0], rtol=1e-10, atol=1e-12, dense_output=True, max_step=0.01)
     assert np.max(np.abs(sol.sol(r.t)[0] - r.state["F_m"])) < 1e-6 * r.measures["hardness_N"]
+
+
+def test_small_compressions_and_tilted_faces():
+    """A 10 % test (its bites shallower than the approach) is two bites; a cylinder between faces tilted by 3 degrees
+    triggers earlier (its edge touches first: the trigger is found on the integrated law) and, in full contact at the
+    deepest point, reads the same hardness as between parallel faces for the same deepest gap (the linear law's
+    integral is the centre's compression times the area)."""
+    r = ideal_test(food(), Protocol(compression=0.1, pause=0.5))
+    assert r.measures["springiness"] == pytest.approx(1.0, abs=1e-3)
+    flat = ideal_test(food(), Protocol(pause=0.5))
+    tilted = ideal_test(food(), Protocol(pause=0.5), tilt=math.radians(3))
+    assert tilted.profile.trigger_gap > flat.profile.trigger_gap
+    assert tilted.measures["hardness_N"] == pytest.approx(K * (0.010 - tilted.profile.deepest_gap), rel=1e-9)
+
+
+def test_a_third_bite_is_refused():
+    p, t, g, _, delta = curve()
+    third = np.concatenate([g, g[t.size // 2:]])
+    with pytest.raises(TpaError, match="two deepest points"):
+        analyse(np.arange(third.size) * 1e-3, third, K * np.maximum(0.010 - third, 0))
 
 
 def test_ideal_analyser_refuses_a_sample_that_never_triggers():

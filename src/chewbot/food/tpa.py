@@ -150,6 +150,8 @@ def settings(compression_percent: float | None = 50.0, test_speed_mm_s: float = 
         compression, distance = None, distance_mm * 1e-3
     else:
         c = compression_percent
+        if c is None:
+            raise TpaError("--compression or --distance: give one (how far each bite compresses the sample)")
         if not np.isfinite(c) or c <= 0 or c >= 100:
             raise TpaError(f"--compression {c:g}: a percentage of the height at the trigger between 0 and 100 (exclusive)")
         if c < 1:
@@ -310,10 +312,14 @@ def bites(t, g) -> tuple[slice, slice, int, int]:
     span = float(np.ptp(g)) if g.size else 0.0
     if not span > 0:
         raise TpaError("the gap does not change: this is not a compression test")
-    troughs, _ = find_peaks(-g, prominence=0.5 * span)
-    if troughs.size != 2:
-        raise TpaError(f"a two-bite test has two deepest points of the gap; this one has {troughs.size}")
-    m1, m2 = int(troughs[0]), int(troughs[1])
+    # the two most prominent troughs of the gap; a third as prominent as half the second is a third bite
+    troughs, props = find_peaks(-g, prominence=1e-6 * span)
+    order = np.argsort(props["prominences"])[::-1]
+    prominent = props["prominences"][order]
+    if troughs.size < 2 or (troughs.size > 2 and prominent[2] > 0.5 * prominent[1]):
+        count = int(np.sum(prominent > 0.5 * prominent[0])) if troughs.size else 0
+        raise TpaError(f"a two-bite test has two deepest points of the gap; this one has {count}")
+    m1, m2 = sorted(int(k) for k in troughs[order[:2]])
     between = g[m1:m2 + 1]
     top = np.flatnonzero(between >= between.max() - 1e-3 * span) + m1
     split = int((top[0] + top[-1]) // 2)
