@@ -149,6 +149,8 @@ def test_measures_of_a_brittle_curve():
     assert m["springiness_at_peak"] == pytest.approx((dm - c2) / (df - c1), rel=1e-3)
     assert m["resilience_at_peak"] == pytest.approx(b * (2 * dm**2 - df**2) / df**2, rel=2e-3)
     assert m["springiness_at_peak"] > 1  # the macro's reading of a fracture, unchecked
+    assert m["gumminess_N"] == pytest.approx(K * df * b * dm**2 / A1, rel=1e-3)
+    assert m["chewiness_N"] == pytest.approx(K * df * b * dm**2 / A1 * (dm - c2) / (dm - c1), rel=1e-3)
 
 
 def test_measures_of_a_crushed_curve():

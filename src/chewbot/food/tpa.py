@@ -27,7 +27,7 @@ peak force (``springiness_at_peak``, ``resilience_at_peak``) can exceed 1 on a f
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
