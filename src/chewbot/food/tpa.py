@@ -172,9 +172,10 @@ def _path(t, start: float, changes, blend: float):
     starts, dv = (np.array(c, float) for c in zip(*changes))
     x = (t[..., None] - starts) / blend
     xc = np.clip(x, 0.0, 1.0)
-    P = np.where(x > 1, x - 0.5, xc**6 - 3 * xc**5 + 2.5 * xc**4)
-    S = 6 * xc**5 - 15 * xc**4 + 10 * xc**3
-    dS = np.where((x > 0) & (x < 1), 30 * xc**4 - 60 * xc**3 + 30 * xc**2, 0.0) / blend
+    xc2 = xc * xc
+    P = np.where(x > 1, x - 0.5, xc2 * xc2 * (2.5 + xc * (xc - 3)))
+    S = xc2 * xc * (10 + xc * (6 * xc - 15))
+    dS = 30 * xc2 * (1 - xc) ** 2 / blend
     return start + blend * P @ dv, S @ dv, dS @ dv
 
 
@@ -601,9 +602,10 @@ def ideal_test(food, protocol: Protocol = Protocol(), rate: float = 1000.0, tilt
             t_f = t[j] if strain[j] == 0 or j == 0 else brentq(
                 lambda tt: (h0 - profile.path(np.array([tt]))[0][0]) / h0 - food.fracture_strain, t[j - 1], t[j],
                 xtol=1e-13, rtol=4 * np.finfo(float).eps)
+            _, dg_f, _ = profile.path(np.array([t_f]))
             t = np.concatenate([t[:j], [t_f, t_f], t[j:]])
-            g, dg, _ = profile.path(t)
-            g[j:j + 2] = h0 * (1 - food.fracture_strain)
+            g = np.concatenate([g[:j], [h0 * (1 - food.fracture_strain)] * 2, g[j:]])
+            dg = np.concatenate([dg[:j], [dg_f[0]] * 2, dg[j:]])
             delta = h0 - g
             broken = (np.arange(t.size) > j).astype(float)
             events.append({"t": float(t_f), "event": "fracture", "delta_m": float(delta[j])})
