@@ -7,7 +7,7 @@ point's gap (:mod:`chewbot.food.geometry`), its rate, the sliding velocity, and 
 :class:`FoodState`: ``broken`` (0/1), the Maxwell branch's force F_m (integrated exactly over the step for a linear
 change of b F_e, :func:`chewbot.food.law.maxwell_force`). The derivatives the step's Newton iteration needs are
 CasADi's, exact. The food's state at a step's start is part of the step's shared inputs, laid out by name
-(:data:`FOOD_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
+(:data:`STEP_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
 
 Events. The law has kinks and one jump (:mod:`chewbot.food.law`): contact (delta = 0), the teeth meeting
 (delta = h0), the adhesion clamp (F_d + F_m = -adhesion_N) and the fracture (delta / h0 = fracture_strain, which
@@ -46,11 +46,11 @@ from chewbot.simulation.plant import MAX_STEP, PLANT_SHARED, Plant, Solved, Step
 EVENT_TOLERANCE = 1e-10
 EVENTS = ("contact", "teeth", "fracture", "adhesion")
 # The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N).
-FOOD_STATE = Layout.of(broken=1, F_m=1, bFe=1)
+STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1)
 # W of the food's step: the torques and each stage's time since the step's start (s); s: the plant's, the food's
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
-FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + FOOD_STATE + Layout.of(z_home=1)
+FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_home=1)
 
 
 @dataclass(frozen=True)
@@ -289,5 +289,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "FOOD_STATE", "FoodPlant", "FoodState", "food_function",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function",
            "food_stage", "food_step_kernel", "start_gap"]

@@ -53,7 +53,7 @@ class Sensor(StrEnum):
 
 
 @dataclass(frozen=True)
-class InverseDynamics:
+class ControllerDynamics:
     """A controller's inverse dynamics, resolved (:func:`chewbot.run.options.resolve_dynamics`): the formulation
     ``method``, the ``goal`` of its distribution (None where it has none) and ``friction`` in the controller's model
     (where the formulation takes friction, and the plant has it)."""
@@ -64,7 +64,7 @@ class InverseDynamics:
 
     @classmethod
     def resolved(cls, method: str | None = None, goal: str | None = None, friction: bool = False,
-                 has_hkp: bool = True) -> InverseDynamics:
+                 has_hkp: bool = True) -> ControllerDynamics:
         """The formulation table's default method where ``method`` is None, its goal's default where it
         distributes, friction where it takes it."""
         from chewbot.dynamics.registry import formulation
@@ -107,7 +107,7 @@ class SimulationOptions:
     model: str = "target"
     task: str = "default"
     side: Side | None = None
-    inverse: InverseDynamics = field(default_factory=InverseDynamics.resolved)
+    inverse: ControllerDynamics = field(default_factory=ControllerDynamics.resolved)
     friction: bool = False
     contact: Contact = Contact.bilateral
     rate: float | None = DEFAULT_RATE
@@ -291,7 +291,7 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
                           "changes the plant's model only: the task is the controller's and the plant's; change it with --set")
     from chewbot.dynamics.registry import formulation
 
-    inverse = InverseDynamics(d.method, _enum("goal", d.goal, Goal), friction and "friction" in formulation(d.method).options)
+    inverse = ControllerDynamics(d.method, _enum("goal", d.goal, Goal), friction and "friction" in formulation(d.method).options)
     return SimulationOptions(row, model, task, side, inverse, bool(friction), Contact(d.contact), rate, float(noise_rad), int(seed),
                              plant_file, overrides, plant_overrides, bool(bite_unknown), gains_file, gain_overrides, food,
                              measured, bool(exported), engine, bool(compare), bool(compare_engines))

@@ -2,7 +2,7 @@
 
     tau = ID(q_ref, q_dot_ref, q_ddot_ref, F_B)
 
-with the controller's inverse dynamics ID (:class:`~chewbot.simulation.options.InverseDynamics`) and the bite
+with the controller's inverse dynamics ID (:class:`~chewbot.simulation.options.ControllerDynamics`) and the bite
 force it knows. Open-loop unstable on both robots (errors grow like e^(15 t) on the target): what the model alone
 does, for comparison.
 """

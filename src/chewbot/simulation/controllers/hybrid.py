@@ -40,7 +40,7 @@ from chewbot.model.vector import N_P
 from chewbot.simulation.controllers.gains import Entries, ErrorDynamics, Gain, Positive
 from chewbot.simulation.controllers.law import (CONTROL_INPUTS, ControllerParts, control_name, control_sizes, inverse_function,
                                                 task_space_sx)
-from chewbot.simulation.options import InverseDynamics
+from chewbot.simulation.options import ControllerDynamics
 from chewbot.simulation.controllers.table import ControllerRow
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
@@ -78,7 +78,7 @@ class Gains(ErrorDynamics):
         return self
 
 
-def hybrid_function(mechanism: str, inverse: InverseDynamics) -> ca.Function:
+def hybrid_function(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     """The law as one CasADi function of :data:`HYBRID_INPUTS` -> :data:`HYBRID_OUTPUTS`: computed torque in the task
     coordinates, y_ddot = y_ddot_ref + kd (y_dot_ref - y_dot) + kp (y_ref - y) on x, y and alpha always and on z unless
     ``force_mode`` is 1, where z's acceleration is ``a_force`` (the force loop's); q_ddot = J^-1 (y_ddot - J_dot q_dot)
@@ -87,7 +87,7 @@ def hybrid_function(mechanism: str, inverse: InverseDynamics) -> ca.Function:
     return cached_graph(symbols(mechanism), ("hybrid-law", *inverse.key), lambda: _hybrid(mechanism, inverse))
 
 
-def _hybrid(mechanism: str, inverse: InverseDynamics) -> ca.Function:
+def _hybrid(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     n = n_coordinates(mechanism)
     x = {name: ca.SX.sym(name, size) for name, size in control_sizes(mechanism, Gains.layout(n).size).items()}
     mode, a_force = ca.SX.sym("force_mode"), ca.SX.sym("a_force")
@@ -103,7 +103,7 @@ def _hybrid(mechanism: str, inverse: InverseDynamics) -> ca.Function:
                        list(HYBRID_INPUTS), list(HYBRID_OUTPUTS))
 
 
-def hybrid_kernel(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> KernelSpec:
+def hybrid_kernel(row: ControllerRow, mechanism: str, inverse: ControllerDynamics) -> KernelSpec:
     """:func:`hybrid_function` compiled, for the ticks of a simulation."""
     name = f"hybrid_{control_name(row, mechanism, inverse)}"
 

@@ -8,7 +8,7 @@ bite point in {M}, p the controller's model. :class:`CompiledLaw` evaluates it c
 closes the loop puts the same function inside its integrator's stages (``--rate continuous``). The controller's model
 is its own (``--model`` with ``--set``), which may differ from the plant's.
 
-The inverse dynamics (ID) a law uses is the controller's (:class:`~chewbot.simulation.options.InverseDynamics`,
+The inverse dynamics (ID) a law uses is the controller's (:class:`~chewbot.simulation.options.ControllerDynamics`,
 resolved like ``chewbot run --method --goal``): each formulation's own per-sample graph from the formulation table
 (:attr:`chewbot.dynamics.registry.Formulation.sample_torques`).
 """
@@ -32,7 +32,7 @@ from chewbot.simulation.controllers.gains import Gains, Section
 from chewbot.simulation.controllers.table import ControllerRow
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
-from chewbot.simulation.options import InverseDynamics
+from chewbot.simulation.options import ControllerDynamics
 from chewbot.simulation.reference import Reference
 
 CONTROL_INPUTS = ("q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains", "B", "p")
@@ -58,7 +58,7 @@ def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = No
     return cached_graph(symbols(mechanism), key, lambda: f.sample_torques(mechanism, **options))
 
 
-def inverse_function(mechanism: str, inverse: InverseDynamics) -> ca.Function:
+def inverse_function(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     """The controller's inverse dynamics ``inverse`` on ``mechanism`` (:func:`inverse_dynamics_function`)."""
     return inverse_dynamics_function(mechanism, inverse.method, inverse.goal, inverse.friction)
 
@@ -78,17 +78,17 @@ def task_space_sx(q: ca.SX, dq: ca.SX, B: ca.SX, p: ca.SX, mechanism: str) -> di
     return {"y": y, "J": J, "dy": dy, "bias": ca.jtimes(dy, q, dq), "J_theta1": out["J_theta1_angles"]}
 
 
-def _key(row: ControllerRow, inverse: InverseDynamics) -> tuple:
+def _key(row: ControllerRow, inverse: ControllerDynamics) -> tuple:
     """What a law's graph depends on besides the mechanism: its name, and the inverse dynamics where it uses one."""
     return (row.name, *(inverse.key if row.needs.inverse_dynamics else ()))
 
 
-def control_function(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> ca.Function:
+def control_function(row: ControllerRow, mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     """The law of ``row`` as one CasADi function of :data:`CONTROL_INPUTS` -> tau (N m, before saturation)."""
     return cached_graph(symbols(mechanism), ("control", *_key(row, inverse)), lambda: _control(row, mechanism, inverse))
 
 
-def _control(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> ca.Function:
+def _control(row: ControllerRow, mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     module = row.module()
     gains = 0 if module.Gains is None else module.Gains.layout(n_coordinates(mechanism)).size
     x = {name: ca.SX.sym(name, size) for name, size in control_sizes(mechanism, gains).items()}
@@ -96,13 +96,13 @@ def _control(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> ca
     return ca.Function(f"control_{row.name.replace('-', '_')}", list(x.values()), [tau], list(CONTROL_INPUTS), ["tau"])
 
 
-def control_name(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> str:
+def control_name(row: ControllerRow, mechanism: str, inverse: ControllerDynamics) -> str:
     """A C name for a control law's kernels: the controller, and the inverse dynamics where its law uses one."""
     parts = [row.name, *(inverse.c_name() if row.needs.inverse_dynamics else ())]
     return "_".join(p.replace("-", "_").replace("6rss", "sixrss") for p in parts) + f"_{c_name(mechanism)}"
 
 
-def control_kernel(row: ControllerRow, mechanism: str, inverse: InverseDynamics) -> KernelSpec:
+def control_kernel(row: ControllerRow, mechanism: str, inverse: ControllerDynamics) -> KernelSpec:
     """:func:`control_function` compiled, for the ticks of a held-rate simulation."""
     name = f"control_{control_name(row, mechanism, inverse)}"
 
@@ -124,7 +124,7 @@ class ControllerParts:
     model: Model
     reference: Reference
     gains: Gains
-    inverse: InverseDynamics
+    inverse: ControllerDynamics
     bite_known: bool = True
 
     @property
@@ -142,11 +142,11 @@ class ControllerParts:
 
 
 def make_controller(row: ControllerRow, model: Model, reference: Reference, gains: Gains | None = None,
-                    inverse: InverseDynamics | None = None, bite_known: bool = True):
+                    inverse: ControllerDynamics | None = None, bite_known: bool = True):
     """The controller of ``row`` on ``model`` following ``reference``: ``gains`` default to the built-in ones,
     ``inverse`` to the formulation table's default method (without friction)."""
     gains = Gains.load(mechanism=model.mechanism) if gains is None else gains
-    inverse = InverseDynamics.resolved(has_hkp=model.has_hkp) if inverse is None else inverse
+    inverse = ControllerDynamics.resolved(has_hkp=model.has_hkp) if inverse is None else inverse
     return ControllerParts(row, model, reference, gains, inverse, bite_known).build()
 
 
