@@ -39,7 +39,7 @@ def write_food(tmp_path, **keys):
 def test_builtin_foods_load_and_fit_the_workspace():
     """Every built-in food reads, and a 50 % texture test fits at both sides (the start gap h0 + 1 mm reachable)."""
     foods = builtin_foods()
-    assert set(foods) == {"peanut", "cheddar", "gummy", "bread", "artisynth-bolus"}
+    assert set(foods) == {"peanut", "cheddar", "gummy", "bread", "artisynth-bolus", "carrot"}
     reach = largest_gap(model("target"), "left")
     for name in foods:
         f = load_food(name)
