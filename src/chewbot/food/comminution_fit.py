@@ -38,7 +38,7 @@ from chewbot.files import without_marker
 from chewbot.food.bolus import CLOSING_FORCE_N, MIN_GAP_MM, SIEVE, Bolus, fragments, ideal_stroke, stroke
 from chewbot.food.comminution import FITTABLE, PARAMETERS, ComminutionTable
 from chewbot.food.law import CASADI
-from chewbot.food.sieving import SIEVING_MM
+from chewbot.food.sieving import SIEVES_MM, SIEVING_MM
 from chewbot.units import HEADER_CELL, unit_factor
 
 # The keys fitted unless the command names others: the rate of selection, the strength and the fragments' size.
@@ -86,12 +86,24 @@ def read_sieving(path: Path | str) -> Sieving:
     path = Path(path)
     if not path.is_file():
         raise SievingError(f"{path}: no such sieving file")
+    ragged = []  # rows with another number of cells than the header (pyarrow gives their text, not their number)
+
+    def invalid(row):
+        ragged.append(row)
+        return "skip"
+
     try:
         header = pc.read_csv(path, read_options=pc.ReadOptions(skip_rows_after_names=10**9)).column_names
         table = pc.read_csv(path, convert_options=pc.ConvertOptions(column_types={h: pa.string() for h in header},
-                                                                    strings_can_be_null=False))
+                                                                    strings_can_be_null=False),
+                            parse_options=pc.ParseOptions(invalid_row_handler=invalid))
     except (pa.ArrowInvalid, OSError, UnicodeDecodeError) as exc:
         raise SievingError(f"{path}: not a readable CSV ({exc})") from None
+    if ragged:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        row = next((i + 1 for i, line in enumerate(lines) if line == ragged[0].text), "?")
+        raise SievingError(f"{path}: row {row}: {ragged[0].actual_columns} cell(s), the header has "
+                           f"{ragged[0].expected_columns}")
     columns: dict[str, tuple[str, float]] = {}  # name -> (header cell, factor to the column's unit)
     for cell in header:
         m = HEADER_CELL.match(cell)
@@ -137,13 +149,16 @@ def read_sieving(path: Path | str) -> Sieving:
             elif name == "sieve":
                 number = number * factor
                 match = [s for s in SIEVING_MM if math.isclose(number, s, rel_tol=1e-9, abs_tol=1e-9)]
-                number = match[0] if match else number
+                if not match:
+                    raise SievingError(f"{path}: row {row}, column {cell!r}: {number:g} mm is not one of the sieves "
+                                       f"({', '.join(f'{s:g}' for s in SIEVES_MM)} mm; 0 the pan)")
+                number = match[0]
             values[name] = number
         try:
             parsed = SievingRow(**values)
         except ValidationError as exc:
             message = format_validation_error(f"{path}: row {row}", exc)
-            raise SievingError(re.sub(r"key '(\w+)'", lambda m: f"column {columns[m.group(1)][0]!r}", message)) from None
+            raise SievingError(re.sub(r": key '(\w+)'", lambda m: f", column {columns[m.group(1)][0]!r}", message)) from None
         sieves = groups.setdefault((parsed.subject, parsed.chews), {})
         if parsed.sieve in sieves:
             raise SievingError(f"{path}: row {row}: sieve {parsed.sieve:g} mm of subject {parsed.subject!r} after "
