@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_INTERRUPTED, EXIT_OUTPUT, TEST_PAUSE_VARIABLE
-from chewbot.food.bolus import (BED_PARAMETERS, CLASSES, SIEVE, Bolus, bed_force, bed_gap, bed_work, breakage, chew,
+from chewbot.food.bolus import (CLASSES, SIEVE, Bolus, bed_force, bed_gap, bed_work, breakage, chew,
                                 comminution_of, fragments, ideal_stroke, selection, stroke)
 from chewbot.food.comminution import PARAMETERS, ComminutionTable
 from chewbot.food.comminution_fit import (Sieving, SievingError, fit_checks, fit_comminution, fitted_food_text,
@@ -187,7 +187,6 @@ def test_the_bed_of_one_layer_of_spheres():
     C = n * math.pi / 4 * x**2 / c["table_area_mm2"]
     h0 = mass[k] / c["density_kg_per_m3"] * (1 - math.exp(-C)) / C / (c["table_area_mm2"] * (1 - c["bed_porosity"]))
     assert Bolus(mass).bed(PEANUT)[0] == pytest.approx(h0, rel=1e-12)
-    assert len(BED_PARAMETERS) == 4
 
 
 def test_the_ideal_stroke_stops_at_the_force_or_the_gap():

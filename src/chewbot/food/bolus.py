@@ -290,6 +290,7 @@ class Chewing:
     strokes: list[StrokeRecord]
 
     def rosin_rammler(self) -> list[RosinRammler]:
+        """X50 and b after each number of strokes (:meth:`Bolus.rosin_rammler`)."""
         return [b.rosin_rammler() for b in self.boluses]
 
 

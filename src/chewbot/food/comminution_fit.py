@@ -35,7 +35,7 @@ from pydantic import Field, ValidationError
 from chewbot.config import Strict, format_validation_error
 from chewbot.errors import ChewbotError
 from chewbot.files import without_marker
-from chewbot.food.bolus import CLOSING_FORCE_N, MIN_GAP_MM, SIEVE, Bolus, fragments, ideal_stroke, stroke
+from chewbot.food.bolus import CLOSING_FORCE_N, MIN_GAP_MM, SIEVE, Bolus, ideal_stroke, stroke
 from chewbot.food.comminution import FITTABLE, PARAMETERS, ComminutionTable
 from chewbot.food.law import CASADI
 from chewbot.food.sieving import SIEVES_MM, SIEVING_MM
@@ -286,7 +286,6 @@ def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS
     start = np.array([getattr(table, key) for key in keys], float)
     low = np.array([PARAMETERS[k][2] for k in keys])
     high = np.array([PARAMETERS[k][3] for k in keys])
-    high = np.where([k == "fragment_size" for k in keys], np.minimum(high, 0.95), high)
     if progress is not None:
         progress(f"least squares: {len(keys)} parameters, {len(measured)} distributions")
     sol = least_squares(residual, np.clip(start, low, high), jac=jacobian, bounds=(low, high), x_scale="jac",
