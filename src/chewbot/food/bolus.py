@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -137,7 +138,7 @@ def _coverage(xp, c, mass):
 
 def selection(xp, c, mass, gap):
     """S per class: the chance that a particle of the class is caught in a stroke that closes to ``gap`` (m)."""
-    n, _, share = _coverage(xp, c, mass)
+    _, _, share = _coverage(xp, c, mass)
     reach = xp.fmin(xp.fmax((xp.asarray(CLASSES.size) - gap) / c["relief_mm"], _TINY), 1.0) ** c["relief_exponent"]
     return c["placement"] * share * reach
 
@@ -181,30 +182,36 @@ def bed(xp, c, mass):
     """The particle bed on the table: the values of :data:`BED_PARAMETERS` (h0 m, A m^2, E0 Pa, eps_c)."""
     _, _, share = _coverage(xp, c, mass)
     area = c["table_area_mm2"]
-    layer = share[0]  # all the particles compete for the table: the bed is one layer of the mixture
+    layer = share[0]  # the smallest class's share counts all the particles: the bed is one layer of the mixture
     h0 = xp.sum(mass) * layer / c["density_kg_per_m3"] / (area * (1 - c["bed_porosity"]))
     return h0, area, c["bed_modulus_kPa"], c["bed_compaction_strain"]
 
 
+def _named(b) -> SimpleNamespace:
+    """The bed's values by their names in :data:`BED_PARAMETERS` (``b`` a sequence, a NumPy or a CasADi vector)."""
+    return SimpleNamespace(**{name: b[i] for i, name in enumerate(BED_PARAMETERS)})
+
+
 def bed_force(xp, b, gap):
     """The bed's force (N, pushing the teeth apart) at ``gap`` (m); ``b`` the values of :data:`BED_PARAMETERS`."""
-    h0, area, modulus, strain = b[0], b[1], b[2], b[3]
-    eps = xp.fmax(1 - gap / h0, 0.0)
-    return area * modulus * strain * (xp.exp(eps / strain) - 1)
+    p = _named(b)
+    eps = xp.fmax(1 - gap / p.h0, 0.0)
+    return p.area * p.modulus * p.compaction_strain * (xp.exp(eps / p.compaction_strain) - 1)
 
 
 def bed_gap(xp, b, force):
     """The gap (m) at which the bed pushes with ``force`` (N > 0): the inverse of :func:`bed_force` (negative where
     the force is beyond the bed's at g = 0)."""
-    h0, area, modulus, strain = b[0], b[1], b[2], b[3]
-    return h0 * (1 - strain * xp.log(1 + force / (area * modulus * strain)))
+    p = _named(b)
+    return p.h0 * (1 - p.compaction_strain * xp.log(1 + force / (p.area * p.modulus * p.compaction_strain)))
 
 
 def bed_work(xp, b, gap):
     """The work (J) of closing the bed from its loose height to ``gap``: the integral of :func:`bed_force`."""
-    h0, area, modulus, strain = b[0], b[1], b[2], b[3]
-    eps = xp.fmax(1 - gap / h0, 0.0)
-    return area * modulus * strain * h0 * (strain * (xp.exp(eps / strain) - 1) - eps)
+    p = _named(b)
+    eps = xp.fmax(1 - gap / p.h0, 0.0)
+    strain = p.compaction_strain
+    return p.area * p.modulus * strain * p.h0 * (strain * (xp.exp(eps / strain) - 1) - eps)
 
 
 def ideal_stroke(xp, c, mass, closing_force, min_gap):
