@@ -52,9 +52,13 @@ from chewbot.recordings.robotfit import MIN_LEVER_MM
 MM, DEG = 1e-3, np.pi / 180
 MIN_ROTATION_DEG = 2.0
 MIN_LEVER_RATIO = 0.25
+# Frames opened by at most this from the most closed one are intercuspal contact (their mean pose).
+CLOSED_DEG = 0.3
 # Frames opened from the most closed one by more than 0.5 deg and less than this locate the hinge axis.
 HINGE_DEG = 8.0
 MIN_HINGE_DEG = 0.5
+# Hinge frames at least this far apart in opening make a pair (small turns give noisy fixed points).
+PAIR_DEG = 3.0
 MIN_GLIDE_MM = 1.0
 # Two vertices' pairs of edges differing by less than this share of the edges are equally isosceles.
 ISOSCELES = 0.02
@@ -159,10 +163,16 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
                              "condylar axis (tracked = \"incisor\" registers it as a point path)")
     a = np.linalg.svd(phi, full_matrices=False)[2][0]
     a = a if a @ phi[k] > 0 else -a
-    closed = int(np.argmin(phi @ a))
-    # the motions from the most closed frame: rotation R_Y[k] R_Y[closed]^T, translation p_k - R p_closed
-    Rr = np.einsum("nij,kj->nik", R_Y, R_Y[closed])
-    tr = p_Y - np.einsum("nij,j->ni", Rr, p_Y[closed])
+    # intercuspal contact: the mean pose of the frames within CLOSED_DEG of the most closed (each chewing cycle
+    # returns there: the mean over them, not one frame, which may be a filled spike)
+    near = phi @ a <= (phi @ a).min() + CLOSED_DEG * DEG
+    u, _, vt = np.linalg.svd(R_Y[near].sum(axis=0))
+    R_c = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    p_c = p_Y[near].mean(axis=0)
+    closed = int(np.flatnonzero(near)[np.argmin(np.linalg.norm(p_Y[near] - p_c, axis=1))])
+    # the motions from intercuspal contact: rotation R_Y[k] R_c^T, translation p_k - R p_c
+    Rr = np.einsum("nij,kj->nik", R_Y, R_c)
+    tr = p_Y - np.einsum("nij,j->ni", Rr, p_c)
     rho = Rotation.from_matrix(Rr).as_rotvec()
     opening = rho @ a
     # the hinge: frames opening (the angle growing) from the most closed by MIN_HINGE_DEG to HINGE_DEG, where a
@@ -184,12 +194,12 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
         # R_jk x + t_jk = x, R_jk = R_k R_j^T, t_jk = p_k - R_jk p_j (all pairs: no frame is the reference)
         rows = np.flatnonzero(hinge)
         j, k2 = (rows[i] for i in np.triu_indices(rows.size, 1))
-        keep = np.abs(opening[k2] - opening[j]) > MIN_HINGE_DEG * DEG
+        keep = np.abs(opening[k2] - opening[j]) > PAIR_DEG * DEG
         j, k2 = j[keep], k2[keep]
         R_jk = np.einsum("nij,nkj->nik", R_Y[k2], R_Y[j])
         t_jk = p_Y[k2] - np.einsum("nij,nj->ni", R_jk, p_Y[j])
         point = np.linalg.lstsq((np.eye(3) - R_jk).reshape(-1, 3), t_jk.reshape(-1), rcond=None)[0]
-        middle = R_Y[closed] @ c.mean(axis=0) + p_Y[closed]  # the markers' middle at the most closed frame
+        middle = R_c @ c.mean(axis=0) + p_c  # the markers' middle at intercuspal contact
         point = point + a * (a @ (middle - point))  # on the midline
         path = np.einsum("nij,j->ni", Rr, point) + tr - point
         path = path - a * (path @ a)[:, None]
@@ -204,13 +214,13 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
             M_closed = turn @ file_rotation.T
             notes.append(f"the condyles glide {glide:.2g} mm (< {MIN_GLIDE_MM:g}): the turn about the condylar axis is the file's "
                          "[tracker] rotation's")
-        condyles = R_Y[closed].T @ (point - p_Y[closed])  # the condyles' midpoint at the first frame
+        condyles = R_c.T @ (point - p_c)  # the condyles' midpoint at the first frame
         # {M} at the first frame; O_M where the condyles' midpoint lies on the axis
-        R_B = R_Y[closed].T @ M_closed
+        R_B = R_c.T @ M_closed
         t_B = condyles - R_B @ (0.5 * (model.hkp.T_L + model.hkp.T_R))
-    # the most closed frame at home: its pose X = T Y_closed B = I
-    rotation = (R_Y[closed] @ R_B).T
-    origin = -rotation @ (R_Y[closed] @ t_B + p_Y[closed])
+    # intercuspal contact at home: its pose X = T Y_c B = I
+    rotation = (R_c @ R_B).T
+    origin = -rotation @ (R_c @ t_B + p_c)
     return RigidPrior(R_B, t_B, rotation, origin, closed, a, condyles, glide, tuple(notes))
 
 
