@@ -43,8 +43,8 @@ from scipy.spatial.transform import Rotation
 CONDYLE_L = np.array([-2.5, 72.0, 15.965])
 CONDYLE_R = np.array([-2.5, -72.0, 15.965])
 INCISOR = np.array([80.0, 0.0, -25.0])
-SLOPE_START_DEG = 54.0
-SLOPE_END_DEG = 46.0
+SLOPE_START_DEG = 56.0
+SLOPE_END_DEG = 48.0
 EMINENCE_MM = 14.0  # the path's length, over which its slope turns
 REST_DEG = 1.6
 OCCLUSAL = 0.85  # a chewing cycle's share before its occlusal phase (the teeth in contact, 0.12 s at 1.2 Hz)  # postural rest: the incisor about 2.5 mm below intercuspal contact

@@ -55,11 +55,13 @@ MIN_LEVER_RATIO = 0.25
 # Frames opened by at most this from the most closed one are intercuspal contact (their mean pose).
 CLOSED_DEG = 0.3
 # Frames opened from the most closed one by more than 0.5 deg and less than this locate the hinge axis.
-HINGE_DEG = 8.0
+HINGE_DEG = 9.5
 MIN_HINGE_DEG = 0.5
 # Hinge frames at least this far apart in opening make a pair (small turns give noisy fixed points).
 PAIR_DEG = 3.0
 MIN_GLIDE_MM = 1.0
+# The share of the frames farthest from the glide's line left out of its second fit.
+TRIM = 0.1
 # Two vertices' pairs of edges differing by less than this share of the edges are equally isosceles.
 ISOSCELES = 0.02
 
@@ -110,6 +112,15 @@ def _turn_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotation carrying the unit vector a onto the unit vector b."""
     cross = np.cross(a, b)
     return Rotation.from_rotvec(cross / max(np.linalg.norm(cross), 1e-300) * np.arctan2(np.linalg.norm(cross), a @ b)).as_matrix()
+
+
+def _principal(v: np.ndarray) -> np.ndarray:
+    """The principal direction (unit) of the vectors v (N, 3) about 0, robustly: fitted again without the
+    :data:`TRIM` share of them farthest from the first fit's line (frames filled across a spike, a glitch)."""
+    g = np.linalg.svd(v, full_matrices=False)[2][0]
+    off = np.linalg.norm(v - np.outer(v @ g, g), axis=1)
+    keep = off <= np.quantile(off, 1 - TRIM)
+    return np.linalg.svd(v[keep], full_matrices=False)[2][0]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -205,7 +216,7 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
         path = path - a * (path @ a)[:, None]
         glide = float(np.linalg.norm(path, axis=1).max() / MM)
         if glide >= MIN_GLIDE_MM:
-            g = np.linalg.svd(path[~hinge], full_matrices=False)[2][0]
+            g = _principal(path[~hinge])
             g = g if g @ path[int(np.argmax(opening))] > 0 else -g
             # {M} at the most closed frame, in the tracker's frame: y on the axis, the glide on the condylar path
             M_closed = _frame(g, a) @ _frame(condylar_path(model), np.array([0.0, 1.0, 0.0])).T
