@@ -164,12 +164,12 @@ def _constrained(fns: FitFunctions, z0, target, settings):
 
     A frame whose SQP does not end at a stationary point from its own start (an unconstrained optimum far outside
     the workspace, where the SQP's steps leave the chains' closure, or a stall on the boundary) is tried again from
-    the solutions of the frames before and after it (the rows are in time order; twice), then from the home pose,
+    the solutions of the frames before and after it (the rows are in time order), then from the home pose,
     keeping the admissible answer of smaller error. A frame that ends admissible but not stationary keeps that
     pose: its errors are then an upper bound of the nearest pose's."""
     z, lam = fns.constrained(z0, target, settings)
     feasible, stationary = _status(fns, z, lam, target, settings)
-    for neighbour in (-1, 1, -1, 1, None):
+    for neighbour in (-1, 1, None):
         again = np.flatnonzero(~stationary)
         if again.size == 0:
             break

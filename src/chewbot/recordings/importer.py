@@ -243,7 +243,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
 
     def attempt(factor: float):
         p, R = scaled(factor)
-        fit = fit_to_robot(model, p, R, point, *weights, options.min_transmission_deg)
+        fit = (None if found is None else found.fit_of(p, R)) or fit_to_robot(model, p, R, point, *weights, options.min_transmission_deg)
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= max_orientation)
         return fit, within & rigid_ok
 

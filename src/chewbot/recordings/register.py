@@ -66,6 +66,8 @@ ITERATIONS = 40
 # The refinement brings every frame within MARGIN of the tolerance (in tolerances; the import's fit may end a
 # little farther).
 MARGIN = 0.8
+# Poses whose positions (m) and rotation matrices differ by less than this are the same to rounding.
+SAME_POSE = 1e-12
 # Pull toward the prior (per deg^2 and mm^2 of the unknowns): decides where the residuals do not.
 PULL = 1e-6
 MM, DEG = 1e-3, np.pi / 180
@@ -97,6 +99,16 @@ class FoundRegistration:
     evaluations: int
     seconds: float
     notes: tuple[str, ...]
+    fit: object = None  # the fit (RobotFit) of every frame registered at the share, and those poses (p (N, 3), R (N, 3, 3))
+    poses: tuple[np.ndarray, np.ndarray] | None = None
+
+    def fit_of(self, p: np.ndarray, R: np.ndarray):
+        """The search's fit of these poses where they are the ones it fitted (to rounding), else None: the import
+        need not fit them again."""
+        if self.poses is None or self.fit is None or len(p) != len(self.poses[0]):
+            return None
+        same = np.abs(p - self.poses[0]).max() <= SAME_POSE and np.abs(R - self.poses[1]).max() <= SAME_POSE
+        return self.fit if same else None
 
     def describe(self) -> str:
         """How far the registration found lies from the prior, in a line."""
@@ -247,6 +259,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     R_B = prior.R_B @ Rotation.from_rotvec(u["placement_turn"] * DEG).as_matrix()
     t_B = prior.t_B + prior.R_B @ u["placement_shift"] * MM
     found_markers = {name: R_B.T @ (c[k] - t_B) for k, name in enumerate(names)}
+    target, _ = poses(x, share, np.arange(N))
     rest = A @ t_B + origin
     rms = float(np.sqrt(np.nanmean(fit.position_error_mm**2 * weights[0] ** 2 + fit.orientation_error_deg**2 * weights[1] ** 2)))
     notes = list(prior.notes)
@@ -259,7 +272,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     return FoundRegistration(A, origin, found_markers, share, rms, limiting_frames, limiting, prior.rotation, prior.origin,
                              angle_deg(turn), float(np.linalg.norm(rest - centre) / MM),
                              float(np.linalg.norm(u["placement_turn"])), float(np.linalg.norm(u["placement_shift"])), refined,
-                             counter[0], time.perf_counter() - started, tuple(notes))
+                             counter[0], time.perf_counter() - started, tuple(notes), fit, (target[:, :3], _unflat(target[:, 3:])))
 
 
 def _unflat(v: np.ndarray) -> np.ndarray:

@@ -117,6 +117,7 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
     rms = float(np.sqrt(np.nanmean(fit.position_error_mm**2 * weights_import[0] ** 2
                                    + fit.orientation_error_deg**2 * weights_import[1] ** 2)))
     notes = (f"prior: {prior.how}; frame {prior.closed + 1} (the point highest) at home",)
+    target, _ = graphs.targets(unknowns(x), d, const(share))
     return FoundRegistration(A, first - A @ point[0], {}, share, rms, limiting_frames, limiting, prior.rotation, prior.origin,
                              angle_deg(turn), float(np.linalg.norm(x[3:])), 0.0, 0.0, refined, counter[0],
-                             time.perf_counter() - started, notes)
+                             time.perf_counter() - started, notes, fit, (target[:, :3], _unflat(target[:, 3:])))

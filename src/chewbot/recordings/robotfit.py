@@ -55,13 +55,16 @@ MIN_TRANSMISSION_DEG = NEAR_SINGULAR_DEG
 # A point of {M} this near the condylar axis (mm) has no opening direction of its own: no turn about the axis moves
 # it down (a condyle glides instead).
 MIN_LEVER_MM = 10.0
+# SQP iterations per frame at most: a frame on the boundary takes about 3; one that stalls is started again
+# elsewhere, or kept where it stalled if admissible (chewbot.recordings.fit).
+SQP_ITERATIONS = 40
 _SQP = {
     "qpsol": "qrqp", "convexify_strategy": "eigen-clip",  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                       "constr_viol_tol": 1e-13},
     "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
-    "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": 100,
+    "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": SQP_ITERATIONS,
 }
 
 
