@@ -52,8 +52,10 @@ from chewbot.recordings.robotfit import MIN_LEVER_MM
 MM, DEG = 1e-3, np.pi / 180
 MIN_ROTATION_DEG = 2.0
 MIN_LEVER_RATIO = 0.25
-# Frames opened by at most this from the most closed one are intercuspal contact (their mean pose).
+# Frames turned by at most CLOSED_DEG and moved by at most CLOSED_MM (the markers' middle) from the most closed
+# one are intercuspal contact (their mean pose).
 CLOSED_DEG = 0.3
+CLOSED_MM = 0.3
 # Frames opened from the most closed one by more than 0.5 deg and less than this locate the hinge axis.
 HINGE_DEG = 9.5
 MIN_HINGE_DEG = 0.5
@@ -174,27 +176,23 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
                              "condylar axis (tracked = \"incisor\" registers it as a point path)")
     a = np.linalg.svd(phi, full_matrices=False)[2][0]
     a = a if a @ phi[k] > 0 else -a
-    # intercuspal contact: the mean pose of the frames within CLOSED_DEG of the most closed (each chewing cycle
-    # returns there: the mean over them, not one frame, which may be a filled spike)
-    near = phi @ a <= (phi @ a).min() + CLOSED_DEG * DEG
-    u, _, vt = np.linalg.svd(R_Y[near].sum(axis=0))
-    R_c = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
-    p_c = p_Y[near].mean(axis=0)
-    closed = int(np.flatnonzero(near)[np.argmin(np.linalg.norm(p_Y[near] - p_c, axis=1))])
-    # the motions from intercuspal contact: rotation R_Y[k] R_c^T, translation p_k - R p_c
-    Rr = np.einsum("nij,kj->nik", R_Y, R_c)
-    tr = p_Y - np.einsum("nij,j->ni", Rr, p_c)
-    rho = Rotation.from_matrix(Rr).as_rotvec()
-    opening = rho @ a
-    # the hinge: frames opening (the angle growing) from the most closed by MIN_HINGE_DEG to HINGE_DEG, where a
-    # mandible turns about its condylar axis (chewing swings sideways while it closes)
-    hinge = (opening > MIN_HINGE_DEG * DEG) & (opening < HINGE_DEG * DEG) & (np.gradient(opening) > 0)
-    if hinge.sum() >= 3:  # the frames' spread, not their offset: the most closed frame carries its own noise
-        a_h = np.linalg.svd(rho[hinge] - rho[hinge].mean(axis=0), full_matrices=False)[2][0]
-        a = a_h if a_h @ a > 0 else -a_h
+    for _ in range(2):  # the axis of all frames first (chewing's sideways swing tilts it), then the hinge's
+        R_c, p_c, closed = _intercuspal(R_Y, p_Y, phi @ a)
+        # the motions from intercuspal contact: rotation R_Y[k] R_c^T, translation p_k - R p_c
+        Rr = np.einsum("nij,kj->nik", R_Y, R_c)
+        tr = p_Y - np.einsum("nij,j->ni", Rr, p_c)
+        rho = Rotation.from_matrix(Rr).as_rotvec()
         opening = rho @ a
-    else:
-        hinge = opening > MIN_HINGE_DEG * DEG
+        # the hinge: frames opening (the angle growing) from intercuspal contact by MIN_HINGE_DEG to HINGE_DEG, where
+        # a mandible turns about its condylar axis (chewing swings sideways while it closes)
+        hinge = (opening > MIN_HINGE_DEG * DEG) & (opening < HINGE_DEG * DEG) & (np.gradient(opening) > 0)
+        if hinge.sum() < 3:
+            hinge = opening > MIN_HINGE_DEG * DEG
+            break
+        a_h = np.linalg.svd(rho[hinge] - rho[hinge].mean(axis=0), full_matrices=False)[2][0]  # their spread, not offset
+        a = a_h if a_h @ a > 0 else -a_h
+        phi = rho  # the second pass measures openings from intercuspal contact
+    opening = rho @ a
     notes = []
     if body is not None:
         R_B, t_B = (v[0] for v in kabsch(body, c[None]))
@@ -233,6 +231,24 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
     rotation = (R_c @ R_B).T
     origin = -rotation @ (R_c @ t_B + p_c)
     return RigidPrior(R_B, t_B, rotation, origin, closed, a, condyles, glide, tuple(notes))
+
+
+def _intercuspal(R_Y: np.ndarray, p_Y: np.ndarray, opening: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Intercuspal contact: the mean pose (R, p) of the frames opened by at most :data:`CLOSED_DEG` more than the
+    most closed, and within CLOSED_DEG and :data:`CLOSED_MM` (O of the markers' frame) of the one nearest to the
+    others among them (each chewing cycle returns there: their mean, not one frame, which may be a filled spike or
+    still swung sideways); and the frame nearest to it."""
+    candidates = np.flatnonzero(opening <= opening.min() + CLOSED_DEG * DEG)
+    Rc, pc = R_Y[candidates], p_Y[candidates]
+    turned = np.linalg.norm(Rotation.from_matrix(np.einsum("nij,mkj->nmik", Rc, Rc).reshape(-1, 3, 3)).as_rotvec(),
+                            axis=1).reshape(len(candidates), -1)
+    moved = np.linalg.norm(pc[:, None] - pc[None], axis=2)
+    close = (turned <= CLOSED_DEG * DEG) & (moved <= CLOSED_MM * MM)
+    near = candidates[close[int(np.argmax(close.sum(axis=1)))]]
+    u, _, vt = np.linalg.svd(R_Y[near].sum(axis=0))
+    R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    p = p_Y[near].mean(axis=0)
+    return R, p, int(near[np.argmin(np.linalg.norm(p_Y[near] - p, axis=1))])
 
 
 def half_width(model: Model) -> float:

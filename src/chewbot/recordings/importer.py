@@ -276,7 +276,8 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
             notes.append(_clip_note(rec, fit, passed))
         task = _task(model, rec, reg, fit, options, Path(recording), notes, point, weights)
     retiming = None
-    if task is not None and options.timing == "limits":
+    broken = limit_report(model, task) if task is not None else []
+    if broken and options.timing == "limits":
         step("re-timing within the limits")
         retiming = retime(model, task)
         moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, point, *weights, options.min_transmission_deg)
@@ -284,17 +285,19 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         # rounding (nanometres): those samples are put back on it, their rates kept
         task = replace(retiming.task, q=moved) if ok.all() else retiming.task
         slow = retiming.stretch > 1 + 1e-3
-        notes.append(f"--timing limits: {retiming.original_s:.4g} s re-timed to {retiming.duration_s:.4g} s; stretched segments "
+        notes.append(f"--timing limits: at the recorded times {'; '.join(broken)}; re-timed from {retiming.original_s:.4g} s to "
+                     f"{retiming.duration_s:.4g} s, stretched segments "
                      + (", ".join(f"{a:.3g}-{b:.3g} s x{k:.3g}" for (a, b), k in zip(retiming.segments[slow], retiming.stretch[slow]))
-                        or "none: the recorded times hold every limit") + " (of the task's own time before re-timing)")
+                        or "none") + " (of the task's own time before re-timing)")
         try:
             solve_kinematics(model, task)
         except KinematicsError as exc:
             raise exc.located(f"{recording}: the re-timed task") from None
+    elif broken:
+        notes.append("--timing recording: " + "; ".join(broken) + " (chewbot run fails these checks; --timing limits, the "
+                     "default, re-times the task within them)")
     elif task is not None:
-        broken = limit_report(model, task)
-        notes.append("--timing recording: " + ("; ".join(broken) + " (chewbot run fails these checks; --timing limits re-times "
-                     "the task within them)" if broken else "the recorded times hold the crank speed, acceleration and torque limits"))
+        notes.append("the recorded times hold the crank speed, acceleration and torque limits: the task keeps them")
     if detected is not None:
         notes.insert(0, detected.describe())
     return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming,
