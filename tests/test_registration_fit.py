@@ -86,14 +86,15 @@ def plane_components(m, rotation, origin, TR, TO):
 
 
 def test_fit_registration_recovers_what_a_recording_identifies(tmp_path):
-    """A motion of the robot whose chewing cycles close at home (intercuspal contact), recorded from the middle of
-    its first opening (the first frame is not at home), with the lab's [markers] and the file's tracker 10 deg and
-    5 mm off: the prior (the most closed frames at home, the markers where the lab put them) is the true
-    registration, the share is 1 there and nothing moves it: the tracker comes back to 1e-6 deg and 1e-6 mm
-    (noise-free, the prior is exact: measured 1e-12), whatever the file's tracker said; every frame reproduced
-    (incisor error below 1e-3 mm)."""
+    """A motion of the robot whose chewing cycles close at home (intercuspal contact), recorded from 2 deg into its
+    first opening (the first frame is not at home), with the lab's [markers] and the file's tracker 10 deg and
+    5 mm off: the prior (intercuspal contact at home, the markers where the lab put them) is the true
+    registration, the share is 1 there and nothing moves it: the tracker comes back to 0.05 deg and 0.05 mm
+    whatever the file's tracker said (measured 0.009 deg and 0.03 mm: intercuspal contact is the mean of the frames
+    within 0.3 deg of the most closed, which here close smoothly); every frame reproduced (incisor error below
+    1e-3 mm)."""
     t, q, points, TR, TO, file_R, file_O = synthetic(tmp_path, offset=(0.0, 0.0, 0.0, 0.0))
-    start = np.flatnonzero(q[:, 3] > 5 * DEG)[0]  # the recording starts with the mandible 5 deg open
+    start = np.flatnonzero(q[:, 3] > 2 * DEG)[0]  # the recording starts with the mandible 2 deg open
     rec = write_csv(tmp_path / "rec.csv", t[start:] - t[start], points[start:])
     reg = write_registration(tmp_path / "reg.toml", file_R, file_O)
     out = tmp_path / "task.csv"
@@ -102,8 +103,8 @@ def test_fit_registration_recovers_what_a_recording_identifies(tmp_path):
     assert result.exit_code == 0, result.output
     found = load_registration(tmp_path / "task.registration.toml")
     assert found.scale == 1.0 and found.angle_scale == 1.0  # the share
-    assert np.degrees(np.linalg.norm(Rotation.from_matrix(found.rotation @ TR.T).as_rotvec())) < 1e-6
-    assert np.abs(found.origin - TO).max() < 1e-9
+    assert np.degrees(np.linalg.norm(Rotation.from_matrix(found.rotation @ TR.T).as_rotvec())) < 0.05
+    assert np.abs(found.origin - TO).max() < 0.05 * MM
     residuals = pd.read_csv(tmp_path / "task.residuals.csv", comment="#")
     assert residuals["incisor_error [mm]"].max() < 1e-3
     summary = read_sidecar(tmp_path / "task.residuals.csv")["summary"]  # the printed summary, in the sidecar

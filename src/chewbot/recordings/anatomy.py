@@ -17,7 +17,8 @@
 recording itself, so that the prior (and the search from it) does not depend on how the tracker is turned.
 
 * Rigid body (:func:`rigid_prior`): the opening rotation axis (the principal direction of the frames' rotation
-  vectors, signed like the largest rotation) is the condylar axis, +y of {M}; it passes through the point that
+  vectors, signed like the largest rotation from the first frame: the rest frame is at or near the closed end, so
+  that the farthest turn from it opens) is the condylar axis, +y of {M}; it passes through the point that
   the motions from the most closed frame to the frames opened by less than :data:`HINGE_DEG` leave fixed (least
   squares: the initial opening is a rotation about the condylar axis, Posselt 1952), moved along the axis to the
   markers' middle (a cluster on the chin, a bite fork: on the midline). The turn about that axis carries the
@@ -175,7 +176,7 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
         raise RecordingError(f"the recording rotates at most {np.degrees(norms[k]):.3g} deg: no opening axis to put on the "
                              "condylar axis (tracked = \"incisor\" registers it as a point path)")
     a = np.linalg.svd(phi, full_matrices=False)[2][0]
-    a = a if a @ phi[k] > 0 else -a
+    a = a if a @ phi[k] > 0 else -a  # the rest frame is at or near the closed end: the farthest turn from it opens
     for _ in range(2):  # the axis of all frames first (chewing's sideways swing tilts it), then the hinge's
         R_c, p_c, closed = _intercuspal(R_Y, p_Y, phi @ a)
         # the motions from intercuspal contact: rotation R_Y[k] R_c^T, translation p_k - R p_c
