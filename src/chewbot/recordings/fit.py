@@ -162,11 +162,12 @@ def _converge(fns: FitFunctions, z, last, target, settings):
 def _constrained(fns: FitFunctions, z0, target, settings):
     """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found.
 
-    A frame whose SQP does not end at a stationary point from its own start (an unconstrained optimum far outside
-    the workspace, where the SQP's steps leave the chains' closure, or a stall on the boundary) is tried again from
-    the solutions of the frames before and after it (the rows are in time order), then from the home pose,
-    keeping the admissible answer of smaller error. A frame that ends admissible but not stationary keeps that
-    pose: its errors are then an upper bound of the nearest pose's."""
+    A frame whose SQP does not end at a stationary admissible point from its own start (an unconstrained optimum far
+    outside the workspace, where the SQP's steps leave the chains' closure, or a stall on the boundary) is tried
+    again from the solutions of the frames before and after it (the rows are in time order), then from the home
+    pose (an interior one), keeping the
+    admissible answer of smaller error; one that ends admissible but not stationary keeps that pose (its errors are
+    then an upper bound of the nearest pose's); one that never ends admissible has no admissible pose near it."""
     z, lam = fns.constrained(z0, target, settings)
     feasible, stationary = _status(fns, z, lam, target, settings)
     for neighbour in (-1, 1, None):

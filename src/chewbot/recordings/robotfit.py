@@ -372,11 +372,11 @@ class PointRegistrationFunctions:
     The unknowns x (:data:`POINT_X`): a turn w (deg) of the tracker's rotation about the prior's, A = exp(w) A_p,
     and the first frame's point's offset o (mm) from where the tracked point b of {M} is at home, Q_home, in {S}.
     Frame k's point, relative to the first frame in the tracker's frame, is d_k (m); at the scale s the
-    registered point is Q_k = Q_home + o + s A d_k, and the pose the fit is given is the hinge guess of
-    :func:`chewbot.recordings.importer.hinge_angle` written again here: R_k the rotation about y by
-    beta_k = psi + asin(-(s (A d_k)_z + r_z) / abs(r_xz)) (r = b - C in {M}, C the condyles' middle,
-    psi = atan2(r_z, r_x); none for a point within :data:`MIN_LEVER_MM` of the
-    condylar axis), p_k = Q_k - R_k b. Constants :data:`POINT_CONST`: A_p, s, Q_home (m), b (m).
+    registered point is Q_k = Q_home + o + s A d_k, and the pose the fit is given is the hinge guess
+    (:func:`hinge_beta`, the import's too): R_k the rotation about y by beta_k = psi + asin(-(s (A d_k)_z + r_z) /
+    abs(r_xz)) (r = b - C in {M}, C the condyles' middle, psi = atan2(r_z, r_x); none for a point within
+    :data:`MIN_LEVER_MM` of the condylar axis), p_k = Q_k - R_k b. Constants :data:`POINT_CONST`: A_p, s, Q_home
+    (m), b (m).
     """
 
     _targets: ca.Function
