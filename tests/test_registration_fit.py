@@ -277,10 +277,12 @@ def test_retimed_motion_holds_every_limit_and_is_no_slower_than_needed(tmp_path)
     rec = write_csv(tmp_path / "rec.csv", fast, (np.einsum("nij,kj->nki", R, BODY) + p[:, None, :] - TO) @ TR)
     reg = write_registration(tmp_path / "reg.toml", TR, TO)
     base = ["import-motion", rec, "--registration", reg, "--cutoff", "none"]
-    assert runner.invoke(app, base + ["--out", str(tmp_path / "fast.csv")]).exit_code == 0
+    recorded = runner.invoke(app, base + ["--out", str(tmp_path / "fast.csv"), "--timing", "recording"])
+    assert recorded.exit_code == 0 and "--timing recording: crank speed up to" in recorded.output, recorded.output
+    assert "crank acceleration up to" in recorded.output  # which limit fails, and where
     assert runner.invoke(app, ["run", "--task", str(tmp_path / "fast.csv"), "--out", str(tmp_path / "run_fast")]).exit_code == 4
-    result = runner.invoke(app, base + ["--out", str(tmp_path / "slow.csv"), "--timing", "limits"])
-    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, base + ["--out", str(tmp_path / "slow.csv")])  # the default: --timing limits
+    assert result.exit_code == 0 and "re-timed from" in result.output, result.output
     assert runner.invoke(app, ["run", "--task", str(tmp_path / "slow.csv"), "--out", str(tmp_path / "run_slow")]).exit_code == 0
 
     def columns(folder):

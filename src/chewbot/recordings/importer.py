@@ -165,6 +165,20 @@ class MotionImport:
         return lines
 
 
+    def registration_rows(self) -> list[tuple[str, str]]:
+        """What the recording tracks and how it was registered, as (what, value) rows: what was detected (or the
+        file's ``tracked``), the prior and the registration found with how far it moved from the prior (with
+        ``--fit-registration``), and the tracker used (p_S = rotation p_T + origin)."""
+        reg, f = self.registration, self.found
+        rows = [("what the recording tracks", self.detected.describe() if self.detected is not None
+                 else f"tracked = \"{reg.tracked}\" ({'the file' if reg.markers is None or f is not None else 'its [markers]'})")]
+        if f is not None:
+            rows += [("prior", "; ".join(n for n in f.notes if n.startswith("prior:"))),
+                     ("tracker of the prior", _tracker_text(f.prior_rotation, f.prior_origin)),
+                     ("registration found", f.describe())]
+        rows.append(("tracker used", _tracker_text(reg.rotation, reg.origin)))
+        return rows
+
     def failures(self) -> list[str]:
         """The failing frames, as stretches of consecutive frames with the reasons."""
         return _failure_messages(self)
@@ -298,10 +312,15 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
                      "default, re-times the task within them)")
     elif task is not None:
         notes.append("the recorded times hold the crank speed, acceleration and torque limits: the task keeps them")
-    if detected is not None:
-        notes.insert(0, detected.describe())
     return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming,
                         detected)
+
+
+def _tracker_text(rotation: np.ndarray, origin: np.ndarray) -> str:
+    """A tracker placement in a line: its rotation as a rotation vector (deg) and its origin (mm) in {S}."""
+    turn = np.degrees(Rotation.from_matrix(rotation).as_rotvec())
+    return (f"rotation vector {np.round(turn, 2).tolist()} deg (turned {np.linalg.norm(turn):.4g} deg), origin "
+            f"{np.round(origin / 1e-3, 2).tolist()} mm")
 
 
 def tracked_point(model: Model, name: str | None) -> np.ndarray:
