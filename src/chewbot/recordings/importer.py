@@ -319,7 +319,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
 def _tracker_text(rotation: np.ndarray, origin: np.ndarray) -> str:
     """A tracker placement in a line: its rotation as a rotation vector (deg) and its origin (mm) in {S}."""
     turn = np.degrees(Rotation.from_matrix(rotation).as_rotvec())
-    return (f"rotation vector {np.round(turn, 2).tolist()} deg (turned {np.linalg.norm(turn):.4g} deg), origin "
+    return (f"rotation vector {np.round(turn, 2).tolist()} deg (angle {np.linalg.norm(turn):.4g} deg), origin "
             f"{np.round(origin / 1e-3, 2).tolist()} mm")
 
 
