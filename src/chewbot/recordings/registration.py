@@ -65,18 +65,14 @@ class LandmarksSection(Strict):
     condyle_right: Vec3 | None = None
 
 
-# What a recording tracks (``tracked``): a rigid body, or one point of the mandible (a landmark's name) whose path
-# the markers give (one marker, or several moving in parallel). Without the key it is detected from the data
-# (:func:`chewbot.recordings.anatomy.detect`).
-TRACKED = ("rigid",) + LANDMARKS
-
-
 class RegistrationFile(Strict):
     """The TOML file as written."""
 
     units: str
     markers: dict[str, Vec3] | None = None
     rest: Literal["first"] | None = None
+    # what the recording tracks: a rigid body, or the point of the mandible (a LANDMARKS name) whose path the markers
+    # give (one marker, or several moving in parallel); without the key it is detected (recordings.anatomy.detect)
     tracked: Literal["rigid", "incisor", "molar_left", "molar_right", "condyle_left", "condyle_right"] | None = None
     landmarks: LandmarksSection | None = None
     tracker: TrackerSection = TrackerSection()
