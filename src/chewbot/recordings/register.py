@@ -46,6 +46,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
+from chewbot.errors import RecordingError
 from chewbot.model import Model
 from chewbot.recordings.anatomy import RigidPrior, rigid_prior
 from chewbot.recordings.fit import fit_to_robot, settings_vector
@@ -151,6 +152,8 @@ def search(verdict, objective, bounds, step) -> tuple[np.ndarray, float, object,
                 lo, best = mid, fit_mid
             else:
                 hi = mid
+        if best is None and lo > 0:  # no scale above the one it started from passed: that one's fit
+            best = verdict(x, lo)[1]
         return lo, best
 
     def refine(x, s):
@@ -176,6 +179,10 @@ def search(verdict, objective, bounds, step) -> tuple[np.ndarray, float, object,
             else:
                 hi = mid
     share, fit = share_of(x, lo)
+    if fit is None and prior_fit is None:
+        raise RecordingError("--fit-registration: the robot reaches no scale of the recording registered at its prior, not "
+                             "even its first frame within --max-residual (is it a motion of the jaw, and does tracked "
+                             "name the point it gives?)")
     if share < prior_share:  # never below the prior
         return np.zeros(n), prior_share, prior_fit, False
     return x, share, fit, True

@@ -401,7 +401,7 @@ def hinge_beta(model: Model, b, drop):
     lib = ca if is_ca else np
     C = 0.5 * (model.hkp.T_L + model.hkp.T_R)
     rx, rz = b[0] - C[0], b[2] - C[2]
-    size = lib.sqrt(rx**2 + rz**2)
+    size = lib.sqrt(rx**2 + rz**2 + 1e-18)  # (1e-9 m)^2: a finite derivative on the axis, where the guess is 0
     psi = lib.arctan2(rz, rx) if not is_ca else ca.atan2(rz, rx)
     arg = -(drop + rz) / lib.fmax(size, 1e-9) if is_ca else -(drop + rz) / max(float(size), 1e-9)
     arg = ca.fmin(1, ca.fmax(-1, arg)) if is_ca else np.clip(arg, -1.0, 1.0)
