@@ -522,7 +522,8 @@ def test_command_force_file_scale_auto_and_failures(tmp_path):
     failed = runner.invoke(app, common)
     assert failed.exit_code == EXIT_UNREACHABLE and "frame(s) fail" in failed.output and "frame " in failed.output
     assert not out.exists() and (tmp_path / "task.residuals.csv").exists()
-    auto = runner.invoke(app, common + ["--scale", "auto", "--force-file", str(forces), "--rate", "recording", "--force"])
+    auto = runner.invoke(app, common + ["--scale", "auto", "--force-file", str(forces), "--rate", "recording", "--force",
+                                       "--timing", "recording"])  # the force at the recorded times
     assert auto.exit_code == 0, auto.output
     assert "--scale auto: factor 0." in auto.output
     task = read_task_csv(out)
