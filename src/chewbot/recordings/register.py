@@ -54,6 +54,7 @@ from scipy.spatial.transform import Rotation
 
 from chewbot.errors import RecordingError
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.reach import reach
 from chewbot.recordings.rigid import kabsch
@@ -135,12 +136,11 @@ def _physics_start(R_Y, p_Y, c, R_B_file):
 
 def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...], rotation: np.ndarray,
                      origin: np.ndarray, markers: dict[str, np.ndarray] | None, point, weights: tuple[float, float],
-                     tolerances: tuple[float, float], min_transmission_deg: float, progress=None) -> FoundRegistration:
+                     tolerances: tuple[float, float], min_transmission_deg: float, progress: Progress = SILENT) -> FoundRegistration:
     """Search the registration of the marker paths ``positions`` (N, K, 3) m in the tracker's frame (named
     ``names``), starting from the file's tracker ``rotation``, ``origin`` and ``markers`` in {M} (None:
     ``rest = "first"``). ``weights``: the fit's (per mm, per deg); ``tolerances``: ``--max-residual`` (mm, deg)."""
     started = time.perf_counter()
-    step = progress or (lambda message: None)
     fns = fit_functions(model, min_transmission_deg)
     reg = registration_functions(model)
     settings = settings_vector(model, point, *weights)
@@ -246,7 +246,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         return lo, best[0], best[1]
 
     def refine(x, s):
-        step(f"refining the registration at scale {s:.4g}")
+        progress(f"refining the registration at scale {s:.4g}")
         res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-9})
         return res.x
 

@@ -47,6 +47,7 @@ from scipy.spatial.transform import Rotation
 
 from chewbot.errors import RecordingError
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.fit import fit_to_robot
 from chewbot.recordings.reach import reach
 from chewbot.recordings.register import BISECTIONS, MAX_TRACKER_DEG, PENALTY, FoundRegistration
@@ -91,12 +92,11 @@ def opening_directions(model: Model, lowest: np.ndarray) -> list[np.ndarray]:
 
 def fit_point_registration(model: Model, positions: np.ndarray, rotation: np.ndarray, origin: np.ndarray,
                            position_weight_per_mm: float, orientation_weight_per_deg: float, tolerance_mm: float,
-                           min_transmission_deg: float, progress=None) -> FoundRegistration:
+                           min_transmission_deg: float, progress: Progress = SILENT) -> FoundRegistration:
     """Search the registration of an incisal-point recording: ``positions`` (N, K, 3) m in the tracker's frame
     (markers moving in parallel), starting from the file's tracker ``rotation`` and ``origin``; the import's fit
     weights; ``tolerance_mm``: ``--max-residual``'s position (see the module)."""
     started = time.perf_counter()
-    step = progress or (lambda message: None)
     fns = fit_functions(model, min_transmission_deg)
     graphs = point_registration_functions(model)
     point = positions.mean(axis=1)
@@ -171,7 +171,7 @@ def fit_point_registration(model: Model, positions: np.ndarray, rotation: np.nda
         return value, grad
 
     def refine(x, A_start, s):
-        step(f"refining the incisal registration at scale {s:.4g}")
+        progress(f"refining the incisal registration at scale {s:.4g}")
         res = minimize(objective, x, args=(A_start, s), jac=True, method="L-BFGS-B", bounds=bounds,
                        options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-12})
         return res.x

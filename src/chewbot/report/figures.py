@@ -18,6 +18,7 @@ from typing import Callable
 
 import numpy as np
 
+from chewbot.progress import SILENT, Progress
 from chewbot.report.plotting import save, subplots
 from chewbot.table import Table
 
@@ -112,7 +113,7 @@ def drawing_process(enabled: bool = True):
 
 
 @contextmanager
-def drawn(series: Table, method: str | None, folder: Path, contact: str = "", progress=None, drawer: Drawer | None = None):
+def drawn(series: Table, method: str | None, folder: Path, contact: str = "", progress: Progress = SILENT, drawer: Drawer | None = None):
     """Draw the figures of a run (:func:`figure_jobs`) while the block runs; their paths are yielded. A drawing
     process (``drawer``, or one forked here) takes them one by one as soon as the block starts; when the block ends,
     this process takes those still waiting if it has matplotlib loaded already (loading it costs more than the
@@ -121,7 +122,6 @@ def drawn(series: Table, method: str | None, folder: Path, contact: str = "", pr
     A failure in the drawing process is raised here (RuntimeError with its traceback); an error or a signal in
     the block stops the drawing process at once. ``progress(message)`` is told each figure drawn here.
     """
-    step = progress or (lambda msg: None)
     jobs = figure_jobs(series, method, folder, contact)
     with drawing_process(drawer is None and len(jobs) > 1) as forked:
         child = drawer or forked
@@ -130,7 +130,7 @@ def drawn(series: Table, method: str | None, folder: Path, contact: str = "", pr
         yield [path for path in (Path(folder) / name for name, _ in jobs)]
         if child is None or "matplotlib.figure" in sys.modules:
             for name, draw in (child.remaining(jobs) if child else jobs):
-                step(f"drawing {name}")
+                progress(f"drawing {name}")
                 draw()
         if child:
             child.wait()
