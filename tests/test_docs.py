@@ -264,3 +264,23 @@ def test_the_parser_reads_continuations_chains_and_comments(tmp_path):
                    "```python\nchewbot run --out nothing\n```\n")
     found = documented_commands([doc])
     assert [c.parts for c in found] == [(("run", "--out", "runs/a", "--side", "right"),), (("models",), ("report", "runs/a"))]
+
+
+def test_the_readme_starts_with_two_commands_and_the_first_leaves_chewbot_found_by_the_next(tmp_path):
+    """The README starts with exactly two command lines; the first activates the virtual environment it creates in the
+    user's shell, so that the next command line finds ``chewbot``: its activation run as written, with the suite's own
+    environment as ``.venv``, then ``chewbot --version`` as a command line of its own, on a PATH without chewbot."""
+    from chewbot.files import VERSION
+
+    block = re.search(r"```sh\n(.*?)```", (ROOT / "README.md").read_text(encoding="utf-8"), re.S).group(1).strip().splitlines()
+    assert len(block) == 2, block
+    parts = [p.strip() for p in block[0].split("&&")]
+    assert parts[0] == "python3 -m venv .venv"
+    activation = next(p for p in parts if p.split()[0] in (".", "source"))
+    assert activation.split()[1] == ".venv/bin/activate"
+    assert all(Path(shlex.split(p)[0]).name != "chewbot" or shlex.split(p)[0] == "chewbot" for p in parts)
+    (tmp_path / ".venv").symlink_to(Path(sys.prefix), target_is_directory=True)
+    env = {**{k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"}, "PATH": "/usr/bin:/bin"}
+    assert subprocess.run(["sh", "-c", "command -v chewbot"], cwd=tmp_path, env=env, capture_output=True).returncode != 0
+    done = subprocess.run(["sh", "-c", f"{activation}\nchewbot --version"], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0 and VERSION in done.stdout, done.stderr
