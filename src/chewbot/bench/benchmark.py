@@ -294,6 +294,47 @@ def _quiet(command: list[str]) -> None:
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+# --- reading inputs: a long task file, a long robot log -----------------------------------------------------
+
+CSV_ROWS = 400_000  # an hour's log at 1 kHz is 3.6 million rows; a task this long a minute's chewing at ~7 kHz
+
+
+def bench_csv(rows: int = CSV_ROWS, repeats: int = 7, progress: Progress = SILENT) -> dict[str, Timing]:
+    """Wall time of reading a task CSV (:func:`chewbot.task.csvio.read_task_csv`: the default task with more cycles,
+    its rates and bite force as ``track-incisor`` writes a task, 16 columns) and a robot log
+    (:func:`chewbot.identification.log.read_log`: t, theta1..6, tau1..6) of about ``rows`` rows each, every number
+    written in its shortest exact form (17 significant digits at most), interleaved."""
+    from chewbot.identification.log import ANGLES, TORQUES, read_log
+    from chewbot.model.params import load_model
+    from chewbot.table import Table
+    from chewbot.task.csvio import read_task_csv, task_table
+    from chewbot.task.default import default_task, parameters_with
+
+    with tempfile.TemporaryDirectory() as tmp:
+        progress(f"writing a task and a robot log of {rows:,} rows")
+        task = default_task(load_model("target"), "left", parameters_with({"cycles": long_cycles(rows)}))
+        task_path, log_path = Path(tmp) / "task.csv", Path(tmp) / "log.csv"
+        task_table(task).to_csv(task_path)
+        log = Table()
+        log.add("t", task.t, "s")
+        log.add_block(ANGLES, np.column_stack([task.q, task.dq[:, :2]]), "rad")  # numbers of a log's magnitudes
+        log.add_block(TORQUES, np.column_stack([task.dq, task.ddq[:, :2]]) * 1e-2, "N*m")
+        log.to_csv(log_path)
+        runs = {f"task CSV, {task.n:,} rows x 16 columns": partial(read_task_csv, task_path),
+                f"robot log CSV, {task.n:,} rows x 13 columns": partial(read_log, log_path)}
+        return interleaved(runs, repeats, {label: task.n for label in runs}, progress=progress)
+
+
+def csv_markdown(timings: dict[str, Timing]) -> str:
+    """The table of :func:`bench_csv`."""
+    lines = ["Reading inputs (pyarrow's CSV reader: columnar, memory-mapped, correctly rounded; every check of the file "
+             "included):", "", "| file | wall time (s) | per row (us) | runs |", "|---|---|---|---|"]
+    for t in timings.values():
+        q1, q3 = t.spread
+        lines.append(f"| {t.label} | {t.median:.3f} ({q1:.3f}–{q3:.3f}) | {t.per_sample()} | {len(t.times)} |")
+    return "\n".join(lines) + "\n"
+
+
 # --- one sample: the in-loop kernels and the exported C -----------------------------------------------------
 
 
@@ -626,6 +667,8 @@ def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progres
     commands = bench_commands(max(3, repeats // 2), progress)
     progress("the formulations on the whole task")
     task = bench_task(repeats, progress=progress)
+    progress("reading a long task and a long robot log")
+    inputs = bench_csv(repeats=max(3, repeats // 2), progress=progress)
     progress("the in-loop kernels")
     loop = bench_loop(calls, repeats)
     progress("the exported C")
@@ -637,7 +680,7 @@ def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progres
     lines = [f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end "
              f"({minutes:.1f} min). Medians with the interquartile range of the runs in brackets; the variants of a "
              "table ran interleaved; a ratio whose two spreads overlap is printed as \"within noise\".", ""]
-    lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + _loop_table(loop)
+    lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + [csv_markdown(inputs)] + _loop_table(loop)
     lines += _export_table(compiler, c_timings)
     lines += [step_markdown(step_compiler, step_timings)]
     if runs:
