@@ -120,12 +120,13 @@ def test_a_bad_parameter_file_in_a_run_names_the_key(tmp_path):
     _assert_nothing_written(tmp_path, "out")
 
 
-def test_progress_prints_a_line_per_stage_where_standard_error_is_not_a_terminal(capsys):
+def test_progress_prints_a_line_per_stage_where_standard_error_is_not_a_terminal(capsys, monkeypatch):
     """Under a pipe or in a log (pytest's captured standard error is not a terminal) the progress display prints one
-    line per stage with the seconds since the start, none for a step that goes on (same words before the colon) or for
-    a count of samples; nothing with --quiet, nor before ``delay``."""
+    line per stage with the seconds since the start, none for a step that goes on (same words before the colon: within
+    PROGRESS_LINE_S of its line) or for a count of samples; nothing with --quiet, nor before ``delay``."""
     import re
 
+    from chewbot.commands import common
     from chewbot.commands.common import progress
 
     steps = [("compiling kernels: 0 of 2 done, building a", {}), ("compiling kernels: 1 of 2 done", {}),
@@ -143,3 +144,10 @@ def test_progress_prints_a_line_per_stage_where_standard_error_is_not_a_terminal
         assert [re.sub(r" \(\d+\.\d s\)$", "", line) for line in lines] == [
             "demo: compiling kernels: 0 of 2 done, building a", "demo: kinematics", "demo: inverse dynamics (hessian)",
             "demo: writing results.csv"]
+    monkeypatch.setattr(common, "PROGRESS_LINE_S", 0.0)  # a stage that goes on: its new detail gets a line
+    with progress(False, "demo") as step:
+        for message, extra in steps:
+            step(message, **extra)
+    lines = [re.sub(r" \(\d+\.\d s\)$", "", line) for line in capsys.readouterr().err.splitlines()]
+    assert lines[:2] == ["demo: compiling kernels: 0 of 2 done, building a", "demo: compiling kernels: 1 of 2 done"]
+    assert lines[2:] == ["demo: kinematics", "demo: inverse dynamics (hessian)", "demo: writing results.csv"]

@@ -120,6 +120,7 @@ def interrupted_message(signum: int) -> str:
 # --- what a command prints and how it ends ----------------------------------------------------------------------
 
 PROGRESS_DELAY_S = 1.0  # a run shows its progress bar once it has taken this long
+PROGRESS_LINE_S = 10.0  # in a log, a stage that goes on this long gets a line with its latest detail
 FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything else is never replaced)."
 SET_HELP = ("Override one number of the model (a parameter-file key in the file's units, 1-based indices: "
             "friction.hkp_coulomb=0.2, chains.crank_length_mm[3]=12, chains.G_mm[2][1]=24) or of the default task "
@@ -265,7 +266,8 @@ def _checked(stage: str | None) -> None:
 def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0.0):
     """The command's progress display, a :class:`chewbot.progress.Progress`: on a terminal a bar that names the
     current step; where standard error is not a terminal (a pipe, a log) one line per stage, ``LABEL: message (12.3
-    s)``, the seconds since the command started; nothing with --quiet.
+    s)``, the seconds since the command started (and, in a stage that goes on, its latest detail every
+    :data:`PROGRESS_LINE_S` at most); nothing with --quiet.
 
     The yielded callback ``step(message, done=None, total=None, stage=None)`` starts a step: with ``done`` the bar
     shows that many units of ``total`` done (samples of a run), else it advances by one step of ``total`` (the number
@@ -277,7 +279,7 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     ``stage`` is where the test hook may pause (:func:`pause_for_tests`)."""
     import time
 
-    start, shown, started, previous = time.monotonic(), False, False, None
+    start, shown, started, previous, printed = time.monotonic(), False, False, None, 0.0
     if quiet:
         def quiet_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
             _checked(stage)
@@ -286,12 +288,12 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
         return
     if not _console().is_terminal:
         def line_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
-            nonlocal shown, previous
+            nonlocal shown, previous, printed
             _checked(stage)
             head, elapsed = msg.split(":", 1)[0], time.monotonic() - start
-            if elapsed >= delay and (head != previous or not shown):
+            if elapsed >= delay and (head != previous or not shown or (elapsed - printed >= PROGRESS_LINE_S and head != msg)):
                 _console().print(f"{label}: {msg} ({elapsed:.1f} s)", markup=False, highlight=False)
-                shown = True
+                shown, printed = True, elapsed
             previous = head
 
         yield line_step
