@@ -270,7 +270,8 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     :data:`PROGRESS_LINE_S` at most); nothing with --quiet.
 
     The yielded callback ``step(message, done=None, total=None, stage=None)`` starts a step: with ``done`` the bar
-    shows that many units of ``total`` done (samples of a run), else it advances by one step of ``total`` (the number
+    shows that many units of ``total`` done (samples of a run; from then on a step without ``done``, such as the
+    kernels compiled or the report, leaves the count as it is), else it advances by one step of ``total`` (the number
     of steps, if known; otherwise it pulses), except where the message begins with the same words before its first
     colon as the one before (``least squares: evaluation 12, cost ...`` after ``least squares: 11 parameters``): that
     updates the step's description, the step goes on, and no new line is printed. ``delay``: the bar (or the first
@@ -279,7 +280,7 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     ``stage`` is where the test hook may pause (:func:`pause_for_tests`)."""
     import time
 
-    start, shown, started, previous, printed = time.monotonic(), False, False, None, 0.0
+    start, shown, started, previous, printed, counting = time.monotonic(), False, False, None, 0.0, False
     if quiet:
         def quiet_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
             _checked(stage)
@@ -305,15 +306,16 @@ def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0
     task = bar.add_task(label, total=total)
 
     def step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
-        nonlocal shown, started, previous
+        nonlocal shown, started, previous, counting
         _checked(stage)
         if total is not None:
             bar.update(task, total=total)
         head = msg.split(":", 1)[0]
+        counting = counting or done is not None
         if done is not None:
             bar.update(task, description=f"{label}: {msg}", completed=done)
         else:
-            bar.update(task, description=f"{label}: {msg}", advance=1 if started and head != previous else 0)
+            bar.update(task, description=f"{label}: {msg}", advance=1 if started and head != previous and not counting else 0)
         started, previous = True, head
         if not shown and time.monotonic() - start >= delay:
             bar.start()
