@@ -28,7 +28,7 @@ from chewbot.files import RESULTS_FOLDER, OutputError, atomic_folder, atomic_mem
 from chewbot.model import Model
 from chewbot.outputs.record import RunRecord, copy_inputs, read_record, run_record, with_copies
 from chewbot.progress import SILENT, Progress
-from chewbot.report.figures import drawing_process
+from chewbot.report.figures import Drawer, drawing_process
 from chewbot.report.folder import draw, drawing_names, figures_drawn, write_page
 from chewbot.report.view import RunView, ViewBuilder, report_columns
 from chewbot.run.options import RunOptions
@@ -151,18 +151,21 @@ def run_view_columns(model: Model, contact: str) -> Callable:
 
 def write_run(options: RunOptions, out: Path, force: bool = False, progress: Progress = SILENT, figures: bool = True,
               report: bool = True, chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None,
-              format: str = "csv") -> RunRecord:
+              format: str = "csv", drawer: Drawer | None = None) -> RunRecord:
     """Compute a run chunk by chunk and write its folder ``out`` as it goes (what ``chewbot run`` does): each chunk's
     rows go to results.csv (``format`` parquet: results.parquet) as they are computed; once the last chunk is
     computed, the figures are drawn from the view of every row (by a second process where there is a second core)
     while the last rows and run.json are written and report.html is drawn from run.json as written.
     ``progress(message, done=samples, total=samples, stage=None)`` is told each stage (run.json's writing as the stage
-    ``writing``); ``check()``: see :func:`chewbot.run.pipeline.chunks`."""
+    ``writing``); ``check()``: see :func:`chewbot.run.pipeline.chunks`; ``drawer``: a drawing process forked before
+    (:func:`chewbot.report.figures.drawing_process`; None: one is forked here)."""
     progress("task")
     options, model, task = inputs(options)
     progress("kinematics", done=0, total=task.n)
     out = Path(out)
-    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp, drawing_process(figures) as drawer:
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp, \
+            drawing_process(figures and drawer is None) as forked:
+        drawer = drawer or forked
         totals = Totals(model, options)
         writer = ResultsWriter(tmp, task.t, run_view_columns(model, options.contact), format)
         name = RESULTS_FILES[format]
