@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import fcntl
 import io
 import os
 import pickle
@@ -12,7 +11,6 @@ import signal
 import struct
 import sys
 import tempfile
-import termios
 import traceback
 from contextlib import contextmanager
 from functools import partial
@@ -213,6 +211,9 @@ class Drawer:
 
     def waiting(self) -> int:
         """How many jobs are not yet taken (the bytes left in the pipe)."""
+        import fcntl  # POSIX, as the fork the drawing process is
+        import termios
+
         return struct.unpack("i", fcntl.ioctl(self.tokens, termios.FIONREAD, b"\0\0\0\0"))[0]
 
     def remaining(self, jobs):
