@@ -18,6 +18,7 @@ from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
 from chewbot.recordings.measures import Measures, measure
 from chewbot.recordings.anatomy import Detected, detect
@@ -188,13 +189,12 @@ STEPS = 5  # reading and preparing, registration, rigid fit, fit to the robot, t
 
 
 def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
-                  progress=None) -> MotionImport:
+                  progress: Progress = SILENT) -> MotionImport:
     """Import a recording as a robot task (see the module docstring). Raises
     :class:`~chewbot.errors.RecordingError` for bad files and :class:`~chewbot.errors.KinematicsError` when the
     resampled task breaks the kinematics; failing frames are reported in the result (``passed``,
     :meth:`MotionImport.failures`), with ``task`` None. ``progress(message)`` is told each of :data:`STEPS` steps."""
-    step = progress or (lambda message: None)
-    step("reading and preparing the markers")
+    progress("reading and preparing the markers")
     reg = registration if isinstance(registration, Registration) else load_registration(registration)
     model = load_model(options.model)
     notes: list[str] = []
@@ -216,21 +216,21 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
                              "its scale applies to the point's displacement, and the hinge guess follows it; leave out "
                              "angle_scale and --angle-scale")
     if options.fit_registration and tracked:
-        step(f"searching the registration of the {reg.tracked} path")
+        progress(f"searching the registration of the {reg.tracked} path")
         found = fit_point_registration(model, rec.positions, b, reg.rotation, *weights, options.max_position_mm,
                                        options.min_transmission_deg)
         notes.extend(n for n in found.notes if not n.startswith("prior:"))
         reg = replace(reg, rotation=found.rotation, origin=found.origin, scale=found.share, angle_scale=1.0)
     elif options.fit_registration:
-        step("searching the registration")
+        progress("searching the registration")
         found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.markers, reg.point,
                                  weights, (options.max_position_mm, max_orientation), options.min_transmission_deg)
         notes.extend(n for n in found.notes if not n.startswith("prior:"))
         reg = replace(reg, markers=found.markers or None, rotation=found.rotation, origin=found.origin, scale=found.share,
                       angle_scale=found.share, landmarks=None)
     else:
-        step("registration as the file gives it")
-    step("rigid fit")
+        progress("registration as the file gives it")
+    progress("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if tracked:
         rigid = _tracked_point(model, b, points, rec.markers)
@@ -264,7 +264,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     # an incisal point's search ends with frames on the workspace's boundary, where the task's spline between them
     # may leave it: the largest factor of the share at which the task builds, as --scale auto finds it
     auto = options.scale == "auto" or (found is not None and tracked)
-    step("fit to the robot" + (" (searching the scale)" if auto else ""))
+    progress("fit to the robot" + (" (searching the scale)" if auto else ""))
     factor = None
     fit, passed = attempt(1.0)
     if auto and not rigid_ok.all():
@@ -281,7 +281,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         scale, angle_scale = factor * scale, factor * angle_scale
         if found is not None:  # the registration written plays the task as imported
             reg = replace(reg, scale=scale)
-    step("resampling and checking the task")
+    progress("resampling and checking the task")
     task = None
     if passed.all() or (options.clip and fit.admissible.all() and rigid_ok.all()):
         if options.clip and not passed.all():
@@ -292,7 +292,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     retiming = None
     broken = limit_report(model, task) if task is not None else []
     if broken and options.timing == "limits":
-        step("re-timing within the limits")
+        progress("re-timing within the limits")
         retiming = retime(model, task)
         moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, point, *weights, options.min_transmission_deg)
         # the path between its samples, evaluated at the new times, may cross a boundary it runs along by

@@ -48,6 +48,7 @@ from scipy.spatial.transform import Rotation
 
 from chewbot.errors import RecordingError
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import RigidPrior, rigid_prior
 from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.rigid import kabsch
@@ -134,7 +135,7 @@ def box(n_turn: int, n_shift: int, free: bool = True) -> list[tuple[float, float
     return [(-t, t)] * n_turn + [(-s, s)] * n_shift
 
 
-def search(verdict, objective, bounds, step) -> tuple[np.ndarray, float, object, bool]:
+def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, float, object, bool]:
     """The search of the module docstring, for any registration: ``verdict(x, s)`` -> (every frame passes (N,),
     the fit) at the unknowns x (0: the prior) and the scale s; ``objective(x, s)`` -> (value, gradient);
     ``bounds`` of x (L-BFGS-B). Returns x, the share, its fit and whether the prior was refined."""
@@ -157,7 +158,7 @@ def search(verdict, objective, bounds, step) -> tuple[np.ndarray, float, object,
         return lo, best
 
     def refine(x, s):
-        step(f"refining the registration around its prior at scale {s:.4g}")
+        progress(f"refining the registration around its prior at scale {s:.4g}")
         res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds,
                        options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-12})
         return res.x
@@ -200,13 +201,12 @@ def limited_by(verdict, x, share) -> tuple[np.ndarray, str]:
 
 def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...], rotation: np.ndarray,
                      markers: dict[str, np.ndarray] | None, point, weights: tuple[float, float],
-                     tolerances: tuple[float, float], min_transmission_deg: float, progress=None) -> FoundRegistration:
+                     tolerances: tuple[float, float], min_transmission_deg: float, progress: Progress = SILENT) -> FoundRegistration:
     """Search the registration of the marker paths ``positions`` (N, K, 3) m in the tracker's frame (named
     ``names``) from its anatomical prior; ``rotation``: the file's tracker rotation (used only where the condyles
     do not glide); ``markers`` in {M} (None: ``rest = "first"``, the placement is searched). ``weights``: the
     fit's (per mm, per deg); ``tolerances``: ``--max-residual`` (mm, deg)."""
     started = time.perf_counter()
-    step = progress or (lambda message: None)
     fns = fit_functions(model, min_transmission_deg)
     reg = registration_functions(model)
     N = len(positions)
@@ -257,7 +257,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         return value, np.einsum("ka,kab->b", g, J) / len(search_rows) + 2 * PULL * x
 
     bounds = box(3, 3) + box(3, 3, free=markers is None)
-    x, share, fit, refined = search(verdict, objective, bounds, step)
+    x, share, fit, refined = search(verdict, objective, bounds, progress)
     limiting_frames, limiting = limited_by(verdict, x, share)
     u = REGISTRATION_X.cut(x)
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()

@@ -38,6 +38,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import point_prior
 from chewbot.recordings.fit import fit_to_robot
 from chewbot.recordings.register import PULL, FoundRegistration, angle_deg, box, limited_by, search
@@ -60,13 +61,12 @@ def _unflat(v: np.ndarray) -> np.ndarray:
 
 def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, rotation: np.ndarray,
                            position_weight_per_mm: float, orientation_weight_per_deg: float, tolerance_mm: float,
-                           min_transmission_deg: float, progress=None) -> FoundRegistration:
+                           min_transmission_deg: float, progress: Progress = SILENT) -> FoundRegistration:
     """Search the registration of a point path: ``positions`` (N, K, 3) m in the tracker's frame (markers moving in
     parallel), ``b`` the tracked point of {M} (m); ``rotation``: the file's tracker rotation (used only where the
     data do not fix the turn about the opening direction); the import's fit weights; ``tolerance_mm``:
     ``--max-residual``'s position (see the module)."""
     started = time.perf_counter()
-    step = progress or (lambda message: None)
     fns = fit_functions(model, min_transmission_deg)
     graphs = point_registration_functions(model)
     prior = point_prior(model, positions, b, rotation)
@@ -108,7 +108,7 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
         value = 0.5 * np.mean(excess**2) + (~ok).sum() / len(search_rows) + PULL * x @ x
         return value, np.einsum("ka,kab->b", g, J) / len(search_rows) + 2 * PULL * x
 
-    x, share, fit, refined = search(verdict, objective, box(3, 3), step)
+    x, share, fit, refined = search(verdict, objective, box(3, 3), progress)
     limiting_frames, limiting = limited_by(verdict, x, share)
     u = POINT_X.cut(unknowns(x))
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
