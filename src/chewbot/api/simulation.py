@@ -19,6 +19,7 @@ from chewbot.dynamics.options import Contact
 from chewbot.kinematics.options import Side
 from chewbot.kinematics.task import Task
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.run.options import OptionError
 from chewbot.simulation.controllers.table import DEFAULT_CONTROLLER, ControllerRow
 from chewbot.simulation.engines import DEFAULT_ENGINE, EngineRow
@@ -35,13 +36,13 @@ def simulate(model: Model | str = "target", task: Task | str | None = None, *, c
              plant_overrides: dict[str, float] | None = None, bite_unknown: bool = False, food: str | None = None,
              gains: str | Path | None = None, gain_overrides: dict[str, float] | None = None, compare: bool = False,
              compare_engines: bool = False, out: str | Path | None = None, force: bool = False,
-             progress=None) -> SimulateResult | dict[str, SimulateResult]:
+             progress: Progress = SILENT) -> SimulateResult | dict[str, SimulateResult]:
     """Simulate ``controller`` driving the robot of ``plant`` (default: ``model``'s) along ``task`` (None: the default
     task, with the ``task.NAME`` keys of ``overrides``), as ``chewbot simulate`` with the same options: ``rate`` in Hz
     or "continuous", ``noise`` in rad, ``overrides`` and ``plant_overrides`` as ``--set`` and ``--plant-set``,
     ``gain_overrides`` as ``--gain``. ``compare`` / ``compare_engines``: the simulations of ``--compare`` /
     ``--compare-engines``, returned by label. ``out``: also write the results folder there (``force``: replace one
-    chewbot wrote). ``progress(message, stage=None)`` is told each stage."""
+    chewbot wrote). ``progress`` (:class:`chewbot.progress.Progress`) is told each stage."""
     models = [m if isinstance(m, Model) else None for m in (model, plant)]
     for given, keys, option in ((models[0], overrides, "overrides"), (models[1] or models[0], plant_overrides, "plant_overrides")):
         if given is not None and any(not k.startswith("task.") for k in (keys or {})):

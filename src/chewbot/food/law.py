@@ -70,7 +70,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from chewbot.config import validate
 from chewbot.errors import ChewbotError
+from chewbot.food.comminution import ComminutionSection, ComminutionTable
 
 # The teeth's own contact once the sample is flat (delta >= h0): a linear spring of 1 kN/mm, the order of a molar's
 # axial stiffness on its periodontal ligament (tenths to a few kN/mm); it only keeps the teeth from passing through
@@ -131,6 +133,7 @@ class Food:
     relaxation_modulus: float = 0.0
     adhesion: float = 0.0
     source: str = ""
+    comminution: ComminutionTable | None = None  # the file's [comminution] table (chewbot.food.bolus), if any
 
     @property
     def area(self) -> float | None:
@@ -196,6 +199,8 @@ class Food:
             out.update(relaxation_time_s=self.relaxation_time, relaxation_modulus_kPa=self.relaxation_modulus / 1e3)
         out.update(adhesion_N=self.adhesion, tooth_friction=self.tooth_friction, source=self.source,
                    tooth_stiffness_N_per_m=TOOTH_STIFFNESS, friction_speed_m_per_s=FRICTION_SPEED)
+        if self.comminution is not None:
+            out["comminution"] = self.comminution.model_dump()
         return out
 
 
@@ -205,12 +210,12 @@ class Food:
 def _casadi_backend():
     import casadi as ca
 
-    return SimpleNamespace(fmax=ca.fmax, fmin=ca.fmin, where=ca.if_else, sqrt=ca.sqrt, exp=ca.exp, fabs=ca.fabs,
-                           arccos=ca.acos)
+    return SimpleNamespace(fmax=ca.fmax, fmin=ca.fmin, where=ca.if_else, sqrt=ca.sqrt, exp=ca.exp, log=ca.log,
+                           fabs=ca.fabs, arccos=ca.acos, sum=ca.sum1, asarray=ca.DM)
 
 
-NUMPY = SimpleNamespace(fmax=np.maximum, fmin=np.minimum, where=np.where, sqrt=np.sqrt, exp=np.exp, fabs=np.abs,
-                        arccos=np.arccos)
+NUMPY = SimpleNamespace(fmax=np.maximum, fmin=np.minimum, where=np.where, sqrt=np.sqrt, exp=np.exp, log=np.log,
+                        fabs=np.abs, arccos=np.arccos, sum=np.sum, asarray=np.asarray)
 
 
 class _Casadi:
@@ -408,9 +413,13 @@ def load_food(name_or_path: str | Path) -> Food:
 
 def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
     """A food from the content of a food file (a table ``[food]`` with the keys of docs/food.md)."""
-    extra = set(raw) - {"food"}
+    extra = set(raw) - {"food", "comminution"}
     if extra:
-        raise FoodError(f"{source}: unknown table or key {sorted(extra)[0]!r}; a food file has one table [food]")
+        raise FoodError(f"{source}: unknown table or key {sorted(extra)[0]!r}; a food file has a table [food] and "
+                        "may have a table [comminution]")
+    comminution = None
+    if "comminution" in raw:
+        comminution = validate(ComminutionSection, {"comminution": raw["comminution"]}, source, FoodError).comminution
     table = raw.get("food")
     if not isinstance(table, dict):
         raise FoodError(f"{source}: no [food] table")
@@ -461,7 +470,7 @@ def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
         given, missing = (("relaxation_time_s", "relaxation_modulus_kPa") if "relaxation_time_s" in table
                           else ("relaxation_modulus_kPa", "relaxation_time_s"))
         raise FoodError(f"{source}: food.{given}: the Maxwell branch needs food.{missing} too")
-    return Food(source=source, **values)
+    return Food(source=source, comminution=comminution, **values)
 
 
 def _unit_hint(key: str) -> str:
