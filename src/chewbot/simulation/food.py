@@ -134,6 +134,9 @@ class FoodSolved(Solved):
 
     food: FoodState = None
 
+    def at(self, z: np.ndarray) -> FoodSolved:
+        return FoodSolved(z, self.food)
+
 
 @dataclass
 class FoodPlant(Plant):
@@ -200,23 +203,23 @@ class FoodPlant(Plant):
                 blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
                 return s
 
-            self._step = Step(native(food_step_kernel(self.mechanism)), shared, None)
+            self._step = Step(native(food_step_kernel(self.mechanism)), shared)
 
         def stage(t0: float, dt: float) -> np.ndarray:
             return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
 
-        step = replace(self._step, stage=stage)
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
         for j in range(n_steps):
             stop = state.t + (end - state.t) / (n_steps - j)
             while stop - state.t > EVENT_TOLERANCE:
-                state = self._until_event(state, stop - state.t, step)
+                state = self._until_event(state, stop - state.t, stage)
         return state
 
-    def _until_event(self, state: PlantState, h: float, step: Step) -> PlantState:
+    def _until_event(self, state: PlantState, h: float, stage) -> PlantState:
         """One step of h seconds from ``state``, or to just past the first event within it (then switched)."""
-        trial = self.interval(step, state, h, 0)
+        step = self._step
+        trial = self.interval(step, stage, state, h, 0)
         g0, g1 = self.guards(state.internal.food), self.guards(trial.internal.food)
         crossed = np.flatnonzero(np.sign(g0) * np.sign(g1) < 0)
         if not crossed.size or not trial.margin > 0:
@@ -224,17 +227,17 @@ class FoodPlant(Plant):
         first, root = None, h
         for i in crossed:
             def guard(dt, i=i):
-                return self.guards(self.interval(step, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
+                return self.guards(self.interval(step, stage, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
 
             r = brentq(guard, 0.0, h, xtol=EVENT_TOLERANCE, rtol=4 * np.finfo(float).eps)
             if r < root or first is None:
                 first, root = int(i), r
         # just past the crossing: the step whose end has the guard's new sign
         past = min(h, root + EVENT_TOLERANCE)
-        after = self.interval(step, state, past, 0)
+        after = self.interval(step, stage, state, past, 0)
         while np.sign(self.guards(after.internal.food)[first]) == np.sign(g0[first]) and past < h:
             past = min(h, past + EVENT_TOLERANCE * 10)
-            after = self.interval(step, state, past, 0)
+            after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
             b = self.food.stiffness_after_fracture

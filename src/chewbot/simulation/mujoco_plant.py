@@ -223,9 +223,10 @@ class MujocoPlant:
         if abs(steps * dt - h) > 1e-9 * max(h, 1.0):
             raise SimulationError(f"the MuJoCo plant steps {dt:g} s: the control interval {h:g} s is not a multiple of it")
         t = state.t
+        tau, force = (PLANT_INPUTS.slices()[name] for name in ("tau", "F_B"))
         for _ in range(steps):
-            w = PLANT_INPUTS.unpack(inputs(t, dt))
-            self._load(w["tau"][:, 0], w["F_B"] @ RADAU_A[-1])
+            W = inputs(t, dt)
+            self._load(W[tau, 0], W[force] @ RADAU_A[-1])
             mujoco.mj_step(self.mj, self.data)
             t += dt
         if not np.all(np.isfinite(self.data.qpos)):

@@ -20,7 +20,7 @@ given torques, the food's and the closed loop's layouts extend them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import casadi as ca
@@ -132,15 +132,18 @@ class Solved:
 
     z: np.ndarray
 
+    def at(self, z: np.ndarray) -> Solved:
+        """This state with the accelerations and normal forces ``z`` of a step's end."""
+        return Solved(z)
+
 
 @dataclass(frozen=True)
 class Step:
-    """A compiled step (:func:`step_kernel`, loaded) and what it is given: ``shared(state)`` its s for a step from a
-    state, ``stage(t0, dt)`` its W."""
+    """A compiled step (:func:`step_kernel`, loaded) and ``shared(state)``, its s for a step from a state (its W, the
+    stage inputs, is given with each interval)."""
 
     kernel: object
     shared: Callable[[PlantState], np.ndarray]
-    stage: StageInputs
 
 
 @dataclass
@@ -176,37 +179,37 @@ class Plant:
         """The state after h seconds under ``inputs`` (W: the torques and bite forces at the stage times)."""
         if self._step is None:
             s = self.shared()
-            self._step = Step(native(plant_step_kernel(self.mechanism)), lambda state: s, None)
-        return self.steps(state, h, replace(self._step, stage=inputs))
+            self._step = Step(native(plant_step_kernel(self.mechanism)), lambda state: s)
+        return self.steps(state, h, self._step, inputs)
 
-    def steps(self, state: PlantState, h: float, step: Step) -> PlantState:
-        """The state after h seconds by ``step``: the interval split evenly into steps of at most :data:`MAX_STEP`,
-        and a step whose iteration did not converge (residual above :data:`TOLERANCE`) split again, up to
-        2^:data:`MAX_SPLITS` times."""
+    def steps(self, state: PlantState, h: float, step: Step, stage: StageInputs) -> PlantState:
+        """The state after h seconds by ``step`` with the stage inputs ``stage(t0, dt)``: the interval split evenly
+        into steps of at most :data:`MAX_STEP`, and a step whose iteration did not converge (residual above
+        :data:`TOLERANCE`) split again, up to 2^:data:`MAX_SPLITS` times."""
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         for _ in range(n_steps):
-            state = self.interval(step, state, h / n_steps, 0)
+            state = self.interval(step, stage, state, h / n_steps, 0)
         return state
 
     def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
         """The state at the end of a converged step of h seconds from ``start`` (the plant's own state updated)."""
         return end
 
-    def interval(self, step: Step, state: PlantState, h: float, depth: int) -> PlantState:
+    def interval(self, step: Step, stage: StageInputs, state: PlantState, h: float, depth: int) -> PlantState:
         """One step of h seconds from ``state``, split in halves where its iteration did not converge."""
-        out = dict(zip(STEP_KERNEL_OUTPUTS, step.kernel(state.q, state.dq, state.internal.z, step.stage(state.t, h),
-                                                        step.shared(state), h)))
+        out = step.kernel(state.q, state.dq, state.internal.z, stage(state.t, h), step.shared(state), h)
+        out = dict(zip(STEP_KERNEL_OUTPUTS, out))
         margin = float(out["margin"][0])
         if out["residual"][0] <= TOLERANCE or not margin > 0:  # converged, or ended outside the workspace (the caller stops)
-            end = PlantState(state.t + h, out["q1"], out["v1"], out["theta"], out["dtheta"], margin, replace(state.internal, z=out["z1"]))
+            end = PlantState(state.t + h, out["q1"], out["v1"], out["theta"], out["dtheta"], margin, state.internal.at(out["z1"]))
             return self.ended(state, end, h)
         if depth >= MAX_SPLITS:
             raise SimulationError(f"the plant's equations of motion have no solution near t = {state.t:.6g} s (residual "
                                   f"{out['residual'][0]:.3g} N m after splitting the step {2 ** MAX_SPLITS} times); with friction "
                                   "this happens where the Coulomb coefficients are too large for a rigid model (Painlevé's paradox)")
         self.splits += 1
-        half = self.interval(step, state, h / 2, depth + 1)
-        return self.interval(step, half, h / 2, depth + 1)
+        half = self.interval(step, stage, state, h / 2, depth + 1)
+        return self.interval(step, stage, half, h / 2, depth + 1)
 
     def closed_loop(self, controller, reference, limit: float) -> ClosedLoop:
         """This plant with ``controller``'s law (:class:`~chewbot.simulation.interfaces.LawController`) at every stage of
@@ -298,6 +301,7 @@ class ClosedLoop:
     reference: object
     limit: float
     _step: Step | None = field(default=None, init=False, repr=False)
+    _stage: StageInputs | None = field(default=None, init=False, repr=False)
 
     def kernels(self) -> list[KernelSpec]:
         return [closed_loop_kernel(self.controller)]
@@ -314,8 +318,8 @@ class ClosedLoop:
                 F = self.reference.force_at(ts)
                 return W.pack(columns=STAGES, q_ref=q.T, dq_ref=dq.T, ddq_ref=ddq.T, F_known=self.controller.known_force(F).T, F_B=F.T)
 
-            self._step = Step(native(closed_loop_kernel(self.controller)), lambda state: s, stage)
-        return self.plant.steps(state, h, self._step)
+            self._step, self._stage = Step(native(closed_loop_kernel(self.controller)), lambda state: s), stage
+        return self.plant.steps(state, h, self._step, self._stage)
 
 
 def stage_times(t0: float, h: float) -> np.ndarray:

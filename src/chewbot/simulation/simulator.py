@@ -29,7 +29,7 @@ import numpy as np
 from chewbot.compiled.kernels import prepare_kernels
 from chewbot.errors import KinematicsError
 from chewbot.simulation.forward import n_coordinates
-from chewbot.simulation.integrator import C
+from chewbot.simulation.integrator import C, STAGES
 from chewbot.simulation.interfaces import PLANT_INPUTS, Controller, Plant, PlantState, State, StageInputs
 from chewbot.simulation.options import DEFAULT_RATE
 from chewbot.simulation.plant import stage_times
@@ -164,14 +164,22 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
                       observed=None if observed is None else observed[rows])
 
 
+_TAU, _F_B = (PLANT_INPUTS.slices()[name] for name in ("tau", "F_B"))
+
+
 def _held(tau: np.ndarray, reference: Reference, tick=None) -> StageInputs:
-    """The plant's stage inputs under held torques: the torques and the bite force at the stage times. ``tick``:
-    (t0, h, the forces at its stages (3, 3)) of the whole tick's step, used where the step is that one."""
+    """The plant's stage inputs under held torques (:data:`~chewbot.simulation.interfaces.PLANT_INPUTS`, one column
+    per stage): the torques and the bite force at the stage times. ``tick``: (t0, h, the forces at its stages (3, 3))
+    of the whole tick's step, used where the step is that one."""
+    W = np.empty((PLANT_INPUTS.size, STAGES))
+    W[_TAU] = tau[:, None]
 
     def inputs(t0: float, h: float) -> np.ndarray:
         if tick is not None and t0 == tick[0] and h == tick[1]:
-            return PLANT_INPUTS.pack(columns=3, tau=tau, F_B=tick[2].T)
-        return PLANT_INPUTS.pack(columns=3, tau=tau, F_B=reference.force_at(stage_times(t0, h)).T)
+            W[_F_B] = tick[2].T
+        else:
+            W[_F_B] = reference.force_at(stage_times(t0, h)).T
+        return W
     return inputs
 
 
