@@ -61,10 +61,12 @@ from chewbot.units import factor, key_unit, same_quantity
 class Strict(BaseModel):
     """The base of every file format: a quoted number is an error, not silently converted; an unknown key is an
     error; NaN and infinity are refused unless a field allows them; instances are frozen. ``DOCS``: the page that
-    lists the format's keys, named in the message of an unknown key."""
+    lists the format's keys, named in the message of an unknown key; ``EXAMPLE``: how a table of the model is
+    written, shown where something else is given (``{ uniform = [low, high] }``)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
     DOCS: ClassVar[str] = ""
+    EXAMPLE: ClassVar[str] = ""
 
 
 S = TypeVar("S", bound=BaseModel)
@@ -201,6 +203,9 @@ def _reason(err: dict, schema: type[BaseModel] | None) -> str:
     if kind in _TYPE_WORDS or kind == "either_type":
         hint = " (in quotes it is text: write the number without them)" if _number_text(value) else ""
         expected = err["msg"] if kind == "either_type" else f"must be {_TYPE_WORDS[kind]}"
+        model = _at(schema, loc) if kind == "model_type" and schema is not None else None
+        if getattr(model, "EXAMPLE", ""):
+            expected += f" such as {model.EXAMPLE}"
         return f"{expected}, not {value!r}{hint}"
     if kind == "finite_number":
         return f"must be a finite number, not {value!r}"
