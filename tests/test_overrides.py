@@ -183,7 +183,7 @@ def test_parse_override():
 def test_task_overrides():
     task = default_task(None, "left", parameters_with({"force_z_N": -100.0, "cycles": 2}))
     assert task.force[:, 2].min() == pytest.approx(-100.0) and task.t[-1] == pytest.approx(2.6)
-    for bad, match in (({"forcez_N": 1.0}, "did you mean task.force_z_N"), ({"cycles": 2.5}, "whole number"),
+    for bad, match in (({"forcez_N": 1.0}, "did you mean 'task.force_z_N'"), ({"force_z_kN": 1.0}, "the unit is part of the key, and force_z is given in N, not kN: 'task.force_z_N'"), ({"cycles": 2.5}, "whole number"),
                        ({"period_s": -1.0}, r"--set task.period_s=-1: default task: period_s must be positive")):
         with pytest.raises(TaskError, match=match):
             parameters_with(bad)

@@ -39,6 +39,8 @@ KEY_UNITS = {"m": "m", "m2": "m^2", "cm": "cm", "mm": "mm", "mm2": "mm^2", "mm3"
              "s": "s", "s2": "s^2", "ms": "ms", "N": "N", "kN": "kN", "Nm": "N*m", "Nmm": "N*mm", "Ns": "N*s",
              "Nms": "N*m*s", "rad": "rad", "mrad": "mrad", "deg": "deg", "Pa": "Pa", "kPa": "kPa", "MPa": "MPa", "W": "W",
              "J": "J", "mJ": "mJ", "Hz": "Hz"}
+# How values are shown to people (figures, report tables): lengths in mm and angles in deg, their rates alike.
+DISPLAY = {"m": "mm", "rad": "deg"}
 # A header cell: NAME or NAME [unit] (spaces allowed around the brackets).
 HEADER_CELL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
 _RATE_UNIT = re.compile(r"^(.+?)\s*/\s*(\w+)\s*(\^\s*2|2|²)?$")
@@ -112,6 +114,15 @@ def factor(unit: str) -> float:
 def same_quantity(a: str, b: str) -> bool:
     """Whether units ``a`` and ``b`` measure the same kind of quantity (mm and m; not mm and deg)."""
     return _parse(a)[1] == _parse(b)[1]
+
+
+def shown(unit: str) -> tuple[float, str]:
+    """(multiplier, unit) to show a value of ``unit`` (SI) in: m -> mm, rad -> deg (:data:`DISPLAY`), their rates
+    alike (``m/s`` -> ``mm/s``), any other unit as it is."""
+    base, sep, rest = unit.partition("/")
+    if base not in DISPLAY:
+        return 1.0, unit
+    return factor(base) / factor(DISPLAY[base]), DISPLAY[base] + sep + rest
 
 
 def key_unit(key: str) -> tuple[str, str | None]:

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from chewbot.errors import ChewbotError
+from chewbot.units import factor
 
 BLEND = 0.05  # s: each change of speed is spread over this
 HOLD = 0.2  # s at rest before the first and after the second bite
@@ -113,9 +114,9 @@ def protocol(height: float, compression_percent: float = 50.0, speed_mm_s: float
         raise TpaError(f"--speed {speed_mm_s:g}: the probe's speed must be a positive number of mm/s")
     if not pause_s >= 0 or not np.isfinite(pause_s):
         raise TpaError(f"--pause {pause_s:g}: the pause must be a non-negative number of seconds")
-    p = Protocol(height, compression_percent / 100, speed_mm_s * 1e-3, pause_s)
+    p = Protocol(height, compression_percent / 100, speed_mm_s * factor("mm/s"), pause_s)
     if p.stroke_time <= BLEND:
-        raise TpaError(f"--speed {speed_mm_s:g}: a stroke of {(p.start_gap - p.deepest_gap) * 1e3:.3g} mm takes less than "
+        raise TpaError(f"--speed {speed_mm_s:g}: a stroke of {(p.start_gap - p.deepest_gap) / factor('mm'):.3g} mm takes less than "
                        f"the {BLEND:g} s over which the speed is blended; lower the speed")
     return p
 
@@ -178,8 +179,8 @@ def tpa_measures(t, g, F) -> dict:
     gumminess = hardness * cohesiveness
     return {"hardness_N": hardness, "fracturability_N": fracturability, "cohesiveness": cohesiveness,
             "springiness": springiness, "resilience": _work(pos, g, after) / _work(pos, g, before),
-            "adhesiveness_mJ": _work(neg, g, first) * 1e3, "gumminess_N": gumminess, "chewiness_N": gumminess * springiness,
-            "areas_mJ": {"first_bite": A1 * 1e3, "second_bite": A2 * 1e3},
+            "adhesiveness_mJ": _work(neg, g, first) / factor("mJ"), "gumminess_N": gumminess, "chewiness_N": gumminess * springiness,
+            "areas_mJ": {"first_bite": A1 / factor("mJ"), "second_bite": A2 / factor("mJ")},
             "deepest_gap_m": [float(g[m1]), float(g[m2])], "peak_time_s": float(t[peak]),
             "fracture_time_s": None if not breaks.size else float(t[int(np.argmax(compressing[:breaks[0] + 1]))])}
 

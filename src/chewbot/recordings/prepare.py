@@ -33,6 +33,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from chewbot.errors import RecordingError
 from chewbot.recordings.formats import Recording
+from chewbot.units import factor
 
 FILTER_ORDER = 2
 # (sqrt(2) - 1)^(1 / (2 n)) for n = FILTER_ORDER: the forward-backward response 1 / (1 + (f / f0)^(2n)) is
@@ -94,7 +95,7 @@ def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Rec
             rigid = _outliers(d, SPIKE_MIN_MM, SPIKE_MADS)
         bad |= rigid
     step = np.diff(P, axis=0)
-    speed = np.linalg.norm(step, axis=2).max(axis=1) / np.diff(rec.t) / 1e-3  # mm/s, (n-1,)
+    speed = np.linalg.norm(step, axis=2).max(axis=1) / np.diff(rec.t) / factor("mm")  # mm/s, (n-1,)
     with np.errstate(invalid="ignore"):
         jumps = np.flatnonzero(_outliers(speed, SPIKE_MIN_SPEED_MM_S, SPEED_MADS))  # jump between frame j and j + 1
     for a, b in zip(jumps[:-1], jumps[1:]):

@@ -58,6 +58,7 @@ from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.reach import reach
 from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import fit_functions, registration_functions
+from chewbot.units import factor
 
 MAX_TRACKER_DEG = 30.0
 PLAUSIBLE_MM = 100.0
@@ -76,7 +77,7 @@ PENALTY = 10.0
 # nearest to what the lab measured. Small beside the residual's curvature in the identified directions: on the
 # tests' synthetic recording 1e-4 moved the plane's tilt by 0.57 deg, 1e-6 by 0.006 deg, 1e-8 by 2e-4 deg.
 PRIOR = 1e-8
-MM, DEG = 1e-3, np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 
 
 @dataclass(frozen=True, eq=False)

@@ -51,8 +51,9 @@ from chewbot.recordings.fit import fit_to_robot
 from chewbot.recordings.reach import reach
 from chewbot.recordings.register import BISECTIONS, MAX_TRACKER_DEG, PENALTY, FoundRegistration
 from chewbot.recordings.robotfit import fit_functions, point_registration_functions
+from chewbot.units import factor
 
-MM, DEG = 1e-3, np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 # The search's fit weighs the hinge guess this little per degree (against 1 per mm at the incisor): its optimal
 # value is then the incisor's squared distance from the reachable set, the guess only choosing among the poses
 # that reach it.

@@ -8,6 +8,7 @@ import io
 import numpy as np
 
 from chewbot.report.plotting import layout, subplots
+from chewbot.units import factor
 
 
 def incisor_paths_svg(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str) -> str:
@@ -20,7 +21,7 @@ def incisor_paths(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, t
     recorded (registered, scale 1) and reproduced by the robot, and its distance from the first frame over time;
     ``recorded``, ``reproduced`` (N, 3) m. Returns the figure, laid out."""
     fig, (side, front, time) = subplots(1, 3, figsize=(13.0, 4.0))
-    rec, rep = recorded / 1e-3, reproduced / 1e-3
+    rec, rep = recorded / factor("mm"), reproduced / factor("mm")
     for ax, (i, j), name in ((side, (0, 2), "sagittal"), (front, (1, 2), "frontal")):
         ax.plot(rec[:, i], rec[:, j], color="0.55", lw=2.2, label="recorded")
         ax.plot(rep[:, i], rep[:, j], color="C0", lw=1.0, label="reproduced")
