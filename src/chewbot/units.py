@@ -26,7 +26,7 @@ UNITS = {
     "pressure": {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6},
     "power": {"W": 1.0},
     "energy": {"J": 1.0, "mJ": 1e-3},
-    "frequency": {"Hz": 1.0},
+    "frequency": {"Hz": 1.0, "kHz": 1e3},
 }
 # The dimension of each kind, as exponents of (m, kg, s, rad): what :func:`factor` multiplies to tell whether two
 # units measure the same quantity. Torque is a force times a length, as N*m is.
@@ -35,10 +35,10 @@ _DIMENSIONS = {"length": (1, 0, 0, 0), "angle": (0, 0, 0, 1), "time": (0, 0, 1, 
                "energy": (2, 1, -2, 0), "frequency": (0, 0, -1, 0)}
 # The units a key may end with, as keys spell them (no * or ^): the parts of a key's unit, joined by "_" for a
 # product and "_per_" for a quotient (inertia_g_mm2: g*mm^2; density_g_per_mm3: g/mm^3; viscous_Nms_per_rad: N*m*s/rad).
-KEY_UNITS = {"m": "m", "m2": "m^2", "cm": "cm", "mm": "mm", "mm2": "mm^2", "mm3": "mm^3", "um": "um", "g": "g", "kg": "kg",
+KEY_UNITS = {"m": "m", "m2": "m^2", "m3": "m^3", "cm": "cm", "cm2": "cm^2", "cm3": "cm^3", "mm": "mm", "mm2": "mm^2", "mm3": "mm^3", "um": "um", "g": "g", "kg": "kg",
              "s": "s", "s2": "s^2", "ms": "ms", "N": "N", "kN": "kN", "Nm": "N*m", "Nmm": "N*mm", "Ns": "N*s",
              "Nms": "N*m*s", "rad": "rad", "mrad": "mrad", "deg": "deg", "Pa": "Pa", "kPa": "kPa", "MPa": "MPa", "W": "W",
-             "J": "J", "mJ": "mJ", "Hz": "Hz"}
+             "J": "J", "mJ": "mJ", "Hz": "Hz", "kHz": "kHz"}
 # How values are shown to people (figures, report tables): lengths in mm and angles in deg, their rates alike.
 DISPLAY = {"m": "mm", "rad": "deg"}
 # A header cell: NAME or NAME [unit] (spaces allowed around the brackets).

@@ -189,7 +189,7 @@ _BOUND_WORDS = {"greater_than": ("gt", "greater than"), "greater_than_equal": ("
                 "less_than": ("lt", "less than"), "less_than_equal": ("le", "at most")}
 
 
-def _reason(err: dict, schema: type[BaseModel] | None) -> str:
+def _reason(err: dict, schema: type[BaseModel] | None, at: tuple = ()) -> str:
     kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
     loc = err["loc"]
     if kind == "missing":
@@ -197,7 +197,7 @@ def _reason(err: dict, schema: type[BaseModel] | None) -> str:
     if kind == "extra_forbidden":
         model = _at(schema, loc[:-1]) if schema is not None else None
         allowed = _keys(model) if model is not None else []
-        parent = key_path(loc[:-1])
+        parent = key_path(at + tuple(loc[:-1]))
         prefix = "" if parent == "(top level)" else parent + "."
         return unknown_key(str(loc[-1]), allowed, prefix, value, getattr(model, "DOCS", "") or getattr(schema, "DOCS", ""))
     if kind in _TYPE_WORDS or kind == "either_type":
@@ -233,7 +233,7 @@ def format_validation_error(source: str, exc: ValidationError, schema: type[Base
     """pydantic's errors as chewbot words them: one line per problem, ``SOURCE: key 'a.b[2]': reason``. ``schema``:
     the model validated (for the keys allowed beside an unknown one, the choices of a choice, the length of a
     list); ``at``: where the validated data sits in the file."""
-    return "\n".join(f"{source}: key '{key_path(at + tuple(err['loc']))}': {_reason(err, schema)}" for err in exc.errors())
+    return "\n".join(f"{source}: key '{key_path(at + tuple(err['loc']))}': {_reason(err, schema, at)}" for err in exc.errors())
 
 
 # ------------------------------------------------------------------------------------------ the schema at a key
