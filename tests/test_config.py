@@ -259,3 +259,30 @@ def test_every_unit_of_every_key_is_known():
     assert {"mm", "g", "g*mm^2", "g/mm^3", "kPa", "deg", "N*s/m"} - {"deg"} <= found
     for unit in found:
         factor(unit)
+
+
+@pytest.mark.parametrize("schema, page, prefix", [(ParameterFile, "models.md", ""), (FoodFile, "food.md", "food.")])
+def test_the_documented_plausible_ranges_are_the_codes(schema, page, prefix):
+    """docs/models.md and docs/food.md give each key's plausible range as the schema declares it."""
+    rows = [line for line in (Path(__file__).parents[1] / "docs" / page).read_text().splitlines()
+            if line.startswith("| `") and " to " in line]
+
+    def number(x: float) -> str:
+        return f"{x:g}".replace("e+0", "e").replace("e+", "e")
+
+    def walk(model: type[BaseModel], path: str = ""):
+        for name, info in model.model_fields.items():
+            key = path + (info.alias or name)
+            for marker in _markers(info.annotation) + list(info.metadata):
+                if isinstance(marker, Plausible):
+                    shown_key = f"`{key.removeprefix(prefix)}`"
+                    row = next((r for r in rows if shown_key in r.split("|")[1]), None)
+                    assert row is not None, key
+                    assert f"{number(marker.low)} to {number(marker.high)}" in row, (key, row)
+                    found.add(key)
+            for inner in _models(info.annotation):
+                walk(inner, key + ".")
+
+    found: set[str] = set()
+    walk(schema)
+    assert len(found) >= 7

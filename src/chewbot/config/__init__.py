@@ -195,7 +195,7 @@ def _reason(err: dict, schema: type[BaseModel] | None, at: tuple = ()) -> str:
     if kind == "missing":
         return "missing key"
     if kind == "extra_forbidden":
-        model = _at(schema, loc[:-1]) if schema is not None else None
+        model = _at(schema, loc[:-1])
         allowed = _keys(model) if model is not None else []
         parent = key_path(at + tuple(loc[:-1]))
         prefix = "" if parent == "(top level)" else parent + "."
@@ -203,7 +203,7 @@ def _reason(err: dict, schema: type[BaseModel] | None, at: tuple = ()) -> str:
     if kind in _TYPE_WORDS or kind == "either_type":
         hint = " (in quotes it is text: write the number without them)" if _number_text(value) else ""
         expected = err["msg"] if kind == "either_type" else f"must be {_TYPE_WORDS[kind]}"
-        model = _at(schema, loc) if kind == "model_type" and schema is not None else None
+        model = _at(schema, loc) if kind == "model_type" else None
         if getattr(model, "EXAMPLE", ""):
             expected += f" such as {model.EXAMPLE}"
         return f"{expected}, not {value!r}{hint}"
@@ -279,12 +279,7 @@ def _step(annotation, part):
 
 def _at(schema, loc: tuple):
     """The model (a Strict subclass) at ``loc`` in ``schema``, or None."""
-    annotation = schema
-    for part in loc:
-        annotation = _step(annotation, part)
-        if annotation is None:
-            return None
-    for member in _members(_unwrap(annotation)[0]):
+    for member in _members(_unwrap(_annotation(schema, loc))[0]):
         inner = _unwrap(member)[0]
         if isinstance(inner, type) and issubclass(inner, BaseModel):
             return inner
@@ -292,9 +287,10 @@ def _at(schema, loc: tuple):
 
 
 def _annotation(schema, loc: tuple):
+    """The annotation at ``loc`` in ``schema`` (None where it cannot be followed)."""
     annotation = schema
     for part in loc:
-        if schema is None or annotation is None:
+        if annotation is None:
             return None
         annotation = _step(annotation, part)
     return annotation
@@ -352,8 +348,9 @@ class Plausible:
         """Why ``value`` is implausible, or None."""
         if math.isinf(value) or self.low <= value <= self.high:
             return None
-        return (f"{value:.15g} {self.unit} is implausible: {self.reason} lie between {self.low:.15g} and "
-                f"{self.high:.15g} {self.unit} (is it in another unit?)")
+        unit = "" if self.unit == "1" else f" {self.unit}"
+        return (f"{value:.15g}{unit} is implausible: {self.reason} lie between {self.low:.15g} and {self.high:.15g}{unit}"
+                + (" (is it in another unit?)" if unit else ""))
 
     def _check(self, value):
         reason = self.problem(value)
