@@ -122,10 +122,10 @@ class FrictionSection(Strict):
 
 
 class LimitsSection(Strict):
-    torque_Nm: Annotated[float, Field(gt=0), Plausible(0.01, 1000.0, "N*m", "actuator torques of a head-sized robot")]
-    power_W: Annotated[float, Field(gt=0), Plausible(0.1, 1e5, "W", "actuator powers")]
-    axial_load_N: Annotated[float, Field(gt=0), Plausible(1.0, 1e5, "N", "bearing loads")]
-    radial_load_N: Annotated[float, Field(gt=0), Plausible(1.0, 1e5, "N", "bearing loads")]
+    torque_Nm: Annotated[float, Field(gt=0), Plausible(1e-4, 1000.0, "N*m", "actuator torques (micro motors to a head-sized robot's)")]
+    power_W: Annotated[float, Field(gt=0), Plausible(1e-3, 1e5, "W", "actuator powers")]
+    axial_load_N: Annotated[float, Field(gt=0), Plausible(0.1, 1e5, "N", "bearing loads")]
+    radial_load_N: Annotated[float, Field(gt=0), Plausible(0.1, 1e5, "N", "bearing loads")]
     # optional: the crank angle range, speed and acceleration limits; unbounded when absent
     theta_range_deg: Annotated[list[MaybeInfinite], Field(min_length=2, max_length=2)] = [-math.inf, math.inf]
     speed_rad_per_s: Annotated[MaybeInfinite, Field(gt=0), Plausible(0.01, 1e4, "rad/s", "crank speeds")] = math.inf
