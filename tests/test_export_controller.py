@@ -9,9 +9,11 @@ Gauss-Newton step fewer, a filter off by one tick, a reference off by one sample
 
 from __future__ import annotations
 
+import ctypes
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +21,8 @@ from recording_support import chewing_recording, registration
 from typer.testing import CliRunner
 
 from chewbot.cli import app
-from chewbot.export.controller import STATUS_BITS, ExportedController, StepLibrary, StepSpec, build_shared
+from chewbot.export.controller import (STATUS_BITS, STRUCTS, ExportedController, SharedLibrary, StepLibrary, StepSpec, build_shared,
+                                       fk_function, law_function, structures)
 from chewbot.simulation.run import SimulateOptions, build, compute
 from chewbot.table import Table
 
@@ -164,6 +167,59 @@ def home(spec):
     return home_angles(spec.model)
 
 
+@pytest.mark.parametrize("options", [dict(controller="computed-torque"), dict(controller="pd", model="6rss"),
+                                     dict(controller="computed-torque", method="newton-euler", friction="on")])
+def test_context_mirror_has_the_c_compilers_layout(options, tmp_path):
+    """The header's structs, compiled with the strict flags by a small program printing each member's offsetof and
+    sizeof and each struct's sizeof (tests/c/struct_layout.c), against their ctypes mirror, both generated from the
+    one field table: the same members at the same offsets with the same sizes (exact: bytes). On the target with
+    computed torque and with Newton-Euler (two normal forces, 8 gains, their own work sizes) and on the 6RSS with PD
+    (one unused normal-force slot, 12 gains)."""
+    from chewbot.export.controller.sources import dimensions, filled, header
+
+    spec = StepSpec.of(build(SimulateOptions(sensor="measured", **options))[6], 1000.0)
+    fk, law = fk_function(spec.model), law_function(spec)
+    (tmp_path / "chewbot_ctrl.h").write_text(header(spec, fk, law))
+    mirror = structures(dimensions(spec, fk, law), filled(spec))
+    members, expected = [], []
+    for struct in STRUCTS:
+        kind = mirror[struct.name]
+        assert [name for name, _ in kind._fields_] == [f.name for f in struct.fields]
+        for name, _ in kind._fields_:
+            members.append(f"MEMBER({struct.name}, {name})")
+            expected.append(f"{struct.name} {name} {getattr(kind, name).offset} {getattr(kind, name).size}")
+        members.append(f"STRUCT({struct.name})")
+        expected.append(f"{struct.name} - 0 {ctypes.sizeof(kind)}")
+    (tmp_path / "struct_members.h").write_text("\n".join(members) + "\n")
+    program = tmp_path / "layout"
+    done = subprocess.run(["cc", *STRICT, f"-I{tmp_path}", "-o", str(program), str(Path(__file__).parent / "c" / "struct_layout.c")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0 and not done.stderr, done.stderr
+    assert subprocess.run([str(program)], capture_output=True, text=True, check=True).stdout.splitlines() == expected
+
+
+def test_a_mirror_of_another_size_is_refused(step):
+    """A context mirror whose size differs from the library's sizeof(chewbot_ctrl) (here one work double more) is
+    refused before any call: a step through it would write past the context."""
+    lib, spec = step
+    shared = SharedLibrary(lib.shared.path, {**lib.shared.dimensions, "WORK_W": lib.shared.dimensions["WORK_W"] + 1})
+    with pytest.raises(RuntimeError, match="bytes"):
+        StepLibrary(spec, shared)
+
+
+def test_templates_are_filled_whole():
+    """A template's placeholder left without a value, or a value without a placeholder, is an error, not a file with
+    a hole in it or a value silently dropped."""
+    from chewbot.export.controller.sources import render
+
+    values = dict(rows="1", table="  0.0,")
+    assert render("chewbot_ctrl_task.c", **values).endswith("{\n  0.0,\n};\n")
+    with pytest.raises(KeyError):
+        render("chewbot_ctrl_task.c", rows="1")
+    with pytest.raises(ValueError, match="no placeholder for extra"):
+        render("chewbot_ctrl_task.c", **values, extra="x")
+
+
 def test_the_step_at_rest_at_home_is_quiet(step):
     lib, spec = step
     lib.init(0.0)
@@ -288,7 +344,7 @@ def test_encoder_offsets_and_homing(step):
     assert status == 0 and np.max(np.abs(shifted - plain)) <= 1e-12 * np.max(np.abs(plain))
     lib.init(0.0)
     lib.home(theta + offsets)
-    assert np.allclose(lib.offsets, offsets, atol=1e-15)
+    assert np.allclose(lib.context.offsets, offsets, atol=1e-15)
     again, _ = lib.step(0.0, theta + offsets)
     assert np.max(np.abs(again - plain)) <= 1e-12 * np.max(np.abs(plain))
 

@@ -81,6 +81,14 @@ def rates_function(mechanism: str, orientation: str) -> ca.Function:
     return _fn(mechanism, orientation, "rates", lambda s: {"theta": s.theta, "q": s.q, "dq": s.dq, "ddq": s.ddq}, outputs)
 
 
+def pose_rates_function(mechanism: str, orientation: str) -> ca.Function:
+    """(q, dq, ddq) -> pose, dpose, ddpose: X_EE in the orientation's parametrisation (with the parasitic
+    coordinates of the target) and its exact first and second time derivatives."""
+
+    return _fn(mechanism, orientation, "pose_rates", lambda s: {"q": s.q, "dq": s.dq, "ddq": s.ddq},
+               lambda s: dict(zip(("pose", "dpose", "ddpose"), (s.pose, *_rates(s.pose, s.q, s.dq, s.ddq)))))
+
+
 def _rates(x: ca.SX, q: ca.SX, dq: ca.SX, ddq: ca.SX) -> tuple[ca.SX, ca.SX]:
     """The first and second time derivatives of an expression x(q) along (q_dot, q_ddot), exact."""
     dx = ca.jtimes(x, q, dq)

@@ -16,12 +16,14 @@ import numpy as np
 from chewbot.compiled.cache import symbols
 from chewbot.compiled.kernels import evaluate, native
 from chewbot.errors import KinematicsError
-from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel, parasitic_function
+from chewbot.kinematics.functions import (KINEMATICS_OUTPUTS, jacobian_rates_function, jacobians_function, kinematics_kernel,
+                                         parasitic_function, pose_rates_function)
 from chewbot.kinematics.conditioning import reciprocal_condition
 from chewbot.kinematics.ik import check_chains, continuous
 from chewbot.kinematics.options import check_orientation
 from chewbot.kinematics.symbolic import COORDINATES
 from chewbot.model import Model
+from chewbot.rotation import euler_parameters_to_angles
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 from chewbot.units import factor
 
@@ -34,6 +36,10 @@ E3_DENOMINATOR_TOLERANCE = 1e-6
 # Parallel (type II) singularity: J_theta1, its columns normalised, closer to rank deficiency than this (its
 # smallest singular value over its largest): the actuators no longer determine the mandible's motion.
 PARALLEL_SINGULAR_TOLERANCE = 1e-6
+# A motion given in Euler parameters must keep abs(e) = 1 at every level: abs(e)^2 - 1, its rate 2 e.e_dot and its
+# second rate 2 (e.e_ddot + abs(e_dot)^2) may differ from 0 by this, relative to 1 + the rates' sizes (rounding of
+# a conversion leaves about 1e-16; an optimiser's equality constraint, chewbot.task.incisor's, 1e-9).
+UNIT_NORM_TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,6 +147,35 @@ def mechanism_coordinates(model: Model, orientation: str, X, dX, ddX, e, de, dde
         return X[:, cols], dX[:, cols], ddX[:, cols]
     k, ne = (2, 3) if model.has_hkp else (3, 4)
     return tuple(np.concatenate([x[:, :k], y[:, :ne]], axis=1) for x, y in ((X, e), (dX, de), (ddX, dde)))
+
+
+def euler_angle_motion(model: Model, orientation: str, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                       times: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse of :func:`mechanism_coordinates`: q_EE in ``orientation`` and its rates (N, n) -> the same motion in
+    the mechanism's Euler-angle coordinates (X, Y, alpha, beta for the target, X_EE for the 6RSS) and its rates,
+    exact (the pose and its rates by automatic differentiation, the angles' by
+    :func:`chewbot.rotation.euler_parameters_to_angles`). Euler parameters off abs(e) = 1 at any level (position,
+    velocity, acceleration; :data:`UNIT_NORM_TOLERANCE`) and gimbal lock raise :class:`KinematicsError` naming the
+    first such sample."""
+    check_orientation(orientation)
+    if orientation == "euler-angles":
+        return q, dq, ddq
+    x, dx, ddx = evaluate(pose_rates_function(model.mechanism, orientation), q, dq, ddq, model.vector())
+    e, de, dde = x[:, -4:], dx[:, -4:], ddx[:, -4:]
+    levels = (("abs(e)^2 - 1", np.sum(e * e, axis=1) - 1, 1.0),
+              ("its rate 2 e.e_dot", 2 * np.sum(e * de, axis=1), 1 + np.sum(np.abs(de), axis=1)),
+              ("its second rate 2 (e.e_ddot + abs(e_dot)^2)", 2 * (np.sum(e * dde, axis=1) + np.sum(de * de, axis=1)),
+               1 + np.sum(np.abs(dde), axis=1) + np.sum(de * de, axis=1)))
+    for what, value, scale in levels:
+        bad = np.flatnonzero(~(np.abs(value) <= UNIT_NORM_TOLERANCE * scale))
+        if bad.size:
+            k = int(bad[0])
+            raise KinematicsError(f"the Euler parameters leave abs(e) = 1: {what} = {value[k]:.3g} (tolerance "
+                                  f"{UNIT_NORM_TOLERANCE:g}); {bad.size} sample(s) affected", sample=k,
+                                  time=None if times is None else float(times[k]))
+    k = 2 if model.has_hkp else 3  # the independent positions, then as many angles
+    angles = euler_parameters_to_angles(e, de, dde, times)
+    return tuple(np.column_stack([lin[:, :k], ang[:, :k]]) for lin, ang in zip((x, dx, ddx), angles))
 
 
 def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarray) -> None:

@@ -31,10 +31,10 @@ import numpy as np
 from chewbot.compiled.cache import cached_graph, folded
 from chewbot.compiled.kernels import evaluate
 from chewbot.errors import KinematicsError, TaskError
+from chewbot.kinematics.motion import euler_angle_motion
 from chewbot.kinematics.options import check_orientation
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
-from chewbot.rotation import euler_parameters_to_angles
 from chewbot.table import Table
 from chewbot.kinematics.task import TARGET_COORDS, Task
 from chewbot.units import factor
@@ -218,7 +218,7 @@ def track_incisor(
     I, dI, ddI = incisor_path(model, q, dq, ddq, orientation)
     f_D, f_V, f_A = I - p, dI - v, ddI - a
     _check_solution(t, f_D, max_residual, evaluate(constraints, q, dq, ddq), refs)
-    X = _angles(model, orientation, q, dq, ddq, t)
+    X = euler_angle_motion(model, orientation, q, dq, ddq, t)
     task = Task(name=name, t=t, coords=TARGET_COORDS, q=X[0], dq=X[1], ddq=X[2],
                 force=np.zeros((n, 3)) if force is None else force, side=side, source="incisor tracking",
                 meta={"generator": "incisor", "orientation": orientation, "pin": pin,
@@ -251,21 +251,3 @@ def _check_solution(t, f_D, max_residual, constraints, refs) -> None:
                                   f"{err[i]:.3g} m > {max_residual:g} m; {bad.size} sample(s)) with the pinned coordinate's "
                                   "trajectory; give the one the motion has (a column of the path file, such as "
                                   "alpha[deg], or pinned= from Python) or pin another coordinate", sample=i, time=float(t[i]))
-
-
-def _angles(model: Model, orientation: str, q, dq, ddq, t):
-    """The motion in (X, Y, alpha, beta) and rates, converted exactly from ``orientation``'s q_EE."""
-    if orientation == "euler-angles":
-        return q, dq, ddq
-    fn = _pose_rates(model)
-    x, dx, ddx = evaluate(fn, q, dq, ddq)
-    angles = euler_parameters_to_angles(x[:, 3:7], dx[:, 3:7], ddx[:, 3:7], t)
-    return tuple(np.column_stack([lin[:, :2], ang[:, :2]]) for lin, ang in zip((x, dx, ddx), angles))
-
-
-def _pose_rates(model: Model) -> ca.Function:
-    def build():
-        s = symbolic(folded(model), "euler-parameters")
-        return ca.Function("pose_rates", [s.q, s.dq, s.ddq], list(_levels(s.pose, s.q, s.dq, s.ddq)))
-
-    return cached_graph(folded(model), ("incisor", "pose_rates"), build)
