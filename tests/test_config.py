@@ -86,7 +86,7 @@ MISTAKES = [
      "0.4 g is implausible: masses of a mandible lie between 10 and 10000 g (is it in another unit?)"),
     ("registration", "point_mm = [80.0,", "point_mm = [80000.0,", "fit.point_mm[1]", "80000 mm is implausible"),
     ("food", "young_modulus_kPa = 20.0", "young_modulus_kPa = 7000000", "food.young_modulus_kPa",
-     "7000000 kPa is implausible: Young's moduli of foods (jellies about 1 kPa, hard candy about 1 GPa) lie between 0.1 and 1000000 kPa"),
+     "7000000 kPa is implausible: Young's moduli of foods (creams tens of Pa, hard candy about 1 GPa) lie between 0.001 and 1000000 kPa"),
     ("spec", '"mandible.mass_g" = 350.0', '"mandible.mass_g" = 0.4', 'set."mandible.mass_g"', "0.4 g is implausible"),
     ("grid", "beta_deg = 5.0", "beta_deg = { values = [0.0, 1000.0] }", "grid.beta_deg.values[2]",
      "1000 deg is implausible: rotations of a mandible from its home pose lie between -180 and 180 deg"),

@@ -31,11 +31,13 @@ form. The pieces are public for the formats that read a file in parts (a gains f
 * :func:`format_validation_error`: pydantic's errors as chewbot words them;
 * :func:`unknown_key` and :func:`did_you_mean`: the wording of an unknown key and of the closest choice (also for
   keys that are not TOML, ``--set`` and ``--gain`` arguments);
-* :func:`key_path`: a location as the messages write it;
+* :func:`key_path` and :func:`quoted`: a location and a key with dots as the messages write them;
 * :class:`Plausible`: a plausible range as data beside a field (``Annotated[float, Field(gt=0), Plausible(10, 1e4,
   "g", "a mandible ...")]``; on a list it applies to every entry);
 * :func:`either`: a value that may be of two TOML types (a number or a list, a number or a table), validated as the
-  one it is, with no trace of the alternative in the key path.
+  one it is, with no trace of the alternative in the key path;
+* a model's ``DOCS`` (the page that lists its keys, named beside an unknown key) and ``EXAMPLE`` (how its table is
+  written, shown where something else is given).
 """
 
 from __future__ import annotations

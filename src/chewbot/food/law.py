@@ -363,7 +363,7 @@ class FoodTable(Strict):
     shape: Literal[SHAPES]
     height_mm: Annotated[float, Field(gt=0), Plausible(0.5, 100.0, "mm", "heights of a sample between molars")]
     diameter_mm: Annotated[float, Field(gt=0), Plausible(0.5, 100.0, "mm", "diameters of a sample between molars")] | None = None
-    young_modulus_kPa: Annotated[float, Field(gt=0), Plausible(0.1, 1e6, "kPa", "Young's moduli of foods (jellies about 1 kPa, hard candy about 1 GPa)")]
+    young_modulus_kPa: Annotated[float, Field(gt=0), Plausible(1e-3, 1e6, "kPa", "Young's moduli of foods (creams tens of Pa, hard candy about 1 GPa)")]
     poisson_ratio: Annotated[float, Field(ge=0, le=0.5)] | None = None
     damping_s_per_m: Annotated[float, Field(ge=0), Plausible(0.0, 1000.0, "s/m", "Hunt-Crossley damping factors of foods")] | None = None
     fracture_strain: Annotated[float, Field(gt=0, le=1)] | None = None
