@@ -35,7 +35,7 @@ NOT_RUN = {
     "--scheduler tcp://": "needs a running Dask cluster at that address (docs/sweeps.md shows how to start one)",
 }
 # Subcommands that finish in a few seconds on the shipped examples; the others are slow.
-QUICK = ("models", "check-model", "cache", "import-motion", "track-incisor")
+QUICK = ("models", "check-model", "cache", "import-motion", "track-incisor", "fit-comminution")
 
 
 @dataclass(frozen=True)
@@ -129,7 +129,7 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return [f"{out}/chewbot-export.json"]
     if sub == "export-controller":
         return [f"{out}/chewbot-export.json", f"{out}/include/chewbot_ctrl.h", f"{out}/Makefile"]
-    if sub in ("export-model", "estimate-force"):
+    if sub in ("export-model", "estimate-force", "fit-comminution"):
         return [out or "robot.xml"]
     if sub == "tpa":
         return [f"{out}/tpa.json"] + ([] if "--log" in args else [f"{out}/results.csv", f"{out}/task.csv"])

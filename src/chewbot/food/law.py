@@ -73,6 +73,7 @@ from pydantic import Field, StringConstraints
 
 from chewbot.config import Plausible, Strict, key_error, read_text, validate
 from chewbot.errors import ChewbotError
+from chewbot.food.comminution import ComminutionTable
 from chewbot.units import factor, key_unit
 
 # The teeth's own contact once the sample is flat (delta >= h0): a linear spring of 1 kN/mm, the order of a molar's
@@ -134,6 +135,7 @@ class Food:
     relaxation_modulus: float = 0.0
     adhesion: float = 0.0
     source: str = ""
+    comminution: ComminutionTable | None = None  # the file's [comminution] table (chewbot.food.bolus), if any
 
     @property
     def area(self) -> float | None:
@@ -200,6 +202,8 @@ class Food:
             out.update(relaxation_time_s=self.relaxation_time, relaxation_modulus_kPa=self.relaxation_modulus / kPa)
         out.update(adhesion_N=self.adhesion, tooth_friction=self.tooth_friction, source=self.source,
                    tooth_stiffness_N_per_m=TOOTH_STIFFNESS, friction_speed_m_per_s=FRICTION_SPEED)
+        if self.comminution is not None:
+            out["comminution"] = self.comminution.model_dump()
         return out
 
 
@@ -209,12 +213,12 @@ class Food:
 def _casadi_backend():
     import casadi as ca
 
-    return SimpleNamespace(fmax=ca.fmax, fmin=ca.fmin, where=ca.if_else, sqrt=ca.sqrt, exp=ca.exp, fabs=ca.fabs,
-                           arccos=ca.acos)
+    return SimpleNamespace(fmax=ca.fmax, fmin=ca.fmin, where=ca.if_else, sqrt=ca.sqrt, exp=ca.exp, log=ca.log,
+                           fabs=ca.fabs, arccos=ca.acos, sum=ca.sum1, asarray=ca.DM)
 
 
-NUMPY = SimpleNamespace(fmax=np.maximum, fmin=np.minimum, where=np.where, sqrt=np.sqrt, exp=np.exp, fabs=np.abs,
-                        arccos=np.arccos)
+NUMPY = SimpleNamespace(fmax=np.maximum, fmin=np.minimum, where=np.where, sqrt=np.sqrt, exp=np.exp, log=np.log,
+                        fabs=np.abs, arccos=np.arccos, sum=np.sum, asarray=np.asarray)
 
 
 class _Casadi:
@@ -378,11 +382,12 @@ class FoodTable(Strict):
 
 
 class FoodFile(Strict):
-    """A food file: one table ``[food]``."""
+    """A food file: a table ``[food]`` and, optionally, a table ``[comminution]`` (:mod:`chewbot.food.comminution`)."""
 
     DOCS = "docs/food.md"
 
     food: FoodTable
+    comminution: ComminutionTable | None = None
 
 
 # Keys that apply to one shape only, and are required for it.
@@ -411,7 +416,8 @@ def load_food(name_or_path: str | Path) -> Food:
 
 def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
     """A food from the content of a food file (a table ``[food]`` with the keys of docs/food.md)."""
-    table = validate(FoodFile, raw, source, FoodError).food
+    f = validate(FoodFile, raw, source, FoodError)
+    table = f.food
     given = table.model_dump(exclude_none=True)
 
     def fail(key: str, reason: str):
@@ -438,7 +444,7 @@ def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
     for key, value in given.items():  # SI: each key's value times the factor of the unit it ends with
         attribute, unit = key_unit(key)
         values[attribute] = value * factor(unit) if unit else value
-    return Food(source=source, **values)
+    return Food(source=source, comminution=f.comminution, **values)
 
 
 __all__ = ["CASADI", "FOOD_EVENTS", "FOOD_PARAMETERS", "FOOD_STATE", "FRICTION_SPEED", "Food", "FoodError", "N_FOOD", "NUMPY",
