@@ -41,6 +41,7 @@ from chewbot.food.law import CASADI
 from chewbot.food.sieving import SIEVES_MM, SIEVING_MM
 from chewbot import units
 from chewbot.units import HEADER_CELL, unit_factor
+from chewbot.progress import SILENT, Progress
 
 # The keys fitted unless the command names others: the rate of selection, the strength and the fragments' size.
 DEFAULT_KEYS = ("placement", "strength_at_1mm_MPa", "fragment_size")
@@ -243,7 +244,7 @@ class ComminutionFit:
 
 def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS,
                     closing_force: float = CLOSING_FORCE_N, min_gap: float = MIN_GAP_MM * units.factor("mm"),
-                    progress=None, check=None) -> ComminutionFit:
+                    progress: Progress = SILENT, check=None) -> ComminutionFit:
     """Fit ``keys`` of ``table`` to ``sieving`` (module docstring); ``progress(message)`` is told of each evaluation,
     ``check()`` is called there (it raises to stop)."""
     from scipy.optimize import least_squares
@@ -277,8 +278,7 @@ def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS
     def residual(theta):
         predicted, _ = evaluate(theta)
         r = (predicted - measured).ravel()
-        if progress is not None:
-            progress(f"least squares: evaluation {evaluations}, cost {0.5 * float(r @ r):.4g}")
+        progress(f"least squares: evaluation {evaluations}, cost {0.5 * float(r @ r):.4g}")
         return r
 
     def jacobian(theta):
@@ -287,8 +287,7 @@ def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS
     start = np.array([getattr(table, key) for key in keys], float)
     low = np.array([PARAMETERS[k][2] for k in keys])
     high = np.array([PARAMETERS[k][3] for k in keys])
-    if progress is not None:
-        progress(f"least squares: {len(keys)} parameters, {len(measured)} distributions")
+    progress(f"least squares: {len(keys)} parameters, {len(measured)} distributions")
     sol = least_squares(residual, np.clip(start, low, high), jac=jacobian, bounds=(low, high), x_scale="jac",
                         xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
     J = jacobian(sol.x)

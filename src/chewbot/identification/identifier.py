@@ -19,6 +19,7 @@ from chewbot.identification.log import RobotLog
 from chewbot.identification.motion import LogMotion, log_motion
 from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMETERS, x_of
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.task import smoothing
 from chewbot.units import factor
 
@@ -136,7 +137,7 @@ def references(model: Model, x0: np.ndarray) -> np.ndarray:
 
 def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
              fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
-             progress=None, check=None) -> Identification:
+             progress: Progress = SILENT, check=None) -> Identification:
     """Estimate the friction and the mandible's inertia of ``model`` from ``log`` (see the module docstring).
 
     ``fix``: parameter-file keys (:data:`chewbot.identification.parameters.GROUPS`) kept at the model's values;
@@ -144,11 +145,10 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     thresholds (:mod:`chewbot.identification.estimate`); ``progress(message, stage=None)`` is told each stage (the
     least squares as the stage ``fit``); ``check()`` is called at each evaluation of the residual and raises to stop.
     """
-    step = progress or (lambda msg, stage=None: None)
     for key in fix:
         if key not in GROUPS:
             raise ChewbotError(f"--fix {key}: not an identified key; choose among {', '.join(GROUPS)}")
-    step("motion from the crank angles")
+    progress("motion from the crank angles")
     motion = log_motion(model, log, side, window_s)
     x0 = x_of(model)
     status = ["" for _ in PARAMETERS]
@@ -169,9 +169,9 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
                            f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
     problem = ReducedProblem(model, motion.kin, log.tau, used, check)
-    step("the start model")
-    result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
-    step("results")
+    progress("the start model")
+    result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, progress)
+    progress("results")
     for j in np.flatnonzero(free):
         status[j] = "held" if result.held[j] else "estimated"
     for j in np.flatnonzero(result.at_bound):

@@ -73,7 +73,9 @@ class RegistrationFile(Strict):
     units: str
     markers: dict[str, Vec3] | None = None
     rest: Literal["first"] | None = None
-    tracked: Literal["incisor"] | None = None
+    # what the recording tracks: a rigid body, or the point of the mandible (a LANDMARKS name) whose path the markers
+    # give (one marker, or several moving in parallel); without the key it is detected (recordings.anatomy.detect)
+    tracked: Literal["rigid", "incisor", "molar_left", "molar_right", "condyle_left", "condyle_right"] | None = None
     landmarks: LandmarksSection | None = None
     tracker: TrackerSection = TrackerSection()
     scale: float = Field(1.0, gt=0)
@@ -94,7 +96,8 @@ class Registration:
     ``rotation`` (3, 3) and ``origin`` (3,) m with p_S = rotation p_T + origin; ``point`` (3,) m in {M} or None
     (the model's incisal point); weights per mm and per degree; ``landmarks``: digitised points of the mandible
     at the rest frame in the tracker's frame (m), by the name of the model's point they are (:data:`LANDMARKS`),
-    or None; ``tracked``: "incisor" for an incisal-point recording, else None."""
+    or None; ``tracked``: "rigid", the name of the point of the mandible whose path the markers give (a
+    :data:`LANDMARKS` name), or None: detected from the recording."""
 
     source: str
     units: str
@@ -107,7 +110,12 @@ class Registration:
     orientation_weight_per_deg: float
     point: np.ndarray | None
     landmarks: dict[str, np.ndarray] | None = None  # name: position (m) in the tracker's frame at the rest frame
-    tracked: str | None = None  # "incisor": the recording tracks the incisal point (its markers move in parallel)
+    tracked: str | None = None  # "rigid", a landmark's name (a point path) or None (detected from the recording)
+
+    @property
+    def point_path(self) -> bool:
+        """The recording is the path of one point of the mandible (``tracked`` names it)."""
+        return self.tracked not in (None, "rigid")
 
 
 def load_registration(path: str | Path) -> Registration:
@@ -123,13 +131,14 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     def fail(key: str, reason: str):
         raise key_error(source, key, reason, RecordingError)
 
-    if f.tracked is not None:
-        if f.markers is not None or f.landmarks is not None or f.rest is not None or f.fit.point_mm is not None:
-            fail("tracked", "tracked = \"incisor\": the recording's markers are the incisal point, carried into {S} by "
-                 "[tracker]; it takes no [markers], [landmarks], rest or [fit] point_mm")
+    if f.tracked not in (None, "rigid"):
+        if f.markers is not None or f.landmarks is not None or f.fit.point_mm is not None:
+            fail("tracked", f"tracked = \"{f.tracked}\": the recording's markers give the path of that point, carried into "
+                 "{S} by [tracker]; it takes no [markers], [landmarks] or [fit] point_mm (rest, [tracker], scale and the "
+                 "[fit] weights it takes)")
         return Registration(source, f.units, None, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * length_factor(f.units, source),
                             f.scale, f.angle_scale, f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                            None, None, "incisor")
+                            None, None, f.tracked)
     if (f.markers is None) == (f.rest is None):
         fail("markers" if f.markers is None else "rest", "give either a [markers] table (each marker's position in {M}) "
              "or rest = \"first\" (the first frame defines the markers and is the home pose), not both or neither")
@@ -151,7 +160,8 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
             fail("markers", "the markers lie on one line (or nearly): they do not fix a rotation about it")
     return Registration(source, f.units, markers, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
                         f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * factor("mm"), landmarks)
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * factor("mm"), landmarks,
+                        "rigid" if f.markers is not None or landmarks is not None else f.tracked)
 
 
 def _rotation(rows, fail) -> np.ndarray:
@@ -184,7 +194,7 @@ def registration_toml(reg: Registration, comment: str) -> str:
     lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}"]
     if reg.tracked is not None:
         lines += [f'tracked = "{reg.tracked}"']
-    else:
+    if not reg.point_path:
         lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / mm)}" for name, p in (reg.markers or {}).items()]
     lines += ["", "[tracker]", "rotation = [" + ",\n            ".join(vec(row) for row in reg.rotation) + "]",
               f"origin = {vec(reg.origin / mm)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
