@@ -107,7 +107,7 @@ class Contact:
     preload: float = 0.0
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True)
 class Drive:
     """The drive train of each of the six cranks (all alike): a DC motor on a gearhead. SI units.
 
