@@ -293,3 +293,20 @@ def test_identify_and_estimate_force_read_a_current_only_log(simulated, tmp_path
     assert (tmp_path / "id.toml").exists()
     out = run_cli("estimate-force", str(path), "--model", "target-as-printed", "--out", str(tmp_path / "f2.csv"))
     assert out.exit_code == 2 and "no drive" in out.output
+
+
+def test_a_plant_with_another_gearbox_than_the_controllers(target):
+    """--plant-set drive.gear_efficiency: the controller's currents, through the plant's own loss law, give other
+    torques than it meant (the loss law of 0.6 instead of 0.75 where power flows); --rate continuous, which applies the
+    law's torques as they are, refuses such a plant."""
+    with pytest.raises(chewbot.ChewbotError, match="--rate continuous.*drive"):
+        chewbot.simulate("target", controller="computed-torque", rate="continuous",
+                         overrides={"task.cycles": 1}, plant_overrides={"drive.gear_efficiency": 0.6})
+    r = chewbot.simulate("target", controller="computed-torque", overrides={"task.cycles": 1},
+                         plant_overrides={"drive.gear_efficiency": 0.6})
+    sim, plant = r.simulation, r.plant_model.drive
+    assert plant.efficiency == 0.6 and r.model.drive.efficiency == 0.75
+    np.testing.assert_allclose(law.crank_torque(plant, sim.tau_motor, r.kinematics.dtheta), sim.tau, rtol=1e-9, atol=1e-12)
+    meant = np.clip(sim.tau_cmd, -5, 5)
+    assert np.abs(sim.tau - meant).max() > 0.05 * np.abs(meant).max()  # the gearbox the controller does not know
+    assert r.metrics["stopped"] is None
