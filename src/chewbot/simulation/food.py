@@ -67,7 +67,7 @@ class FoodState:
     F_n: float
 
 
-def _food_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
+def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
     """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e, the bite point's velocity,
     cos of the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
@@ -94,7 +94,7 @@ def food_stage(mechanism: str) -> ca.Function:
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
         s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
         B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
+        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
         F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
         _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)
         r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
@@ -119,7 +119,7 @@ def food_function(mechanism: str) -> ca.Function:
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
         broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
+        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, z_home], [delta, ddelta, bFe, F_v, F_n, F, cos_tilt],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "z_home"],
@@ -157,12 +157,23 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [food_step_kernel(self.mechanism), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
+        return [self.step_kernel(), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
+
+    def step_kernel(self) -> KernelSpec:
+        """The compiled step it advances by (:func:`food_step_kernel`)."""
+        return food_step_kernel(self.mechanism)
 
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
                                 z_home=self._z_home)
+
+    def shared_at(self, s0: np.ndarray, state: PlantState) -> np.ndarray:
+        """s of a step from ``state``: ``s0`` (:meth:`shared`) with the food's state at the step's start."""
+        s = s0.copy()
+        blocks, food = FOOD_SHARED.split(s), state.internal.food
+        blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+        return s
 
     def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
         """The food's state at one plant state."""
@@ -183,6 +194,10 @@ class FoodPlant(Plant):
 
     # ---------------------------------------------------------------------------------------------- events
 
+    def guards_at(self, internal: FoodSolved) -> np.ndarray:
+        """The guard functions at the plant's own state (:meth:`guards` of its food's)."""
+        return self.guards(internal.food)
+
     def guards(self, state: FoodState) -> np.ndarray:
         """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed)."""
         f = self.food
@@ -196,14 +211,7 @@ class FoodPlant(Plant):
         replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
-
-            def shared(state: PlantState) -> np.ndarray:  # s with the food's state at the step's start
-                s = s0.copy()
-                blocks, food = FOOD_SHARED.unpack(s), state.internal.food
-                blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
-                return s
-
-            self._step = Step(native(food_step_kernel(self.mechanism)), shared)
+            self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
 
         def stage(t0: float, dt: float) -> np.ndarray:
             return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
@@ -220,14 +228,14 @@ class FoodPlant(Plant):
         """One step of h seconds from ``state``, or to just past the first event within it (then switched)."""
         step = self._step
         trial = self.interval(step, stage, state, h, 0)
-        g0, g1 = self.guards(state.internal.food), self.guards(trial.internal.food)
+        g0, g1 = self.guards_at(state.internal), self.guards_at(trial.internal)
         crossed = np.flatnonzero(np.sign(g0) * np.sign(g1) < 0)
         if not crossed.size or not trial.margin > 0:
             return trial
         first, root = None, h
         for i in crossed:
             def guard(dt, i=i):
-                return self.guards(self.interval(step, stage, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
+                return self.guards_at(self.interval(step, stage, state, dt, 0).internal)[i] if dt > 0 else g0[i]
 
             r = brentq(guard, 0.0, h, xtol=EVENT_TOLERANCE, rtol=4 * np.finfo(float).eps)
             if r < root or first is None:
@@ -235,7 +243,7 @@ class FoodPlant(Plant):
         # just past the crossing: the step whose end has the guard's new sign
         past = min(h, root + EVENT_TOLERANCE)
         after = self.interval(step, stage, state, past, 0)
-        while np.sign(self.guards(after.internal.food)[first]) == np.sign(g0[first]) and past < h:
+        while np.sign(self.guards_at(after.internal)[first]) == np.sign(g0[first]) and past < h:
             past = min(h, past + EVENT_TOLERANCE * 10)
             after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
@@ -279,9 +287,8 @@ class FoodPlant(Plant):
                          "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
 
 
-def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
-    """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
-    :class:`FoodPlant`."""
+def build(model, friction: bool, side: str, food: Food | None = None) -> Plant:
+    """chewbot's :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a :class:`FoodPlant`."""
     if food is None:
         return Plant(model, friction=friction, side=side)
     return FoodPlant(model, friction=friction, side=side, food=food)
@@ -292,5 +299,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx",
            "food_stage", "food_step_kernel", "start_gap"]
