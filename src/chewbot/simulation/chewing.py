@@ -154,6 +154,30 @@ def repeated_task(model: Model, one: Task, cycles: int, closing_force: float) ->
                 one.source, meta={"generator": "repeated cycle", "cycle_s": T, "cycles": cycles})
 
 
+def sequence_task(model: Model, food: Food, side: str, cycles: int, cycle: ChewingCycle, path=None, controller=None) -> tuple[Task, float]:
+    """The task of a sequence and its cycle's period (s): ``cycles`` default cycles, or of the cycle in the task CSV
+    ``path``; without its force where ``controller`` (a controller table's row) does not read the task's force as a
+    force reference (it then follows the motion to its closest gap). The cycle must start with the teeth farther
+    apart than the food's height (ChewError otherwise)."""
+    from chewbot.food.geometry import gap
+    from chewbot.run.pipeline import load_task
+
+    if path is None:
+        task, period = chewing_task(model, side, cycles, cycle), cycle.period
+    else:
+        one = load_task(str(path), model, side, {})
+        task = repeated_task(model, one, cycles, cycle.closing_force_N)
+        period = float(one.t[-1] - one.t[0])
+    g0 = float(gap(model, side, task.q[:1], task.dq[:1])["gap"][0])
+    if g0 <= food.height:
+        where = "--opening-mm" if path is None else f"--task {path}"
+        raise ChewError(f"{where}: the cycle starts with a gap of {g0 * 1e3:.4g} mm at the {side} bite point, not above the "
+                        f"{food.name}'s height ({food.height * 1e3:.4g} mm); open wider")
+    if controller is not None and not controller.force_reference:
+        task = replace(task, force=np.zeros_like(task.force))
+    return task, period
+
+
 # ------------------------------------------------------------------------------------------- the sequence
 
 
@@ -170,17 +194,38 @@ class CycleRecord:
     strokes: int
 
 
+# The human references of the built-in foods' boluses (docs/bolus.md): X50 (mm) low, high, and where it is from.
+HUMAN_X50_MM = {"peanut": (1.18, 1.26, "human, 20-26 chews (Hutchings et al. 2012)"),
+                "carrot": (0.0, 4.0, "normal at swallow, X50 <= 4.0 mm (Woda et al. 2010)")}
+# The bolus's texture test (--tpa-at): compression of its height (%), speed (mm/s), pause (s): the texture test's defaults.
+BOLUS_TPA = (50.0, 2.0, 2.0)
+
+
 @dataclass
 class Chewing:
-    """A chewing sequence: the ``food``, the simulation ``result``, the per-cycle ``records``, the cycle ``period`` (s),
-    its ``checks`` and the ``reason`` it ended early (None)."""
+    """A chewing sequence: the ``food`` and its comminution ``table``, the simulation ``result``, the per-cycle
+    ``records``, the cycle ``period`` (s), its ``checks``, ``target_x50_mm`` (--until-x50-mm), ``band`` the human
+    reference's X50 (low, high mm, label) or None, ``tpa`` the bolus's texture tests (:func:`bolus_tpa`)."""
 
     food: Food
+    table: object
     result: object
     records: list[CycleRecord]
     period: float
     checks: list = field(default_factory=list)
     target_x50_mm: float | None = None
+    band: tuple | None = None
+    tpa: list = field(default_factory=list)
+
+    def record(self) -> dict:
+        """run.json's ``chew``: the law, the stroke, the cycles' figures, the bolus's texture tests."""
+        return {"food": self.food.name, "cycles": len(self.records) - 1, "period_s": self.period,
+                "target_x50_mm": self.target_x50_mm, "human_x50_mm": None if self.band is None else list(self.band),
+                "law": self.result.info.get("bolus", {}).get("law"),
+                "per_cycle": [{"cycle": r.cycle, "x50_mm": r.fit.x50_mm, "b": r.fit.b, "extrapolated": r.fit.extrapolated,
+                               "determined": r.fit.determined, "peak_force_N": r.peak_force, "work_J": r.work,
+                               "strokes": r.strokes, "mass_g": r.bolus.total * 1e3} for r in self.records],
+                "tpa": self.tpa}
 
 
 def cycles_for(food: Food, x50_mm: float, cycle: ChewingCycle) -> int:
@@ -219,9 +264,36 @@ def chew(options, task: Task, period: float, progress=None, check=None, target_x
                                    float(closing[rows[1:]].sum()), int(np.sum(in_cycle == k))))
         if target_x50_mm is not None and records[-1].fit.determined and records[-1].fit.x50_mm <= target_x50_mm:
             break
-    chewing = Chewing(food, result, records, period, target_x50_mm=target_x50_mm)
+    chewing = Chewing(food, c, result, records, period, target_x50_mm=target_x50_mm, band=HUMAN_X50_MM.get(options.food))
     chewing.checks = sequence_checks(chewing, cycles)
     return chewing
+
+
+def bolus_tpa(chewing: Chewing, shares_percent) -> list[dict]:
+    """The bolus's texture test after each share (%) of the cycles chewed: the ideal texture analyser
+    (the protocol of :data:`BOLUS_TPA`, every stroke at its speed) on the intact food's bulk law at cycle 0, and on the
+    particle bed's law (:func:`chewbot.food.bolus.bed_force`, the bolus after that cycle) after: Bourne's measures."""
+    from chewbot.food.bolus import bed_force
+    from chewbot.food.law import NUMPY
+    from chewbot.food.tpa import ideal_test, protocol, settings, tpa_measures
+
+    compression, speed, pause = BOLUS_TPA
+    n = len(chewing.records) - 1
+    out = []
+    for share in shares_percent:
+        k = int(round(share / 100 * n))
+        if k == 0:
+            height = chewing.food.height
+            measures = ideal_test(chewing.food, settings(compression, speed, pause, pre_test_speed_mm_s=speed)).analysis.measures
+        else:
+            b = chewing.records[k].bolus.bed(chewing.table)
+            height = float(b[0])
+            p = protocol(height, compression, speed, pause)
+            t = p.times()
+            g = p.path(t)[0]
+            measures = tpa_measures(t, g, bed_force(NUMPY, b, g))
+        out.append({"share_percent": float(share), "cycle": k, "height_mm": height * 1e3, "measures": measures})
+    return out
 
 
 def sequence_checks(chewing: Chewing, cycles: int) -> list:
@@ -261,4 +333,4 @@ def sequence_checks(chewing: Chewing, cycles: int) -> list:
 
 
 __all__ = ["BURST_SHARE", "ChewError", "Chewing", "ChewingCycle", "CycleRecord", "chew", "chewing_task", "cycle_poses",
-           "cycles_for", "repeated_task"]
+           "cycles_for", "bolus_tpa", "repeated_task", "sequence_task", "HUMAN_X50_MM"]

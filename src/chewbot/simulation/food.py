@@ -128,6 +128,20 @@ def food_function(mechanism: str) -> ca.Function:
     return cached_graph(m, ("food-quantities",), build)
 
 
+def food_quantities_kernel(mechanism: str) -> KernelSpec:
+    """:func:`food_function` compiled: the food's state at each step's end is one call of it."""
+    from chewbot.model.symbolic import c_name
+
+    name = f"food_quantities_{c_name(mechanism)}"
+
+    def build(params):
+        fn = food_function(mechanism)
+        inputs = fn.sx_in()
+        return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
+
+    return KernelSpec(name, build, (mechanism, "food-quantities"), mechanism)
+
+
 @dataclass(frozen=True)
 class FoodSolved(Solved):
     """The food plant's own state: the plant's (``z``) and the food's (``food``)."""
@@ -157,7 +171,8 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [self.step_kernel(), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
+        return [self.step_kernel(), food_quantities_kernel(self.mechanism), forward_kernel(self.mechanism),
+                plant_outputs_kernel(self.mechanism)]
 
     def step_kernel(self) -> KernelSpec:
         """The compiled step it advances by (:func:`food_step_kernel`)."""
@@ -178,8 +193,8 @@ class FoodPlant(Plant):
     def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
         """The food's state at one plant state."""
         if self._fn is None:
-            self._fn = food_function(self.mechanism)
-        delta, _, bFe, F_v, F_n, _, _ = self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home)
+            self._fn = native(food_quantities_kernel(self.mechanism))
+        delta, _, bFe, F_v, F_n, _, _ = (x[0] for x in self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home))
         return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n))
 
     def initial(self, t: float, q, dq) -> PlantState:
@@ -299,5 +314,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx", "food_quantities_kernel",
            "food_stage", "food_step_kernel", "start_gap"]

@@ -1,0 +1,68 @@
+"""PNG figures of a chewing sequence (``chewbot chew``): the particle size distribution after each cycle, X50 against
+the cycles with the human reference, and the force and work per cycle. Every axis says its unit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from chewbot.report.plotting import save, subplots
+
+
+def distribution(cycles: np.ndarray, sieves_mm: np.ndarray, fractions: np.ndarray, path: Path, title: str = "") -> Path:
+    """The cumulative mass passing each sieve (%) against its aperture (mm), one curve per cycle (``fractions``:
+    (cycles, sieves) retained on each sieve, the pan last)."""
+    from matplotlib import colormaps
+
+    fig, ax = subplots(figsize=(8, 5))
+    passing = 1 - np.cumsum(fractions, axis=1)  # below each sieve: what it does not retain nor the coarser ones
+    colours = colormaps["viridis"](np.linspace(0, 1, len(cycles)))
+    for k, row, colour in zip(cycles, passing, colours):
+        ax.plot(sieves_mm[:-1], 100 * row[:-1], marker="o", ms=3, lw=1.0, color=colour, label=f"cycle {int(k)}")
+    ax.set_xscale("log")
+    ax.set_xlabel("sieve aperture [mm]")
+    ax.set_ylabel("cumulative mass passing [%]")
+    ax.set_title(f"Particle size distribution per cycle{f': {title}' if title else ''}")
+    ax.grid(alpha=0.3, which="both")
+    if len(cycles) <= 12:
+        ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def x50(cycles: np.ndarray, x50_mm: np.ndarray, extrapolated: np.ndarray, path: Path, band: tuple | None = None,
+        title: str = "") -> Path:
+    """X50 (mm) against the cycles; extrapolated values hollow; ``band`` (low mm, high mm, label) the human reference."""
+    fig, ax = subplots(figsize=(8, 5))
+    ax.plot(cycles, x50_mm, color="C0", lw=1.0)
+    inside = ~extrapolated
+    ax.plot(cycles[inside], x50_mm[inside], "o", color="C0", ms=4, label="X50 (Rosin-Rammler fit)")
+    if extrapolated.any():
+        ax.plot(cycles[extrapolated], x50_mm[extrapolated], "o", mfc="none", color="C0", ms=4,
+                label="X50 beyond the top sieve (extrapolated)")
+    if band is not None:
+        ax.axhspan(band[0], band[1], color="C2", alpha=0.25, label=band[2])
+    ax.set_yscale("log")
+    ax.set_xlabel("chewing cycles [1]")
+    ax.set_ylabel("median particle size X50 [mm]")
+    ax.set_title(f"X50 against cycles{f': {title}' if title else ''}")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def force_per_cycle(cycles: np.ndarray, peak_N: np.ndarray, work_J: np.ndarray, path: Path, title: str = "") -> Path:
+    """The peak force on the teeth (N) and the closing work (mJ) of each cycle."""
+    fig, (top, bottom) = subplots(2, 1, figsize=(8, 6), sharex=True)
+    top.bar(cycles, peak_N, color="C1")
+    top.set_ylabel("peak force [N]")
+    top.set_title(f"Force and work per cycle{f': {title}' if title else ''}")
+    bottom.bar(cycles, 1e3 * work_J, color="C4")
+    bottom.set_ylabel("closing work [mJ]")
+    bottom.set_xlabel("chewing cycle [1]")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+    return save(fig, path)
+
+
+__all__ = ["distribution", "force_per_cycle", "x50"]
