@@ -32,7 +32,7 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate
 from chewbot.compiled.layout import Layout
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
-from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, comminution_of
+from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, bed_normal_force, comminution_of
 from chewbot.food.law import CASADI, N_FOOD, maxwell_force, normal_force, tangential_force
 from chewbot.simulation.food import FOOD_INPUTS, FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx
 from chewbot.simulation.food import build as food_plant
@@ -47,7 +47,7 @@ BOLUS_SHARED = FOOD_SHARED + Layout.of(bed=len(BED_PARAMETERS))
 def _bolus_force_sx(f, delta, ddelta, broken, F_m, velocity, bed):
     """(F_n, F_v, F): the bulk law's normal force until the fracture, the bed's after, and the force on the mandible."""
     bulk, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m)
-    F_n = ca.if_else(broken > 0.5, bed_force(CASADI, bed, f[0] - delta), bulk)
+    F_n = ca.if_else(broken > 0.5, bed_normal_force(CASADI, bed, f[0] - delta, ddelta), bulk)
     Fx, Fy = tangential_force(CASADI, f, F_n, velocity[0], velocity[1])
     return F_n, F_v, ca.vertcat(Fx, Fy, -F_n)
 

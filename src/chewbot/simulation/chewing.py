@@ -65,7 +65,7 @@ class ChewingCycle:
         return 1.0 / self.frequency_Hz
 
 
-def _bump(s):
+def bump(s):
     """b(s) = 64 s^3 (1 - s)^3 and its first two derivatives in s."""
     u = 1 - s
     return 64 * s**3 * u**3, 192 * (s**2 * u**3 - s**3 * u**2), 192 * (2 * s * u**3 - 6 * s**2 * u**2 + 2 * s**3 * u)
@@ -110,7 +110,7 @@ def chewing_task(model: Model, side: str, cycles: int, cycle: ChewingCycle = Che
     n = int(round(cycles * T * TASK_RATE_HZ)) + 1
     t = np.linspace(0.0, cycles * T, n)
     s = np.minimum(t / T - np.floor(np.minimum(t / T, cycles - 1e-12)), 1.0)
-    b, db, ddb = _bump(s)
+    b, db, ddb = bump(s)
     d = q_closed - q_open
     q, dq, ddq = q_open + b[:, None] * d, (db / T)[:, None] * d, (ddb / T**2)[:, None] * d
     force = np.zeros((n, 3))
@@ -158,10 +158,11 @@ def sequence_task(model: Model, food: Food, side: str, cycles: int, cycle: Chewi
     """The task of a sequence and its cycle's period (s): ``cycles`` default cycles, or of the cycle in the task CSV
     ``path``; without its force where ``controller`` (a controller table's row) does not read the task's force as a
     force reference (it then follows the motion to its closest gap). The cycle must start with the teeth farther
-    apart than the food's height (ChewError otherwise)."""
+    apart than the food's height (ChewError otherwise); a food without a ``[comminution]`` table is a FoodError naming it."""
     from chewbot.food.geometry import gap
     from chewbot.run.pipeline import load_task
 
+    comminution_of(food)  # a food that cannot be chewed, before anything is built
     if path is None:
         task, period = chewing_task(model, side, cycles, cycle), cycle.period
     else:
@@ -332,5 +333,5 @@ def sequence_checks(chewing: Chewing, cycles: int) -> list:
     return out + list(chewing.result.checks)
 
 
-__all__ = ["BURST_SHARE", "ChewError", "Chewing", "ChewingCycle", "CycleRecord", "chew", "chewing_task", "cycle_poses",
+__all__ = ["BURST_SHARE", "ChewError", "bump", "Chewing", "ChewingCycle", "CycleRecord", "chew", "chewing_task", "cycle_poses",
            "cycles_for", "bolus_tpa", "repeated_task", "sequence_task", "HUMAN_X50_MM"]
