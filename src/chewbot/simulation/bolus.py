@@ -31,12 +31,11 @@ import numpy as np
 from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate
 from chewbot.compiled.layout import Layout
-from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, bed_normal_force, comminution_of
 from chewbot.food.law import CASADI, N_FOOD, maxwell_force, normal_force, tangential_force
-from chewbot.simulation.food import FOOD_INPUTS, FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx
+from chewbot.simulation.food import FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx, stage_with_food
 from chewbot.simulation.food import build as food_plant
-from chewbot.simulation.forward import n_coordinates, residual_function
+from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.interfaces import Column, PlantCapabilities, PlantState
 from chewbot.simulation.plant import step_kernel
 
@@ -55,21 +54,9 @@ def _bolus_force_sx(f, delta, ddelta, broken, F_m, velocity, bed):
 def bolus_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a bolus: (q, v, a, N, w, s), w laid out as
     :data:`~chewbot.simulation.food.FOOD_INPUTS` and s as :data:`BOLUS_SHARED`."""
-    m = symbols(mechanism)
-
-    def build():
-        n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
-        q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
-        w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
-        s, shared = BOLUS_SHARED.symbols("s", ca.SX.sym)
-        B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
-        F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
-        _, _, F = _bolus_force_sx(f, delta, ddelta, shared["broken"], F_m, velocity, shared["bed"])
-        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
-        return ca.Function("bolus_stage", [q, v, a, N, w, s], [r])
-
-    return cached_graph(m, ("bolus-stage",), build)
+    return stage_with_food(mechanism, "bolus_stage", BOLUS_SHARED,
+                           lambda f, delta, ddelta, F_m, velocity, shared: _bolus_force_sx(
+                               f, delta, ddelta, shared["broken"], F_m, velocity, shared["bed"])[2])
 
 
 def bolus_step_kernel(mechanism: str) -> KernelSpec:

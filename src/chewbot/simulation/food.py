@@ -86,21 +86,30 @@ def _force_sx(f, delta, ddelta, broken, F_m, velocity):
 def food_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
     s as :data:`FOOD_SHARED`."""
+    return stage_with_food(mechanism, "food_stage", FOOD_SHARED,
+                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)[2])
+
+
+def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
+    """A stage residual of the plant with a food: (q, v, a, N, w, s) -> r, w laid out as :data:`FOOD_INPUTS` and s as
+    ``shared`` (:data:`FOOD_SHARED` and what ``force`` reads beyond it); ``force(f, delta, ddelta, F_m, velocity,
+    blocks)`` the food's force on the mandible (3,) from the food's vector, the compression and its rate, the Maxwell
+    branch's force over the stage, the bite point's velocity and the blocks of s."""
     m = symbols(mechanism)
 
     def build():
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
-        s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
-        B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
-        F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
-        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)
-        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
-        return ca.Function("food_stage", [q, v, a, N, w, s], [r])
+        s, blocks = shared.symbols("s", ca.SX.sym)
+        B, p, f = blocks["B"], blocks["p"], blocks["food"]
+        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"])
+        F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
+        F = force(f, delta, ddelta, F_m, velocity, blocks)
+        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
+        return ca.Function(name, [q, v, a, N, w, s], [r])
 
-    return cached_graph(m, ("food-stage",), build)
+    return cached_graph(m, (name,), build)
 
 
 def food_step_kernel(mechanism: str) -> KernelSpec:
@@ -315,4 +324,4 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
 
 
 __all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx", "food_quantities_kernel",
-           "food_stage", "food_step_kernel", "start_gap"]
+           "food_stage", "food_step_kernel", "stage_with_food", "start_gap"]
