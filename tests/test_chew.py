@@ -172,6 +172,17 @@ def test_a_food_without_comminution_is_refused_naming_it(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize("options, words", [
+    (dict(controller="computed-torque", bolus=True), "food is required"),
+    (dict(controller="pd", food="peanut", bolus=True, engine="mujoco"), "does not break a food into a bolus"),
+])
+def test_the_bolus_options_are_refused_where_they_do_not_apply(options, words):
+    from chewbot.run.options import OptionError
+
+    with pytest.raises(OptionError, match=words):
+        resolve(**options)
+
+
 def test_cycles_and_until_exclude_each_other(tmp_path):
     result = CliRunner().invoke(app, ["chew", "--food", "peanut", "--cycles", "2", "--until-x50-mm", "1", "--out", str(tmp_path / "x")])
     assert result.exit_code == EXIT_BAD_INPUT and "exclude each other" in result.output

@@ -16,7 +16,8 @@ from chewbot.kinematics.options import Side
 from chewbot.simulation.controllers import table as controllers
 
 CHEW_STEPS = 10  # models and task, simulation, kinematics, checks, results.csv, run.json, figures, report, bolus figures
-DEFAULT_CONTROLLER = "hybrid"
+# The controller that closes onto the food under force control: the one whose row reads the task's force as its reference.
+DEFAULT_CONTROLLER = next(r.name for r in controllers.CONTROLLERS.values() if r.force_reference)
 DEFAULT_CYCLES = 25
 
 
@@ -72,7 +73,7 @@ def chew(
 
       chewbot chew --food peanut --cycles 3 --out runs/chew-peanut
 
-      chewbot chew --food carrot --until-x50-mm 4 --out runs/chew-carrot
+      chewbot chew --food peanut --until-x50-mm 6 --out runs/chew-until
 
       chewbot chew --food peanut --cycles 4 --tpa-at 0,50,100 --out runs/chew-tpa
     """
