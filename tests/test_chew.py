@@ -172,6 +172,15 @@ def test_a_food_without_comminution_is_refused_naming_it(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+def test_the_engine_row_says_what_the_bolus_plant_can_do():
+    from chewbot.simulation.bolus import BolusPlant
+    from chewbot.simulation.engines import ENGINES
+
+    capabilities = BolusPlant.__dataclass_fields__["capabilities"].default
+    assert ENGINES["chewbot"].bolus is capabilities.bolus is True and capabilities.food
+    assert not any(e.bolus for name, e in ENGINES.items() if name != "chewbot")
+
+
 @pytest.mark.parametrize("options, words", [
     (dict(controller="computed-torque", bolus=True), "food is required"),
     (dict(controller="pd", food="peanut", bolus=True, engine="mujoco"), "does not break a food into a bolus"),

@@ -6,17 +6,20 @@ broken (docs/bolus.md, "The bolus in the plant").
 
 * the food's bulk law (:mod:`chewbot.food.law`) until its first fracture (the law's ``fracture`` event, located as in
   the food plant), then
-* the particle bed's, F(g) = A E0 eps_c (e^(eps / eps_c) - 1), eps = max(0, 1 - g / h0) (:func:`chewbot.food.bolus.bed_force`),
-  g the bite point's gap, its tangential friction the food's (``tooth_friction``); the switch is the food's ``broken``
-  state, so it happens at the fracture's strain, within the step.
+* the particle bed's after it, damped while compressed: F = max(0, F_bed(g) (1 + 3/2 alpha r)),
+  F_bed(g) = A E0 eps_c (e^(eps / eps_c) - 1), eps = max(0, 1 - g / h0), r = -dg/dt the closing rate, alpha the bed's
+  Hunt-Crossley damping (:func:`chewbot.food.bolus.bed_normal_force`), g the bite point's gap; its tangential friction
+  the food's (``tooth_friction``). The switch is the food's ``broken`` state, so it happens at the fracture's strain,
+  within the step.
 
 The bed's parameters (:data:`~chewbot.food.bolus.BED_PARAMETERS`: h0, A, E0, eps_c) are a block of the compiled step's
 shared inputs (:data:`BOLUS_SHARED`), read from the plant's own state at each step's start: a chewing sequence
 changes them without compiling anything. The bolus is part of that state (:class:`BolusSolved`): a **stroke** is a
 contact of the teeth with the food (from the first step whose force is positive to the first where it is zero again);
 at its end, if the food has broken, the bolus is broken down by the food layer's stroke
-(:meth:`chewbot.food.bolus.Bolus.stroke`) with the stroke's closest gap and peak force (at the ends of the integrator's
-steps), and the bed's parameters are those of the new bolus (:meth:`~chewbot.food.bolus.Bolus.bed`). The bed's
+(:meth:`chewbot.food.bolus.Bolus.stroke`) with the stroke's closest gap (at the ends of the integrator's steps) and its
+peak force, the bed's quasi-static force F_bed at that gap (where the closing stops; before the fracture, the bulk
+law's force), and the bed's parameters are those of the new bolus (:meth:`~chewbot.food.bolus.Bolus.bed`). The bed's
 contact (g = h0) is an event, as the bulk law's kinks are. Every state is a value: the trial steps of the event
 location leave nothing behind.
 """
@@ -143,7 +146,8 @@ class BolusPlant(FoodPlant):
         return replace(state, internal=BolusSolved(internal.z, internal.food, self.bolus, self.bolus.bed(self.table)))
 
     def gap_and_force(self, internal: BolusSolved) -> tuple[float, float]:
-        """The gap (m) and the food's normal force (N) at a state (the bed's once broken)."""
+        """The gap (m) and the food's normal force (N) at a state: the bulk law's, or once broken the bed's quasi-static
+        force (positive exactly where the bed is in contact)."""
         food = internal.food
         g = self.food.height - food.delta
         return g, (float(bed_force(NUMPY, internal.bed, g)) if food.broken else food.F_n)
