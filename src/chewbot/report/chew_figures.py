@@ -18,15 +18,16 @@ def distribution(cycles: np.ndarray, sieves_mm: np.ndarray, fractions: np.ndarra
     fig, ax = subplots(figsize=(8, 5))
     passing = 1 - np.cumsum(fractions, axis=1)  # below each sieve: what it does not retain nor the coarser ones
     colours = colormaps["viridis"](np.linspace(0, 1, len(cycles)))
-    for k, row, colour in zip(cycles, passing, colours):
-        ax.plot(sieves_mm[:-1], 100 * row[:-1], marker="o", ms=3, lw=1.0, color=colour, label=f"cycle {int(k)}")
+    every = max(1, int(np.ceil(len(cycles) / 8)))  # at most about eight curves named in the legend
+    for i, (k, row, colour) in enumerate(zip(cycles, passing, colours)):
+        named = i % every == 0 or i == len(cycles) - 1
+        ax.plot(sieves_mm[:-1], 100 * row[:-1], marker="o", ms=3, lw=1.0, color=colour, label=f"cycle {int(k)}" if named else None)
     ax.set_xscale("log")
     ax.set_xlabel("sieve aperture [mm]")
     ax.set_ylabel("cumulative mass passing [%]")
     ax.set_title(f"Particle size distribution per cycle{f': {title}' if title else ''}")
     ax.grid(alpha=0.3, which="both")
-    if len(cycles) <= 12:
-        ax.legend(fontsize=8)
+    ax.legend(fontsize=8)
     return save(fig, path)
 
 
