@@ -23,12 +23,8 @@ def distribution(cycles: np.ndarray, sieves_mm: np.ndarray, fractions: np.ndarra
         named = i % every == 0 or i == len(cycles) - 1
         ax.plot(sieves_mm[:-1], 100 * row[:-1], marker="o", ms=3, lw=1.0, color=colour, label=f"cycle {int(k)}" if named else None)
     ax.set_xscale("log")
-    ax.set_xlabel("sieve aperture [mm]")
-    ax.set_ylabel("cumulative mass passing [%]")
-    ax.set_title(f"Particle size distribution per cycle{f': {title}' if title else ''}")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    return save(fig, path)
+    return _finish(fig, ax, path, "sieve aperture [mm]", "cumulative mass passing [%]",
+                   f"Particle size distribution per cycle{f': {title}' if title else ''}")
 
 
 def x50(cycles: np.ndarray, x50_mm: np.ndarray, extrapolated: np.ndarray, path: Path, band: tuple | None = None,
@@ -44,9 +40,15 @@ def x50(cycles: np.ndarray, x50_mm: np.ndarray, extrapolated: np.ndarray, path: 
     if band is not None:
         ax.axhspan(band[0], band[1], color="C2", alpha=0.25, label=band[2])
     ax.set_yscale("log")
-    ax.set_xlabel("chewing cycles [1]")
-    ax.set_ylabel("median particle size X50 [mm]")
-    ax.set_title(f"X50 against cycles{f': {title}' if title else ''}")
+    return _finish(fig, ax, path, "chewing cycles [1]", "median particle size X50 [mm]",
+                   f"X50 against cycles{f': {title}' if title else ''}")
+
+
+def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> Path:
+    """Label a one-panel figure (axes with their units, title, grid on both scales, legend) and save it."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     return save(fig, path)
