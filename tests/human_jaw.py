@@ -170,6 +170,12 @@ class Subject:
         p = np.einsum("nij,nj->ni", turn, p - working) + working + self.eminence(self.glide(opening_deg))
         return p, np.einsum("nij,njk->nik", turn, hinge)
 
+    def lateral_for(self, incisal_mm: float) -> float:
+        """The lateral turn (deg, toward the left) that moves the incisal point ``incisal_mm`` sideways."""
+        grid = np.linspace(0.0, 15.0, 1501)
+        p, R = self.pose(np.zeros_like(grid), grid)
+        return float(np.interp(incisal_mm, (np.einsum("nij,j->ni", R, self.incisor) + p)[:, 1] - self.incisor[1], grid))
+
     def opening_for(self, incisal_mm: float) -> float:
         """The opening (deg) that lowers the incisal point by ``incisal_mm`` from intercuspal contact."""
         grid = np.linspace(0.0, self.max_opening_deg, 2001)
@@ -249,7 +255,7 @@ def chewing(who: Subject, rate_hz: float = 50.0, duration_s: float = 13.0, openi
     phase = np.clip((t - start) * cycle_hz, 0, None) % 1.0
     moving = t >= start
     opening = _closing(t, rest_s) + np.where(moving, who.opening_for(opening_mm) * cycle(phase), 0.0)
-    lateral = np.where(moving, np.degrees(lateral_mm / (who.incisor[0] - MID[0])) * sideways(phase), 0.0)
+    lateral = np.where(moving, who.lateral_for(lateral_mm) * sideways(phase), 0.0)
     return Motion(t, *who.pose(opening, lateral), who)
 
 
@@ -260,7 +266,7 @@ def border(who: Subject, rate_hz: float = 50.0, duration_s: float = 13.0, openin
     lateral excursion of about ``lateral_mm`` at the incisor; then chewing cycles on the left."""
     t = _times(rate_hz, duration_s)
     opening = _closing(t, 0.8) + who.opening_for(opening_mm) * window(t, 1.5, 3.0)
-    yaw = np.degrees(lateral_mm / (who.incisor[0] - MID[0]))
+    yaw = who.lateral_for(lateral_mm)
     lateral = yaw * (window(t, 5.0, 1.6) - window(t, 7.0, 1.6))
     phase = np.clip((t - 9.0) * 1.2, 0, None) % 1.0
     chew = t >= 9.0
