@@ -264,7 +264,7 @@ def _food_file(tmp_path, **changes) -> Path:
 
 @pytest.mark.parametrize("change,message", [
     ({"portion_g": "1600.0"}, "key 'comminution.portion_g': 1600 g is implausible"),
-    ({"placement": "1.5"}, "key 'comminution.placement': Input should be less than or equal to 1"),
+    ({"placement": "1.5"}, "key 'comminution.placement': must be at most 1, not 1.5"),
     ({"fitted": '["density_kg_per_m3"]'}, "key 'comminution.fitted': 'density_kg_per_m3' is not a key a fit sets"),
     ({"relief_mm": '"1.0"'}, "key 'comminution.relief_mm'"),
 ])

@@ -80,11 +80,11 @@ def test_bad_food_files_name_the_file_and_the_key(tmp_path, change, key):
 
 
 def test_sphere_refuses_a_diameter_and_needs_poisson(tmp_path):
-    with pytest.raises(FoodError, match="food.diameter_mm: does not apply to a sphere"):
+    with pytest.raises(FoodError, match="key 'food.diameter_mm': does not apply to a sphere"):
         load_food(write_food(tmp_path, **{**SPHERE, "diameter_mm": 5.0}))
-    with pytest.raises(FoodError, match="food.poisson_ratio: missing"):
+    with pytest.raises(FoodError, match="key 'food.poisson_ratio': missing key"):
         load_food(write_food(tmp_path, **{k: v for k, v in SPHERE.items() if k != "poisson_ratio"}))
-    with pytest.raises(FoodError, match="food.tooth_friction: missing"):
+    with pytest.raises(FoodError, match="key 'food.tooth_friction': missing key"):
         load_food(write_food(tmp_path, **{k: v for k, v in CYLINDER.items() if k != "tooth_friction"}))
     with pytest.raises(FoodError, match="unit is part of the key"):
         load_food(write_food(tmp_path, **{**{k: v for k, v in CYLINDER.items() if k != "height_mm"}, "height_m": 0.008}))

@@ -427,10 +427,10 @@ def test_registration_errors_name_the_file_and_key(tmp_path):
         ({"units": "mm"}, r"key 'markers': give either"),
         ({**good, "markers": {"A": [0, 0, 0], "B": [1, 0, 0], "C": [2, 0, 0]}}, r"key 'rest': give either"),
         ({"units": "mm", "markers": {"A": [0, 0, 0], "B": [1, 0, 0], "C": [2, 0, 0]}}, r"key 'markers': the markers lie on one line"),
-        ({"units": "mm", "markers": {"A": [0, 0], "B": [1, 0, 0], "C": [0, 1, 0]}}, r"key 'markers.A': List should have at least 3"),
+        ({"units": "mm", "markers": {"A": [0, 0], "B": [1, 0, 0], "C": [0, 1, 0]}}, r"key 'markers.A': must be a list of 3 numbers, not 2"),
         ({**good, "tracker": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, r"key 'tracker.rotation': not a rotation"),
-        ({**good, "fit": {"position_weight_per_mm": 0}}, r"key 'fit.position_weight_per_mm': Input should be greater than 0"),
-        ({**good, "scale": -1.0}, r"key 'scale': Input should be greater than 0"),
+        ({**good, "fit": {"position_weight_per_mm": 0}}, r"key 'fit.position_weight_per_mm': must be greater than 0"),
+        ({**good, "scale": -1.0}, r"key 'scale': must be greater than 0"),
     ]:
         with pytest.raises(RecordingError, match=r"^reg\.toml: " + pattern):
             registration_from_dict(raw, "reg.toml")

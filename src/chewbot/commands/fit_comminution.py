@@ -47,6 +47,9 @@ def fit_comminution(
     from chewbot.food.bolus import comminution_of
     from chewbot.food.comminution_fit import DEFAULT_KEYS, fit_checks, fit_comminution as run_fit, fitted_food_text, read_sieving
     from chewbot.food.law import load_food
+    from chewbot.units import factor
+
+    mm = factor("mm")
 
     with errors_reported():
         f = load_food(food)
@@ -57,9 +60,9 @@ def fit_comminution(
         keys = tuple(fit) or DEFAULT_KEYS
         with progress(quiet, "fit-comminution", total=3) as step:
             step("fitting", stage="fit")
-            result = run_fit(table, data, keys, closing_force, min_gap * 1e-3, progress=step, check=check_interrupted)
+            result = run_fit(table, data, keys, closing_force, min_gap * mm, progress=step, check=check_interrupted)
             step("checking")
-            checks = fit_checks(result, max(data.counts), closing_force, min_gap * 1e-3)
+            checks = fit_checks(result, max(data.counts), closing_force, min_gap * mm)
             step("writing", stage="writing")
         args = [str(sieving), "--food", food, "--out", str(out), *[a for key in keys for a in ("--fit", key)],
                 "--closing-force", f"{closing_force:g}", "--min-gap", f"{min_gap:g}"]

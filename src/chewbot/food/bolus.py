@@ -61,6 +61,7 @@ from chewbot.food import CLOSING_FORCE_N, MIN_GAP_MM
 from chewbot.food.comminution import ComminutionTable
 from chewbot.food.law import NUMPY, Food, FoodError
 from chewbot.food.sieving import SIEVES_MM, RosinRammler, fit_rosin_rammler, sieve_matrix
+from chewbot.units import factor
 
 SUBCLASSES = 4  # classes between two neighbouring sieve sizes (a factor sqrt(2))
 _BELOW = 6  # sqrt(2) steps below the finest sieve: 0.5 mm / 8 = 0.0625 mm
@@ -90,7 +91,7 @@ class SizeClasses:
     def index(self, x: float) -> int:
         """The class of a particle of size ``x`` (m)."""
         if not 0 <= x < self.upper[-1]:
-            raise ValueError(f"a particle of {x * 1e3:g} mm is outside the size classes (below {self.upper[-1] * 1e3:g} mm)")
+            raise ValueError(f"a particle of {x / factor('mm'):g} mm is outside the size classes (below {self.upper[-1] / factor('mm'):g} mm)")
         return int(np.searchsorted(self.upper, x, side="right"))
 
 
@@ -101,7 +102,7 @@ def _size_classes() -> SizeClasses:
     edges = [steps[0]]
     for a, b in zip(steps[:-1], steps[1:]):
         edges += [a * (b / a) ** (j / SUBCLASSES) for j in range(1, SUBCLASSES + 1)]
-    edges = np.array(edges) * 1e-3
+    edges = np.array(edges) * factor("mm")
     lower = np.concatenate([[0.0], edges[:-1]])
     upper = edges
     size = np.sqrt(np.where(lower > 0, lower, upper * 2 ** (-1 / SUBCLASSES)) * upper)
@@ -109,7 +110,7 @@ def _size_classes() -> SizeClasses:
 
 
 CLASSES = _size_classes()
-SIEVE = sieve_matrix(CLASSES.lower * 1e3)  # the classes' masses onto the sieves and the pan
+SIEVE = sieve_matrix(CLASSES.lower / factor("mm"))  # the classes' masses onto the sieves and the pan
 _AREA = math.pi / 4 * CLASSES.size**2  # m^2 a particle covers
 _VOLUME = math.pi / 6 * CLASSES.size**3  # m^3 of a particle
 _AT_LEAST = np.triu(np.ones((CLASSES.n, CLASSES.n)))  # row i sums the classes i and larger
@@ -281,7 +282,7 @@ class Bolus:
         return Bolus(new), StrokeRecord(gap, force, float(caught), float(broken))
 
     def ideal_stroke(self, c: ComminutionTable, closing_force: float = CLOSING_FORCE_N,
-                     min_gap: float = MIN_GAP_MM * 1e-3) -> tuple[Bolus, StrokeRecord]:
+                     min_gap: float = MIN_GAP_MM * factor("mm")) -> tuple[Bolus, StrokeRecord]:
         """The bolus after an ideal stroke (:func:`ideal_stroke`), and what it did."""
         gap, force, work = (float(v) for v in ideal_stroke(NUMPY, c.si(), self.mass, closing_force, min_gap))
         after, record = self.stroke(c, gap, force)
@@ -302,7 +303,7 @@ class Chewing:
 
 
 def chew(c: ComminutionTable, cycles: int, closing_force: float = CLOSING_FORCE_N,
-         min_gap: float = MIN_GAP_MM * 1e-3) -> Chewing:
+         min_gap: float = MIN_GAP_MM * factor("mm")) -> Chewing:
     """``cycles`` ideal strokes on the intact portion."""
     boluses, strokes = [Bolus.portion(c)], []
     for _ in range(cycles):

@@ -9,7 +9,6 @@ that match them; :func:`table` the rows docs/food.md shows (a test holds the pag
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -17,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import field_validator
 
-from chewbot.config import Strict, read_toml
+from chewbot.config import Strict, read_text, read_toml
 from chewbot.food.law import Food, FoodError, builtin_foods, food_from_dict
 from chewbot.food.tpa import MEASURES, TRIGGER_FORCE, TextureTest, ideal_test, settings
 
@@ -98,7 +97,7 @@ def calibrations() -> list[Published]:
 
 
 def _file_table(name: str) -> dict:
-    return tomllib.loads(builtin_foods()[name].read_text(encoding="utf-8"))["food"]
+    return read_text(builtin_foods()[name], "food file", FoodError).data["food"]
 
 
 def _quantity(test: TextureTest, key: str) -> float:

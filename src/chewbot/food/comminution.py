@@ -24,28 +24,38 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import AfterValidator, Field, field_validator
+from pydantic import Field, field_validator
 
-from chewbot.config import Strict
+from chewbot.config import Plausible, Strict
+from chewbot.units import factor, key_unit
 
-# key -> (factor to SI, unit as shown, plausible low, plausible high, what the range covers). The one table of the
-# parameters: the model's fields, the fit's parameters and the docs' list are read from it.
-PARAMETERS = {
-    "portion_g": (1e-3, "g", 0.1, 50.0, "portions of food taken into the mouth"),
-    "piece_size_mm": (1e-3, "mm", 1.0, 22.0, "sizes of the pieces of a portion between the molars"),
-    "density_kg_per_m3": (1.0, "kg/m^3", 300.0, 2000.0, "densities of foods"),
-    "table_area_mm2": (1e-6, "mm^2", 10.0, 1000.0, "occlusal areas of the teeth that meet a bolus"),
-    "placement": (1.0, "1", 0.01, 1.0, "chances that a lone particle is caught in a stroke"),
-    "relief_mm": (1e-3, "mm", 0.05, 5.0, "depths of the cusps' relief"),
-    "relief_exponent": (1.0, "1", 0.5, 5.0, "exponents of the relief's area law"),
-    "strength_at_1mm_MPa": (1e6, "MPa", 0.01, 1000.0, "fracture strengths of food particles"),
-    "weibull_modulus": (1.0, "1", 1.0, 50.0, "Weibull moduli of brittle materials"),
-    "fragment_size": (1.0, "1", 0.05, 0.95, "median fragment sizes as a share of the parent's"),
-    "fragment_spread": (1.0, "1", 0.5, 10.0, "Rosin-Rammler spreads of fragments"),
-    "bed_porosity": (1.0, "1", 0.1, 0.9, "porosities of loose particle beds"),
-    "bed_modulus_kPa": (1e3, "kPa", 1.0, 1e6, "moduli of food particle beds at first compression"),
-    "bed_compaction_strain": (1.0, "1", 0.02, 1.0, "strains over which a bed's stiffness grows e-fold"),
+# key -> (plausible low, plausible high, what the range covers), in the unit the key ends with (chewbot.units.key_unit;
+# "1" for a plain number). The one table of the parameters: the model's fields, the fit's parameters and the docs'
+# list are read from it, through PARAMETERS.
+_RANGES = {
+    "portion_g": (0.1, 50.0, "portions of food taken into the mouth"),
+    "piece_size_mm": (1.0, 22.0, "sizes of the pieces of a portion between the molars"),
+    "density_kg_per_m3": (300.0, 2000.0, "densities of foods"),
+    "table_area_mm2": (10.0, 1000.0, "occlusal areas of the teeth that meet a bolus"),
+    "placement": (0.01, 1.0, "chances that a lone particle is caught in a stroke"),
+    "relief_mm": (0.05, 5.0, "depths of the cusps' relief"),
+    "relief_exponent": (0.5, 5.0, "exponents of the relief's area law"),
+    "strength_at_1mm_MPa": (0.01, 1000.0, "fracture strengths of food particles"),
+    "weibull_modulus": (1.0, 50.0, "Weibull moduli of brittle materials"),
+    "fragment_size": (0.05, 0.95, "median fragment sizes as a share of the parent's"),
+    "fragment_spread": (0.5, 10.0, "Rosin-Rammler spreads of fragments"),
+    "bed_porosity": (0.1, 0.9, "porosities of loose particle beds"),
+    "bed_modulus_kPa": (1.0, 1e6, "moduli of food particle beds at first compression"),
+    "bed_compaction_strain": (0.02, 1.0, "strains over which a bed's stiffness grows e-fold"),
 }
+
+
+def _unit(key: str) -> str:
+    return key_unit(key)[1] or "1"
+
+
+# key -> (factor to SI, unit as shown, plausible low, plausible high, what the range covers)
+PARAMETERS = {key: (factor(_unit(key)), _unit(key), low, high, what) for key, (low, high, what) in _RANGES.items()}
 # The keys a fit may set: the selection and the breakage.
 FITTABLE = ("placement", "relief_mm", "relief_exponent", "strength_at_1mm_MPa", "weibull_modulus", "fragment_size",
             "fragment_spread")
@@ -55,19 +65,13 @@ def _field(key: str, **limits):
     """A parameter's annotation: a number within its hard ``limits``, then within its plausible range (a value outside
     it is most likely in another unit, and an error naming the range)."""
     _, unit, low, high, what = PARAMETERS[key]
-    shown = "" if unit == "1" else f" {unit}"
-
-    def plausible(value: float) -> float:
-        if not low <= value <= high:
-            raise ValueError(f"{value:.15g}{shown} is implausible: {what} lie between {low:g} and {high:g}{shown}"
-                             + (" (is it in another unit?)" if shown else ""))
-        return value
-
-    return Annotated[float, Field(**limits), AfterValidator(plausible)]
+    return Annotated[float, Field(**limits), Plausible(low, high, unit, what)]
 
 
 class ComminutionTable(Strict):
     """The ``[comminution]`` table as written (file units); :meth:`si` in SI."""
+
+    DOCS = "docs/bolus.md"
 
     portion_g: _field("portion_g", gt=0)
     piece_size_mm: _field("piece_size_mm", gt=0)
@@ -100,10 +104,4 @@ class ComminutionTable(Strict):
         return {key: getattr(self, key) * PARAMETERS[key][0] for key in PARAMETERS}
 
 
-class ComminutionSection(Strict):
-    """A food file's ``[comminution]`` table where it sits in the file (its keys named ``comminution.KEY``)."""
-
-    comminution: ComminutionTable
-
-
-__all__ = ["FITTABLE", "PARAMETERS", "ComminutionSection", "ComminutionTable"]
+__all__ = ["FITTABLE", "PARAMETERS", "ComminutionTable"]

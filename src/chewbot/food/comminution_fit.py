@@ -39,6 +39,7 @@ from chewbot.food.bolus import CLOSING_FORCE_N, MIN_GAP_MM, SIEVE, Bolus, ideal_
 from chewbot.food.comminution import FITTABLE, PARAMETERS, ComminutionTable
 from chewbot.food.law import CASADI
 from chewbot.food.sieving import SIEVES_MM, SIEVING_MM
+from chewbot import units
 from chewbot.units import HEADER_CELL, unit_factor
 from chewbot.progress import SILENT, Progress
 
@@ -117,7 +118,7 @@ def read_sieving(path: Path | str) -> Sieving:
         want = COLUMNS[name]
         if name == "sieve":
             try:
-                factor = unit_factor(unit or "", "length") / 1e-3
+                factor = unit_factor(unit or "", "length") / units.factor("mm")
             except ValueError as exc:
                 raise SievingError(f"{path}: column {cell!r}: {exc}") from None
         elif unit not in (None, "", want) or (want is None and unit):
@@ -242,7 +243,7 @@ class ComminutionFit:
 
 
 def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS,
-                    closing_force: float = CLOSING_FORCE_N, min_gap: float = MIN_GAP_MM * 1e-3,
+                    closing_force: float = CLOSING_FORCE_N, min_gap: float = MIN_GAP_MM * units.factor("mm"),
                     progress: Progress = SILENT, check=None) -> ComminutionFit:
     """Fit ``keys`` of ``table`` to ``sieving`` (module docstring); ``progress(message)`` is told of each evaluation,
     ``check()`` is called there (it raises to stop)."""
@@ -310,7 +311,7 @@ def fit_comminution(table: ComminutionTable, sieving: Sieving, keys=DEFAULT_KEYS
 
 
 def fit_checks(fit: ComminutionFit, cycles: int, closing_force: float = CLOSING_FORCE_N,
-               min_gap: float = MIN_GAP_MM * 1e-3) -> list:
+               min_gap: float = MIN_GAP_MM * units.factor("mm")) -> list:
     """The validity checks of a fit (as run.json's ``"checks"``): the least squares converged; the fitted food's
     chewing sequence of ``cycles`` ideal strokes conserves the bolus's mass (1e-9 relative) and its X50 never
     rises; no key ended at the bound of its plausible range (a warning: the data push it out of what is

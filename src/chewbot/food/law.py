@@ -62,17 +62,19 @@ the law the plant integrates is the law the analysis evaluates.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field, StringConstraints
 
-from chewbot.config import validate
+from chewbot.config import Plausible, Strict, key_error, read_text, validate
 from chewbot.errors import ChewbotError
-from chewbot.food.comminution import ComminutionSection, ComminutionTable
+from chewbot.food.comminution import ComminutionTable
+from chewbot.units import factor, key_unit
 
 # The teeth's own contact once the sample is flat (delta >= h0): a linear spring of 1 kN/mm, the order of a molar's
 # axial stiffness on its periodontal ligament (tenths to a few kN/mm); it only keeps the teeth from passing through
@@ -183,10 +185,11 @@ class Food:
 
     def as_dict(self) -> dict:
         """The food as run.json records it (the file's keys and units)."""
-        out = {"name": self.name, "shape": self.shape, "height_mm": self.height * 1e3}
+        mm, kPa = factor("mm"), factor("kPa")
+        out = {"name": self.name, "shape": self.shape, "height_mm": self.height / mm}
         if self.diameter is not None:
-            out["diameter_mm"] = self.diameter * 1e3
-        out["young_modulus_kPa"] = self.young_modulus / 1e3
+            out["diameter_mm"] = self.diameter / mm
+        out["young_modulus_kPa"] = self.young_modulus / kPa
         if self.poisson_ratio is not None:
             out["poisson_ratio"] = self.poisson_ratio
         out["damping_s_per_m"] = self.damping
@@ -196,7 +199,7 @@ class Food:
         if self.yield_strain is not None:
             out.update(yield_strain=self.yield_strain, plastic_fraction=self.plastic_fraction)
         if self.relaxation_time is not None:
-            out.update(relaxation_time_s=self.relaxation_time, relaxation_modulus_kPa=self.relaxation_modulus / 1e3)
+            out.update(relaxation_time_s=self.relaxation_time, relaxation_modulus_kPa=self.relaxation_modulus / kPa)
         out.update(adhesion_N=self.adhesion, tooth_friction=self.tooth_friction, source=self.source,
                    tooth_stiffness_N_per_m=TOOTH_STIFFNESS, friction_speed_m_per_s=FRICTION_SPEED)
         if self.comminution is not None:
@@ -354,34 +357,40 @@ def guards(f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0) -> np.ndarray
 # ------------------------------------------------------------------------------------------- files
 
 
-# key: (attribute, factor to SI, required for which shapes (None: optional), lower bound, open bound, upper bound)
-_KEYS = {
-    "name": ("name", None),
-    "shape": ("shape", None),
-    "height_mm": ("height", 1e-3),
-    "diameter_mm": ("diameter", 1e-3),
-    "young_modulus_kPa": ("young_modulus", 1e3),
-    "poisson_ratio": ("poisson_ratio", 1.0),
-    "damping_s_per_m": ("damping", 1.0),
-    "fracture_strain": ("fracture_strain", 1.0),
-    "stiffness_after_fracture": ("stiffness_after_fracture", 1.0),
-    "recovery_after_fracture": ("recovery_after_fracture", 1.0),
-    "yield_strain": ("yield_strain", 1.0),
-    "plastic_fraction": ("plastic_fraction", 1.0),
-    "relaxation_time_s": ("relaxation_time", 1.0),
-    "relaxation_modulus_kPa": ("relaxation_modulus", 1e3),
-    "adhesion_N": ("adhesion", 1.0),
-    "tooth_friction": ("tooth_friction", 1.0),
-}
-# (lowest, whether the lowest is excluded, highest or None)
-_RANGES = {
-    "height_mm": (0.0, True, None), "diameter_mm": (0.0, True, None), "young_modulus_kPa": (0.0, True, None),
-    "poisson_ratio": (0.0, False, 0.5), "damping_s_per_m": (0.0, False, None), "fracture_strain": (0.0, True, 1.0),
-    "stiffness_after_fracture": (0.0, False, 1.0), "recovery_after_fracture": (0.0, False, 1.0),
-    "yield_strain": (0.0, True, 1.0), "plastic_fraction": (0.0, False, 1.0), "relaxation_time_s": (0.0, True, None),
-    "relaxation_modulus_kPa": (0.0, False, None), "adhesion_N": (0.0, False, None), "tooth_friction": (0.0, False, None),
-}
-_REQUIRED = ("name", "shape", "height_mm", "young_modulus_kPa", "tooth_friction")
+class FoodTable(Strict):
+    """The ``[food]`` table of a food file (docs/food.md), as written: one field per key, in the unit its key ends
+    with, with its limits and its plausible range. A key the file leaves out takes :class:`Food`'s default."""
+
+    DOCS = "docs/food.md"
+
+    name: Annotated[str, StringConstraints(strip_whitespace=True, min_length=1)]
+    shape: Literal[SHAPES]
+    height_mm: Annotated[float, Field(gt=0), Plausible(0.5, 100.0, "mm", "heights of a sample between molars")]
+    diameter_mm: Annotated[float, Field(gt=0), Plausible(0.5, 100.0, "mm", "diameters of a sample between molars")] | None = None
+    young_modulus_kPa: Annotated[float, Field(gt=0), Plausible(1e-3, 1e6, "kPa", "Young's moduli of foods (creams tens of Pa, hard candy about 1 GPa)")]
+    poisson_ratio: Annotated[float, Field(ge=0, le=0.5)] | None = None
+    damping_s_per_m: Annotated[float, Field(ge=0), Plausible(0.0, 1000.0, "s/m", "Hunt-Crossley damping factors of foods")] | None = None
+    fracture_strain: Annotated[float, Field(gt=0, le=1)] | None = None
+    stiffness_after_fracture: Annotated[float, Field(ge=0, le=1)] | None = None
+    recovery_after_fracture: Annotated[float, Field(ge=0, le=1)] | None = None
+    yield_strain: Annotated[float, Field(gt=0, le=1)] | None = None
+    plastic_fraction: Annotated[float, Field(ge=0, le=1)] | None = None
+    relaxation_time_s: Annotated[float, Field(gt=0), Plausible(1e-3, 1e5, "s", "relaxation times of foods")] | None = None
+    relaxation_modulus_kPa: Annotated[float, Field(ge=0), Plausible(0.0, 1e6, "kPa", "relaxation moduli of foods")] | None = None
+    adhesion_N: Annotated[float, Field(ge=0), Plausible(0.0, 100.0, "N", "pulls of a sticky sample")] | None = None
+    tooth_friction: Annotated[float, Field(ge=0), Plausible(0.0, 2.0, "1", "friction coefficients of food on a tooth")]
+
+
+class FoodFile(Strict):
+    """A food file: a table ``[food]`` and, optionally, a table ``[comminution]`` (:mod:`chewbot.food.comminution`)."""
+
+    DOCS = "docs/food.md"
+
+    food: FoodTable
+    comminution: ComminutionTable | None = None
+
+
+# Keys that apply to one shape only, and are required for it.
 _ONLY = {"diameter_mm": "cylinder", "poisson_ratio": "sphere"}
 
 
@@ -402,84 +411,40 @@ def load_food(name_or_path: str | Path) -> Food:
         path = Path(text)
         if not path.exists():
             raise FoodError(f"{text}: neither a built-in food ({', '.join(builtins)}) nor a food file")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FoodError(f"{path}: cannot read it ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise FoodError(f"{path}: not valid TOML ({exc})") from None
-    return food_from_dict(raw, str(path))
+    return food_from_dict(read_text(path, "food file", FoodError).data, str(path))
 
 
 def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
     """A food from the content of a food file (a table ``[food]`` with the keys of docs/food.md)."""
-    extra = set(raw) - {"food", "comminution"}
-    if extra:
-        raise FoodError(f"{source}: unknown table or key {sorted(extra)[0]!r}; a food file has a table [food] and "
-                        "may have a table [comminution]")
-    comminution = None
-    if "comminution" in raw:
-        comminution = validate(ComminutionSection, {"comminution": raw["comminution"]}, source, FoodError).comminution
-    table = raw.get("food")
-    if not isinstance(table, dict):
-        raise FoodError(f"{source}: no [food] table")
-    for key in table:
-        if key not in _KEYS:
-            hint = _unit_hint(key)
-            raise FoodError(f"{source}: food.{key}: unknown key{hint}; the keys are {', '.join(_KEYS)}")
-    for key in _REQUIRED:
-        if key not in table:
-            raise FoodError(f"{source}: food.{key}: missing")
-    values: dict = {}
-    for key in ("name", "shape"):
-        if not isinstance(table[key], str) or not table[key].strip():
-            raise FoodError(f"{source}: food.{key}: expected a non-empty string, not {table[key]!r}")
-    shape = table["shape"]
-    if shape not in SHAPES:
-        raise FoodError(f"{source}: food.shape: {shape!r} is not a shape; choose {' or '.join(SHAPES)}")
+    f = validate(FoodFile, raw, source, FoodError)
+    table = f.food
+    given = table.model_dump(exclude_none=True)
+
+    def fail(key: str, reason: str):
+        raise key_error(source, f"food.{key}", reason, FoodError)
+
     for key, only in _ONLY.items():
-        if key in table and shape != only:
-            raise FoodError(f"{source}: food.{key}: does not apply to a {shape} (only to a {only})")
-        if key not in table and shape == only:
-            raise FoodError(f"{source}: food.{key}: missing (a {shape} needs it)")
-    for key, value in table.items():
-        attr, factor = _KEYS[key]
-        if factor is None:
-            values[attr] = value.strip()
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise FoodError(f"{source}: food.{key}: expected a finite number, not {value!r}")
-        low, open_low, high = _RANGES[key]
-        if value < low or (open_low and value == low) or (high is not None and value > high):
-            bound = f"{'>' if open_low else '>='} {low:g}" + (f" and <= {high:g}" if high is not None else "")
-            raise FoodError(f"{source}: food.{key}: {value!r} out of range (must be {bound})")
-        values[attr] = float(value) * factor
-    if "stiffness_after_fracture" in table and "fracture_strain" not in table:
-        raise FoodError(f"{source}: food.stiffness_after_fracture: given without food.fracture_strain")
-    if "fracture_strain" in table and "stiffness_after_fracture" not in table:
-        raise FoodError(f"{source}: food.fracture_strain: needs food.stiffness_after_fracture (the factor on the "
-                        "elastic force once broken)")
-    if "recovery_after_fracture" in table and "fracture_strain" not in table:
-        raise FoodError(f"{source}: food.recovery_after_fracture: given without food.fracture_strain (it is the share of "
-                        "its deepest compression a crushed sample recovers)")
-    if ("yield_strain" in table) != ("plastic_fraction" in table):
-        given, missing = (("yield_strain", "plastic_fraction") if "yield_strain" in table
-                          else ("plastic_fraction", "yield_strain"))
-        raise FoodError(f"{source}: food.{given}: the permanent set needs food.{missing} too")
-    if ("relaxation_time_s" in table) != ("relaxation_modulus_kPa" in table):
-        given, missing = (("relaxation_time_s", "relaxation_modulus_kPa") if "relaxation_time_s" in table
-                          else ("relaxation_modulus_kPa", "relaxation_time_s"))
-        raise FoodError(f"{source}: food.{given}: the Maxwell branch needs food.{missing} too")
-    return Food(source=source, comminution=comminution, **values)
-
-
-def _unit_hint(key: str) -> str:
-    """' (the unit ...)' where a key names a known quantity in another unit."""
-    stem = key.rsplit("_", 1)[0] if "_" in key else key
-    for known in _KEYS:
-        if known != key and known.startswith(stem + "_"):
-            return f" (did you mean {known!r}? the unit is part of the key)"
-    return ""
+        if key in given and table.shape != only:
+            fail(key, f"does not apply to a {table.shape} (only to a {only})")
+        if key not in given and table.shape == only:
+            fail(key, f"missing key (a {table.shape} needs it)")
+    if "stiffness_after_fracture" in given and "fracture_strain" not in given:
+        fail("stiffness_after_fracture", "given without food.fracture_strain")
+    if "fracture_strain" in given and "stiffness_after_fracture" not in given:
+        fail("fracture_strain", "needs food.stiffness_after_fracture (the factor on the elastic force once broken)")
+    if "recovery_after_fracture" in given and "fracture_strain" not in given:
+        fail("recovery_after_fracture", "given without food.fracture_strain (it is the share of its deepest compression "
+             "a crushed sample recovers)")
+    for pair, what in ((("yield_strain", "plastic_fraction"), "the permanent set"),
+                       (("relaxation_time_s", "relaxation_modulus_kPa"), "the Maxwell branch")):
+        if (pair[0] in given) != (pair[1] in given):
+            present, missing = pair if pair[0] in given else pair[::-1]
+            fail(present, f"{what} needs food.{missing} too")
+    values = {}
+    for key, value in given.items():  # SI: each key's value times the factor of the unit it ends with
+        attribute, unit = key_unit(key)
+        values[attribute] = value * factor(unit) if unit else value
+    return Food(source=source, comminution=f.comminution, **values)
 
 
 __all__ = ["CASADI", "FOOD_EVENTS", "FOOD_PARAMETERS", "FOOD_STATE", "FRICTION_SPEED", "Food", "FoodError", "N_FOOD", "NUMPY",

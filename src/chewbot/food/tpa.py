@@ -34,6 +34,7 @@ import numpy as np
 from chewbot.errors import ChewbotError
 from chewbot.food.law import (FOOD_PARAMETERS, NUMPY, fracture_state, loaded_force, maxwell_force,
                               normal_force)
+from chewbot.units import factor
 
 BLEND = 0.05  # s: each change of speed is spread over this
 HOLD = 0.2  # s at rest before the approach and after the return
@@ -115,13 +116,14 @@ class Protocol:
 
     def record(self) -> dict:
         """The settings as tpa.json's ``"protocol"`` gives them (the command line's units)."""
-        out = {"pre_test_speed_mm_s": self.pre_test_speed * 1e3, "test_speed_mm_s": self.test_speed * 1e3,
-               "post_test_speed_mm_s": self.post_test_speed * 1e3, "trigger_force_N": self.trigger_force}
+        mm, mm_s = factor("mm"), factor("mm/s")
+        out = {"pre_test_speed_mm_s": self.pre_test_speed / mm_s, "test_speed_mm_s": self.test_speed / mm_s,
+               "post_test_speed_mm_s": self.post_test_speed / mm_s, "trigger_force_N": self.trigger_force}
         if self.distance is None:
             out["compression_percent"] = self.compression * 100
         else:
-            out["distance_mm"] = self.distance * 1e3
-        out.update(pause_s=self.pause, approach_mm=self.approach * 1e3, blend_s=self.blend)
+            out["distance_mm"] = self.distance / mm
+        out.update(pause_s=self.pause, approach_mm=self.approach / mm, blend_s=self.blend)
         return out
 
 
@@ -147,7 +149,7 @@ def settings(compression_percent: float | None = 50.0, test_speed_mm_s: float = 
                            "trigger)")
         if not (np.isfinite(distance_mm) and distance_mm > 0):
             raise TpaError(f"--distance {distance_mm:g}: the compression's distance must be a positive number of mm")
-        compression, distance = None, distance_mm * 1e-3
+        compression, distance = None, distance_mm * factor("mm")
     else:
         c = compression_percent
         if c is None:
@@ -158,8 +160,9 @@ def settings(compression_percent: float | None = 50.0, test_speed_mm_s: float = 
             raise TpaError(f"--compression {c:g}: a percentage of the height at the trigger, not a fraction (did you mean "
                            f"{c * 100:g} %?)")
         compression, distance = c / 100, None
-    return Protocol(pre_test_speed=speeds["--pre-test-speed"] * 1e-3, test_speed=speeds["--speed"] * 1e-3,
-                    post_test_speed=speeds["--post-test-speed"] * 1e-3, trigger_force=trigger_force_N,
+    mm_s = factor("mm/s")
+    return Protocol(pre_test_speed=speeds["--pre-test-speed"] * mm_s, test_speed=speeds["--speed"] * mm_s,
+                    post_test_speed=speeds["--post-test-speed"] * mm_s, trigger_force=trigger_force_N,
                     compression=compression, distance=distance, pause=pause_s)
 
 
@@ -200,8 +203,8 @@ class Profile:
         h_t = self.trigger_gap
         deepest = p.target_gap(h_t)
         if not 0 < deepest < h_t:
-            raise TpaError(f"--distance {p.distance * 1e3:g} mm: more than the sample's height at the trigger, "
-                           f"{h_t * 1e3:.4g} mm")
+            raise TpaError(f"--distance {p.distance / factor('mm'):g} mm: more than the sample's height at the trigger, "
+                           f"{h_t / factor('mm'):.4g} mm")
         changes, stops = [(HOLD, -p.pre_test_speed)], []
 
         def move(t0: float, v0: float, g0: float, target: float, v1: float) -> float:
@@ -209,7 +212,7 @@ class Profile:
             travel = target - g0  # signed; v1 has its sign
             cruise = travel / v1 - b * (v0 + v1) / (2 * v1) - b / 2
             if cruise < 0:
-                raise TpaError(f"a stroke of {abs(travel) * 1e3:.3g} mm at {abs(v1) * 1e3:g} mm/s is shorter than its "
+                raise TpaError(f"a stroke of {abs(travel) / factor('mm'):.3g} mm at {abs(v1) / factor('mm/s'):g} mm/s is shorter than its "
                                f"changes of speed ({b:g} s each); lower the speed")
             changes.extend([(t0, v1 - v0), (t0 + b + cruise, -v1)])
             stops.append(t0 + 2 * b + cruise)
@@ -265,8 +268,9 @@ class Profile:
 
     def record(self) -> dict:
         """The protocol as run (tpa.json): the settings, where it started, the trigger and the deepest gap (mm, s)."""
-        return {**self.protocol.record(), "start_gap_mm": self.start_gap * 1e3, "trigger_time_s": self.trigger_time,
-                "height_at_trigger_mm": self.trigger_gap * 1e3, "deepest_gap_mm": self.deepest_gap * 1e3,
+        mm = factor("mm")
+        return {**self.protocol.record(), "start_gap_mm": self.start_gap / mm, "trigger_time_s": self.trigger_time,
+                "height_at_trigger_mm": self.trigger_gap / mm, "deepest_gap_mm": self.deepest_gap / mm,
                 "turns_s": [self.stops[0], self.stops[2]], "duration_s": self.duration, "rate_Hz": self.rate}
 
 
@@ -388,9 +392,10 @@ def analyse(t, g, F, contact_force: float | None = None, tolerance: float = RATI
     after, before = first & (index >= m1), first & (index <= m1)
     resilience = _work(pos, g, after) / _work(pos, g, before)
     at_peak = _work(pos, g, first & (index <= peak1))
+    mJ = factor("mJ")
     measures = {"hardness_N": hardness, "fracturability_N": None if fracture is None else float(F[fracture]),
                 "cohesiveness": cohesiveness, "springiness": springiness, "resilience": resilience,
-                "adhesiveness_mJ": _work(neg, g, first) * 1e3, "gumminess_N": gumminess,
+                "adhesiveness_mJ": _work(neg, g, first) / mJ, "gumminess_N": gumminess,
                 "chewiness_N": None if springiness is None else gumminess * springiness,
                 "springiness_at_peak": float(P2 / P1) if P1 > 0 else None,
                 "resilience_at_peak": _work(pos, g, first & (index >= peak1)) / at_peak if at_peak > 0 else None}
@@ -401,15 +406,15 @@ def analyse(t, g, F, contact_force: float | None = None, tolerance: float = RATI
     definitions["areas"] = "every area is a work, the sum of F |dg| over the gap g at the bite point (trapezoids)"
 
     def anchor(k: int | None, gap: float | None = None) -> dict | None:
-        return None if k is None else {"index": int(k), "t_s": float(t[k]), "gap_mm": float(g[k] if gap is None else gap) * 1e3,
+        return None if k is None else {"index": int(k), "t_s": float(t[k]), "gap_mm": float(g[k] if gap is None else gap) / factor("mm"),
                                        "force_N": float(F[k])}
 
     anchors = {"contact_1": anchor(*c1) if c1 else None, "fracture": anchor(fracture), "peak_1": anchor(peak1),
                "deepest_1": anchor(m1), "split": anchor(one.stop - 1), "contact_2": anchor(*c2) if c2 else None,
                "peak_2": anchor(peak2), "deepest_2": anchor(m2),
-               "areas_mJ": {"first_bite": A1 * 1e3, "second_bite": A2 * 1e3,
-                            "first_compression": _work(pos, g, before) * 1e3, "first_withdrawal": _work(pos, g, after) * 1e3,
-                            "before_peak_1": at_peak * 1e3, "adhesion": _work(neg, g, first) * 1e3}}
+               "areas_mJ": {"first_bite": A1 / mJ, "second_bite": A2 / mJ,
+                            "first_compression": _work(pos, g, before) / mJ, "first_withdrawal": _work(pos, g, after) / mJ,
+                            "before_peak_1": at_peak / mJ, "adhesion": _work(neg, g, first) / mJ}}
     where = {"cohesiveness": m2, "springiness": m2, "resilience": m1}
     checks = []
     for key in CHECKED:
@@ -455,12 +460,12 @@ def protocol_checks(t, g, F, profile: Profile, rate=None, label: str = "") -> li
     off = abs(reached[worst] - 1)
     ok = bool(off <= PROTOCOL_TOLERANCE)
     how = (f"{profile.protocol.compression * 100:g} % of the height at the trigger" if profile.protocol.distance is None
-           else f"{profile.protocol.distance * 1e3:g} mm")
+           else f"{profile.protocol.distance / factor('mm'):g} mm")
     checks.append(CheckResult(name("compression-reached"), ok, 0 if ok else int(sum(abs(r - 1) > PROTOCOL_TOLERANCE for r in reached)),
                               None if ok else {"index": int((m1, m2)[worst]), "t": float(t[(m1, m2)[worst]])},
                               {"value": float(reached[worst] * 100), "unit": "% of the target"},
                               f"the bites reached {reached[0]:.2%} and {reached[1]:.2%} of the target compression ({how}, "
-                              f"{wanted * 1e3:.4g} mm from {h_t * 1e3:.4g} mm); within {PROTOCOL_TOLERANCE:.0%}: {'yes' if ok else 'no'}",
+                              f"{wanted / factor('mm'):.4g} mm from {h_t / factor('mm'):.4g} mm); within {PROTOCOL_TOLERANCE:.0%}: {'yes' if ok else 'no'}",
                               "failure"))
     # the spans at a held speed, the withdrawals cut where the force is back to zero
     bad_spans, worst_span = [], (0.0, None, None)

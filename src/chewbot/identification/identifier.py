@@ -21,6 +21,7 @@ from chewbot.identification.parameters import GROUPS, HKP, INERTIA, N_X, PARAMET
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.task import smoothing
+from chewbot.units import factor
 
 # Reference magnitudes of the friction parameters where the start model has 0 (the built-in models' values).
 TYPICAL_FRICTION = {"mu_H": 0.1, "c_H": 0.5, "R*mu_c": 2.5e-4, "c_A": 0.01}
@@ -60,20 +61,20 @@ class Identification:
     def rows(self) -> list[dict]:
         """The table of estimates in the file's units (one dict per parameter, keys of
         :data:`chewbot.identification.output.TABLE_COLUMNS`), with the derived actuator Coulomb coefficient."""
-        def se(j, factor):  # empty where the parameter was not estimated
-            return _g(self.se[j] * factor) if self.status[j].startswith("estimated") else ""
+        def se(j, convert):  # empty where the parameter was not estimated
+            return _g(convert(self.se[j])) if self.status[j].startswith("estimated") else ""
 
         rows = []
         for j, p in enumerate(PARAMETERS):
-            rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(self.x0[j] * p.to_file),
-                         "estimate": _g(self.x[j] * p.to_file), "standard_error": se(j, p.to_file),
+            rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(p.in_file_units(self.x0[j])),
+                         "estimate": _g(p.in_file_units(self.x[j])), "standard_error": se(j, p.in_file_units),
                          "status": self.status[j]})
         arm = self.model.friction.actuator_arm
         if arm > 0:
             j = NAMES_INDEX["R*mu_c"]
             rows.append({"parameter": "mu_c", "key": "friction.actuator_coulomb", "unit": "1",
-                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": se(j, 1 / arm),
-                         "status": f"R*mu_c / R, R = {arm * 1e3:g} mm as in the file"})
+                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": se(j, lambda v: v / arm),
+                         "status": f"R*mu_c / R, R = {arm / factor('mm'):g} mm as in the file"})
         return rows
 
     def values(self) -> dict[str, object]:
@@ -82,9 +83,9 @@ class Identification:
         x = self.x
         for key in self.identified:
             if key == "mandible.mass_g":
-                out[key] = float(x[0] * 1e3)
+                out[key] = float(PARAMETERS[0].in_file_units(x[0]))
             elif key == "mandible.inertia_g_mm2":
-                xx, yy, zz, xy, xz, yz = (float(v * 1e9) for v in x[INERTIA])
+                xx, yy, zz, xy, xz, yz = (float(p.in_file_units(v)) for p, v in zip(PARAMETERS[INERTIA], x[INERTIA]))
                 out[key] = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
             elif key == "friction.actuator_coulomb":
                 out[key] = float(x[NAMES_INDEX["R*mu_c"]] / self.model.friction.actuator_arm)
@@ -175,7 +176,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
         status[j] = "held" if result.held[j] else "estimated"
     for j in np.flatnonzero(result.at_bound):
         status[j] += " (at its bound)"
-    held_directions = [{PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in enumerate(d)
+    held_directions = [{PARAMETERS[j].name: float(PARAMETERS[j].in_file_units(c)) for j, c in enumerate(d)
                         if abs(c) > 1e-3 * result.ref[j]} for d in result.null]
     identified = [g for g in GROUPS if any(status[j].startswith("estimated") for j, p in enumerate(PARAMETERS)
                                            if p.group == g)]

@@ -23,6 +23,7 @@ import numpy as np
 
 from chewbot.model import Model
 from chewbot.model.vector import parameter_index
+from chewbot.units import factor
 
 INERTIA_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -30,24 +31,27 @@ INERTIA_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 @dataclass(frozen=True)
 class Parameter:
     """One entry of x: its name, the parameter-file key it is written to (with a 1-based entry for the inertia),
-    its SI unit, and the file's unit with the factor from SI."""
+    its SI unit and the file's unit."""
 
     name: str
     key: str
     unit: str
     file_unit: str
-    to_file: float
     group: str
+
+    def in_file_units(self, value):
+        """``value`` (SI) in the file's unit."""
+        return value / factor(self.file_unit)
 
 
 PARAMETERS: tuple[Parameter, ...] = (
-    Parameter("m", "mandible.mass_g", "kg", "g", 1e3, "mandible.mass_g"),
-    *(Parameter(f"I_{'xyz'[a]}{'xyz'[b]}", f"mandible.inertia_g_mm2[{a + 1}][{b + 1}]", "kg*m^2", "g*mm^2", 1e9,
+    Parameter("m", "mandible.mass_g", "kg", "g", "mandible.mass_g"),
+    *(Parameter(f"I_{'xyz'[a]}{'xyz'[b]}", f"mandible.inertia_g_mm2[{a + 1}][{b + 1}]", "kg*m^2", "g*mm^2",
                 "mandible.inertia_g_mm2") for a, b in INERTIA_ENTRIES),
-    Parameter("mu_H", "friction.hkp_coulomb", "1", "1", 1.0, "friction.hkp_coulomb"),
-    Parameter("c_H", "friction.hkp_viscous_Ns_per_m", "N*s/m", "N*s/m", 1.0, "friction.hkp_viscous_Ns_per_m"),
-    Parameter("R*mu_c", "friction.actuator_arm_mm*friction.actuator_coulomb", "m", "mm", 1e3, "friction.actuator_coulomb"),
-    Parameter("c_A", "friction.actuator_viscous_Nms_per_rad", "N*m*s/rad", "N*m*s/rad", 1.0, "friction.actuator_viscous_Nms_per_rad"),
+    Parameter("mu_H", "friction.hkp_coulomb", "1", "1", "friction.hkp_coulomb"),
+    Parameter("c_H", "friction.hkp_viscous_Ns_per_m", "N*s/m", "N*s/m", "friction.hkp_viscous_Ns_per_m"),
+    Parameter("R*mu_c", "friction.actuator_arm_mm*friction.actuator_coulomb", "m", "mm", "friction.actuator_coulomb"),
+    Parameter("c_A", "friction.actuator_viscous_Nms_per_rad", "N*m*s/rad", "N*m*s/rad", "friction.actuator_viscous_Nms_per_rad"),
 )
 N_X = len(PARAMETERS)
 NAMES = tuple(p.name for p in PARAMETERS)

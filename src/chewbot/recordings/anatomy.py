@@ -51,8 +51,9 @@ from chewbot.errors import RecordingError
 from chewbot.model import Model
 from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import MIN_LEVER_MM
+from chewbot.units import factor
 
-MM, DEG = 1e-3, np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 MIN_ROTATION_DEG = 2.0
 MIN_LEVER_RATIO = 0.25
 # Frames turned by at most CLOSED_DEG and moved by at most CLOSED_MM (the markers' middle) from the most closed

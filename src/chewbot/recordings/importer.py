@@ -31,6 +31,7 @@ from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG, hinge_beta
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
 from chewbot.recordings.rigid import RigidFit, kabsch, rigid_fit, scale_motion, to_base
+from chewbot import units
 from chewbot.table import Table
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
@@ -424,9 +425,9 @@ def _check_jumps(model: Model, rec: Recording, p: np.ndarray, R: np.ndarray, fit
     bound = JUMP_FACTOR * recorded.max()
     if (clipped > bound).any():
         i = int(np.argmax(clipped))
-        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / 1e-3:.3g} mm between {rec.where(i)} "
+        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / units.factor('mm'):.3g} mm between {rec.where(i)} "
                              f"and the next frame, more than {JUMP_FACTOR:g} x the recording's largest step "
-                             f"({recorded.max() / 1e-3:.3g} mm): the nearest admissible poses switch branches there")
+                             f"({recorded.max() / units.factor('mm'):.3g} mm): the nearest admissible poses switch branches there")
 
 
 def _clip_note(rec: Recording, fit: RobotFit, passed: np.ndarray) -> str:

@@ -19,9 +19,10 @@ import numpy as np
 
 from chewbot.model import Model
 from chewbot.recordings.fit import RobotFit, fitted_pose
+from chewbot.units import factor
 
 IN_STEP_R = 0.95
-MM = 1e-3
+MM = factor("mm")
 
 
 def _angle_deg(R: np.ndarray) -> np.ndarray:

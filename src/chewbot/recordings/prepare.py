@@ -34,6 +34,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from chewbot.errors import RecordingError
 from chewbot.recordings.formats import Recording
+from chewbot.units import factor
 
 FILTER_ORDER = 2
 # (sqrt(2) - 1)^(1 / (2 n)) for n = FILTER_ORDER: the forward-backward response 1 / (1 + (f / f0)^(2n)) is
@@ -126,7 +127,7 @@ def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Rec
         turn = np.degrees(np.linalg.norm(steps, axis=1)) / dt
         bad |= _jumps(steps, turn, SPIKE_MIN_TURN_DEG_S, rec.t, max_gap)
     step = np.diff(P, axis=0)
-    speed = np.linalg.norm(step, axis=2).max(axis=1) / dt / 1e-3  # mm/s, (n-1,)
+    speed = np.linalg.norm(step, axis=2).max(axis=1) / dt / factor("mm")  # mm/s, (n-1,)
     bad |= _jumps(step.sum(axis=1), speed, SPIKE_MIN_SPEED_MM_S, rec.t, max_gap)
     edges = np.diff(np.r_[0, bad.astype(int), 0])
     for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):

@@ -55,6 +55,7 @@ from chewbot.recordings.anatomy import RigidPrior, rigid_prior
 from chewbot.recordings.fit import fit_to_robot, settings_vector
 from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_X, fit_functions, registration_functions
+from chewbot.units import factor
 
 # Hard bounds of the search around the prior: the tracker's (and the placement's) turn, deg, and shift per axis, mm.
 MAX_TURN_DEG = 10.0
@@ -74,7 +75,7 @@ MARGIN = 0.8
 SAME_POSE = 1e-12
 # Pull toward the prior (per deg^2 and mm^2 of the unknowns): decides where the residuals do not.
 PULL = 1e-6
-MM, DEG = 1e-3, np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 
 
 @dataclass(frozen=True, eq=False)

@@ -43,8 +43,9 @@ from chewbot.recordings.anatomy import point_prior
 from chewbot.recordings.fit import fit_to_robot
 from chewbot.recordings.register import PULL, FoundRegistration, angle_deg, box, limited_by, search
 from chewbot.recordings.robotfit import POINT_CONST, POINT_X, fit_functions, point_registration_functions
+from chewbot.units import factor
 
-MM, DEG = 1e-3, np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 # The search's fit weighs the hinge guess this little per degree (against 1 per mm at the point): its optimal value
 # is then the point's squared distance from the reachable set, the guess only choosing among the poses that reach it.
 SEARCH_ORIENTATION_WEIGHT = 0.01

@@ -22,18 +22,18 @@ Every error is a :class:`~chewbot.errors.RecordingError` naming the file and the
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, field_validator
 
+from chewbot.config import Strict, key_error, read_text, validate
 from chewbot.errors import RecordingError
-from chewbot.config import Strict, format_validation_error
-from chewbot.model.params import ROTATION_TOLERANCE
+from chewbot.model.params import POSITION, ROTATION_TOLERANCE
 from chewbot.recordings.formats import known_length_units, length_factor
+from chewbot.units import factor
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
@@ -50,7 +50,7 @@ class TrackerSection(Strict):
 class FitSection(Strict):
     position_weight_per_mm: float = Field(1.0, gt=0)
     orientation_weight_per_deg: float = Field(1.0, gt=0)
-    point_mm: Vec3 | None = None
+    point_mm: Annotated[Vec3, POSITION] | None = None
 
 
 # Landmarks a lab may digitise at the rest frame, each mapped to the model's point of the same name.
@@ -67,6 +67,8 @@ class LandmarksSection(Strict):
 
 class RegistrationFile(Strict):
     """The TOML file as written."""
+
+    DOCS = "docs/recordings.md"
 
     units: str
     markers: dict[str, Vec3] | None = None
@@ -118,27 +120,16 @@ class Registration:
 
 def load_registration(path: str | Path) -> Registration:
     """Read and validate a registration file."""
-    path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: no such registration file") from None
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{path}: not valid TOML ({exc})") from None
-    return registration_from_dict(raw, str(path))
+    text = read_text(path, "registration file", RecordingError)
+    return registration_from_dict(text.data, str(text.path))
 
 
 def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     """Validate a parsed registration file and convert it to SI."""
-    try:
-        f = RegistrationFile.model_validate(raw)
-    except ValidationError as exc:
-        raise RecordingError(format_validation_error(source, exc)) from None
+    f = validate(RegistrationFile, raw, source, RecordingError)
 
     def fail(key: str, reason: str):
-        raise RecordingError(f"{source}: key '{key}': {reason}")
+        raise key_error(source, key, reason, RecordingError)
 
     if f.tracked not in (None, "rigid"):
         if f.markers is not None or f.landmarks is not None or f.fit.point_mm is not None:
@@ -169,7 +160,7 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
             fail("markers", "the markers lie on one line (or nearly): they do not fix a rotation about it")
     return Registration(source, f.units, markers, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
                         f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3, landmarks,
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * factor("mm"), landmarks,
                         "rigid" if f.markers is not None or landmarks is not None else f.tracked)
 
 
@@ -197,15 +188,17 @@ def registration_toml(reg: Registration, comment: str) -> str:
     def vec(v) -> str:
         return "[" + ", ".join(repr(float(x)) for x in v) + "]"
 
+    mm = factor("mm")
+
     lines = [f"# {line}" for line in comment.splitlines()]
     lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}"]
     if reg.tracked is not None:
         lines += [f'tracked = "{reg.tracked}"']
     if not reg.point_path:
-        lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / 1e-3)}" for name, p in (reg.markers or {}).items()]
+        lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / mm)}" for name, p in (reg.markers or {}).items()]
     lines += ["", "[tracker]", "rotation = [" + ",\n            ".join(vec(row) for row in reg.rotation) + "]",
-              f"origin = {vec(reg.origin / 1e-3)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
+              f"origin = {vec(reg.origin / mm)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
               f"orientation_weight_per_deg = {float(reg.orientation_weight_per_deg)!r}"]
     if reg.point is not None:
-        lines.append(f"point_mm = {vec(reg.point / 1e-3)}")
+        lines.append(f"point_mm = {vec(reg.point / mm)}")
     return "\n".join(lines) + "\n"

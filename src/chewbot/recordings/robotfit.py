@@ -33,9 +33,9 @@ from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
+from chewbot.units import factor
 
-MM = 1e-3
-DEG = np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 # Gauss-Newton iterations per frame inside the compiled kernel. From the previous frame's result or from the
 # recorded pose's own coordinates, the fit's last step falls to rounding (1e-14 mm) in 4 iterations on a chewing
 # recording at 100 Hz without noise and in 6 with 0.1 mm of marker noise (quadratic convergence where the robot

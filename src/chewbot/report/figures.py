@@ -22,6 +22,7 @@ import numpy as np
 from chewbot.progress import SILENT, Progress
 from chewbot.report.plotting import save, subplots
 from chewbot.table import Table
+from chewbot.units import factor
 
 LEVELS = (("", "displacement"), ("d", "velocity"), ("dd", "acceleration"))
 
@@ -33,7 +34,7 @@ def task_space(table: Table, path: Path) -> Path:
     for row, (prefix, level) in enumerate(LEVELS):
         tr, rot = axes[row]
         for name in ("X", "Y", "Z"):
-            tr.plot(t, table[prefix + name] * 1e3, label=prefix + name)
+            tr.plot(t, table[prefix + name] / factor("mm"), label=prefix + name)
         for name in ("alpha", "beta", "gamma"):
             rot.plot(t, np.degrees(table[prefix + name]), label=prefix + name)
         unit = ["", "/s", "/s²"][row]

@@ -8,6 +8,7 @@ import io
 import numpy as np
 
 from chewbot.report.plotting import layout, subplots
+from chewbot.units import factor
 
 
 def incisor_paths_svg(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str, tracker=None) -> str:
@@ -24,13 +25,13 @@ def incisor_paths(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, t
     rows = 1 if tracker is None else 2
     fig, axes = subplots(rows, 3, figsize=(13.0, 4.0 * rows), squeeze=False)
     side, front, time = axes[0]
-    rec, rep = recorded / 1e-3, reproduced / 1e-3
+    rec, rep = recorded / factor("mm"), reproduced / factor("mm")
     frames = [(rec, rep, "{S}", "the robot's frame", axes[0][:2])]
     if tracker is not None:
         rotation, origin = tracker
 
         def seen(p):  # p_T = rotation^T (p_S - origin), mm
-            return (p - origin) @ rotation / 1e-3
+            return (p - origin) @ rotation / factor("mm")
 
         frames.append((seen(recorded), seen(reproduced), "the tracker's frame", "the tracker's frame", axes[1][:2]))
     for r, p, frame, where, pair in frames:
