@@ -38,7 +38,7 @@ contact) onto the robot's path (:func:`robot_frames`): the subject's motion exac
 with the skull turned so that its eminence lies along the robot's plane. That turn is the robot's, not the
 registration's: the robot cannot hold a subject's occlusal plane and eminence both where the subject has them
 (:func:`anatomical_turn_deg` says how far it moves the mandible's pose). For a point path it is the face-bow
-transfer (:func:`face_bow_frames`): the subject's Bonwill triangle on the model's, as a face-bow mounts casts on an
+transfer (:func:`face_bow_incisor`): the subject's Bonwill triangle on the model's, as a face-bow mounts casts on an
 articulator.
 
 Run as a script to write the recordings of the tests as CSV: ``python tests/human_jaw.py OUTDIR``.
