@@ -9,7 +9,7 @@ import functools
 import numpy as np
 
 from chewbot.kinematics.motion import solve_kinematics
-from chewbot.model.params import load_model
+from chewbot.model.params import load_model, model_from_dict, read_parameter_file, resolve_model_path
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.reference import Reference
 from chewbot.task.default import default_task
@@ -18,6 +18,17 @@ from chewbot.task.default import default_task
 @functools.cache
 def model(name: str):
     return load_model(name)
+
+
+@functools.cache
+def without_drive(name: str):
+    """The built-in robot ``name`` without its [drive] section: the robot of the papers, with the cranks' own inertia
+    (read from the file, not made by the code under test)."""
+    raw = read_parameter_file(resolve_model_path(name))
+    raw.pop("__sha256__")
+    raw.pop("drive")
+    raw["assumed"] = [k for k in raw["assumed"] if not k.startswith("drive.")]
+    return model_from_dict(raw, source=f"{name} without [drive]")
 
 
 @functools.cache

@@ -153,7 +153,8 @@ def test_estimate_force_writes_one_row_per_log_sample_with_units(tmp_path):
 
 def test_estimate_force_names_the_file_of_a_bad_log(tmp_path):
     bad = tmp_path / "bad.csv"
-    bad.write_text("t,theta1,theta2,theta3,theta4,theta5,theta6,tau1,tau2,tau3,tau4,tau5\n0,0,0,0,0,0,0,0,0,0,0,0\n")
+    rows = "".join(f"{k * 1e-3},0,0,0,0,0,0,0,0,0,0,0\n" for k in range(10))
+    bad.write_text("t,theta1,theta2,theta3,theta4,theta5,theta6,tau1,tau2,tau3,tau4,tau5\n" + rows)
     r = runner.invoke(app, ["estimate-force", str(bad), "--out", str(tmp_path / "f.csv")])
     assert r.exit_code == 2 and "bad.csv" in r.output and "tau6" in r.output
     r = runner.invoke(app, ["estimate-force", str(bad), "--model", "6rss", "--out", str(tmp_path / "f.csv")])

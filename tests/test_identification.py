@@ -283,7 +283,7 @@ def test_an_empty_or_missing_log_is_named_as_a_robot_log(tmp_path):
     """The messages name what was expected (a robot log), not a task file."""
     empty = tmp_path / "empty.csv"
     empty.write_text("")
-    with pytest.raises(TaskError, match=r"empty.csv: empty file \(expected a robot log \(t, theta1..6, tau1..6\)"):
+    with pytest.raises(TaskError, match=r"empty.csv: empty file \(expected a robot log \(t, theta1..6, and tau1..6 or i1..6\)"):
         read_log(empty)
     with pytest.raises(TaskError, match=r"absent.csv: no such file \(expected a robot log"):
         read_log(tmp_path / "absent.csv")

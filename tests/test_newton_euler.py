@@ -19,7 +19,7 @@ from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
 from chewbot.rotation import matrix_from_euler_angles
 
-from support import default_kinematics, model
+from support import default_kinematics, model, without_drive
 
 
 @functools.cache
@@ -117,13 +117,14 @@ def test_every_body_satisfies_its_newton_euler_equations(name, goal):
         assert np.abs(euler).max() <= tol_M
         pos_M.append(r)
 
-    # cranks: mass centre fixed at G_i; moment about G_i = I_i theta_ddot z_i
+    # cranks: mass centre fixed at G_i; moment about G_i = (I_i + J_r N^2) theta_ddot z_i, the rotor reflected to it
+    rotor = 0.0 if m.drive is None else m.drive.rotor_inertia * m.drive.gear_ratio**2
     for i in range(6):
         x, y, z = m.R_C0[i].T
         assert np.abs(FG[:, i] - FS[:, i] + m.crank_mass[i] * grav).max() <= tol_F
         drive = (dyn.tau[:, i] - t[f"tau_f{i + 1}"])[:, None] * z
         moment = drive + MG[:, i, :1] * x + MG[:, i, 1:] * y + np.cross(r_GS[:, i], -FS[:, i])
-        assert np.abs(moment - m.crank_inertia[i] * kin.ddtheta[:, i, None] * z).max() <= tol_M
+        assert np.abs(moment - (m.crank_inertia[i] + rotor) * kin.ddtheta[:, i, None] * z).max() <= tol_M
 
     # mandible: Newton at O_M and Euler about O_M with I = R I_M R'
     _, r_B, _, _ = body(m.molar(kin.side))
@@ -149,6 +150,8 @@ def _mechanical_energy(name):
     I_S = R @ m.mandible_inertia @ R.transpose(0, 2, 1)
     E = 0.5 * m.mandible_mass * (v_O**2).sum(1) + 0.5 * np.einsum("ni,nij,nj->n", w, I_S, w) + m.mandible_mass * m.g * kin.X[:, 2]
     E += 0.5 * (m.crank_inertia * kin.dtheta**2).sum(1)
+    if m.drive is not None:  # the rotors turn N times faster than their cranks
+        E += 0.5 * m.drive.rotor_inertia * ((m.drive.gear_ratio * kin.dtheta) ** 2).sum(1)
     for i in range(6):
         P, _, v, _ = body(m.M[i])
         S = m.G[i] + r_GS[:, i]
@@ -164,7 +167,7 @@ def test_power_balance(friction):
 
     dE/dt by central differences (tests only). Their error is dt^2/6 E''' (dt = 1 ms): bounded here by the
     difference between steps dt and 2 dt, (4 - 1) dt^2/6 E''', so the tolerance is that difference (a
-    measured bound on the truncation error) plus rounding.
+    measured bound on the truncation error, the largest over five samples) plus rounding.
     """
     dyn = ne("target", friction=friction)
     m, kin, body, E = _mechanical_energy("target")
@@ -181,7 +184,11 @@ def test_power_balance(friction):
     if not friction:
         assert np.abs(lost).max() == 0.0
     residual = (P_in - lost)[1:-1] - dE
-    bound = np.abs(dE[1:-1] - dE2) + 1e-9 * np.abs(P_in).max()
+    # the truncation estimate, the largest over the five samples the wider difference spans: where the task's cycles
+    # meet its jerk jumps (it is C2 there) and the estimate of one sample changes sign
+    truncation = np.abs(dE[1:-1] - dE2)
+    truncation = np.max([np.pad(truncation, 2, mode="edge")[j:j + truncation.size] for j in range(5)], axis=0)
+    bound = truncation + 1e-9 * np.abs(P_in).max()
     assert np.all(np.abs(residual[1:-1]) <= bound)
 
 
@@ -252,11 +259,15 @@ def _with_limits(name, **limits):
 
 def test_active_torque_limit_is_respected_by_the_constrained_solution():
     """A torque limit below the G1 optimum's peak: the SQP samples meet it, cost no less than the
-    unconstrained optimum, and nothing is reported infeasible."""
-    free = ne("target")
+    unconstrained optimum, and nothing is reported infeasible. On the robot without its drive: the rotors' inertia
+    torques, which no distribution moves off their cranks, make 90 % of the peak unreachable where cranks 3 and 4
+    accelerate hardest."""
+    plain = without_drive("target")
+    kin = default_kinematics("target", "left", "euler-angles")  # the same geometry
+    free = inverse_dynamics(plain, kin, "newton-euler")
     peak = np.abs(free.tau).max()
-    m = _with_limits("target", torque=0.9 * peak)
-    dyn = inverse_dynamics(m, default_kinematics("target", "left", "euler-angles"), "newton-euler")
+    m = dataclasses.replace(plain, limits=dataclasses.replace(plain.limits, torque=0.9 * peak))
+    dyn = inverse_dynamics(m, kin, "newton-euler")
     assert dyn.info["constrained_samples"] > 0
     assert dyn.info["infeasible"] == []
     assert np.abs(dyn.tau).max() <= 0.9 * peak * (1 + 1e-6)

@@ -47,6 +47,11 @@ def build(m):
         chains.append((crank, ux, uy))
         loops.append((end, onto))
     body = p.addFrame(pin.Frame("O_M", ff, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    if m.drive is not None:  # each motor's rotor, reflected through its gears: the crank joint's armature
+        armature = p.armature.copy()
+        for crank, _, _ in chains:
+            armature[p.joints[crank].idx_v] = m.drive.rotor_inertia * m.drive.gear_ratio**2
+        p.armature = armature
     return p, chains, loops, body
 
 

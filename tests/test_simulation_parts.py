@@ -228,7 +228,10 @@ def test_a_plant_written_here_runs_through_the_simulator():
     ours = simulate(new, make_controller(table.controller_row("computed-torque"), m, short), short, 1000.0)
     same = simulate(Plant(new.model), make_controller(table.controller_row("computed-torque"), m, short), short, 1000.0)
     assert ours.n == same.n == 301 and np.array_equal(ours.q, same.q) and np.array_equal(ours.tau, same.tau)
-    assert np.abs(ours.q - ours.q_ref).max() > 1e-7  # the model error is felt (m, rad)
+    # the model error is felt: the motion differs from that of the plant of the controller's own model (measured 3e-8 m
+    # in X; the drive's rotors, 500 times the cranks' inertia, take most of the 20 % heavier mandible's error)
+    exact = simulate(Plant(m), make_controller(table.controller_row("computed-torque"), m, short), short, 1000.0)
+    assert np.abs(ours.q - exact.q).max() > 1e-8
 
 
 def _capabilities(plant: type) -> PlantCapabilities:

@@ -6,7 +6,8 @@ chewbot computes in SI and writes SI; the files it reads may give other units in
 says in plain words why a unit cannot be used for a column. Every other conversion factor comes from here too:
 :func:`factor` gives the SI factor of any product and quotient of the units of :data:`UNITS` (``factor("mm")``,
 ``factor("g*mm^2")``, ``factor("g/mm^3")``), and :func:`key_unit` reads the unit a TOML key ends with
-(``inertia_g_mm2`` -> ``("inertia", "g*mm^2")``, ``hkp_viscous_Ns_per_m`` -> ``("hkp_viscous", "N*s/m")``), so that a
+(``inertia_g_mm2`` -> ``("inertia", "g*mm^2")``, ``hkp_viscous_Ns_per_m`` -> ``("hkp_viscous", "N*s/m")``,
+``torque_constant_mNm_per_A`` -> ``("torque_constant", "mN*m/A")``), so that a
 value in file units is ``value * factor(unit)`` in SI and an SI value is ``value / factor(unit)`` in file units.
 """
 
@@ -20,24 +21,25 @@ UNITS = {
     "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6},
     "angle": {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180},
     "time": {"s": 1.0, "ms": 1e-3},
-    "force": {"N": 1.0, "kN": 1e3},
+    "force": {"N": 1.0, "kN": 1e3, "mN": 1e-3},
     "torque": {"N*m": 1.0, "Nm": 1.0, "N*mm": 1e-3, "mN*m": 1e-3},  # robot logs (chewbot identify)
     "mass": {"kg": 1.0, "g": 1e-3},
     "pressure": {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6},
     "power": {"W": 1.0},
     "energy": {"J": 1.0, "mJ": 1e-3},
     "frequency": {"Hz": 1.0, "kHz": 1e3},
+    "current": {"A": 1.0, "mA": 1e-3},  # motor currents (a drive's torque constant, robot logs)
 }
-# The dimension of each kind, as exponents of (m, kg, s, rad): what :func:`factor` multiplies to tell whether two
+# The dimension of each kind, as exponents of (m, kg, s, rad, A): what :func:`factor` multiplies to tell whether two
 # units measure the same quantity. Torque is a force times a length, as N*m is.
-_DIMENSIONS = {"length": (1, 0, 0, 0), "angle": (0, 0, 0, 1), "time": (0, 0, 1, 0), "force": (1, 1, -2, 0),
-               "torque": (2, 1, -2, 0), "mass": (0, 1, 0, 0), "pressure": (-1, 1, -2, 0), "power": (2, 1, -3, 0),
-               "energy": (2, 1, -2, 0), "frequency": (0, 0, -1, 0)}
+_DIMENSIONS = {"length": (1, 0, 0, 0, 0), "angle": (0, 0, 0, 1, 0), "time": (0, 0, 1, 0, 0), "force": (1, 1, -2, 0, 0),
+               "torque": (2, 1, -2, 0, 0), "mass": (0, 1, 0, 0, 0), "pressure": (-1, 1, -2, 0, 0), "power": (2, 1, -3, 0, 0),
+               "energy": (2, 1, -2, 0, 0), "frequency": (0, 0, -1, 0, 0), "current": (0, 0, 0, 0, 1)}
 # The units a key may end with, as keys spell them (no * or ^): the parts of a key's unit, joined by "_" for a
 # product and "_per_" for a quotient (inertia_g_mm2: g*mm^2; density_g_per_mm3: g/mm^3; viscous_Nms_per_rad: N*m*s/rad).
 KEY_UNITS = {"m": "m", "m2": "m^2", "m3": "m^3", "cm": "cm", "cm2": "cm^2", "cm3": "cm^3", "mm": "mm", "mm2": "mm^2", "mm3": "mm^3", "um": "um", "g": "g", "kg": "kg",
              "s": "s", "s2": "s^2", "ms": "ms", "N": "N", "kN": "kN", "Nm": "N*m", "Nmm": "N*mm", "Ns": "N*s",
-             "Nms": "N*m*s", "rad": "rad", "mrad": "mrad", "deg": "deg", "Pa": "Pa", "kPa": "kPa", "MPa": "MPa", "W": "W",
+             "Nms": "N*m*s", "mNm": "mN*m", "A": "A", "rad": "rad", "mrad": "mrad", "deg": "deg", "Pa": "Pa", "kPa": "kPa", "MPa": "MPa", "W": "W",
              "J": "J", "mJ": "mJ", "Hz": "Hz", "kHz": "kHz"}
 # How values are shown to people (figures, report tables): lengths in mm and angles in deg, their rates alike.
 DISPLAY = {"m": "mm", "rad": "deg"}
@@ -88,7 +90,7 @@ _ATOM = re.compile(r"^([A-Za-zµ]+)(?:\^?(-?\d+))?$")
 def _parse(unit: str) -> tuple[float, tuple[int, ...]]:
     """(factor to SI, dimension) of a product and quotient of units: ``g*mm^2``, ``N*s/m``, ``1/mm``, ``m/s^2``."""
     atoms = _atoms()
-    scale, dims = 1.0, (0, 0, 0, 0)
+    scale, dims = 1.0, (0, 0, 0, 0, 0)
     numerator, *denominators = unit.replace(" ", "").split("/")
     for sign, part in [(1, numerator)] + [(-1, d) for d in denominators]:
         for atom in part.split("*"):

@@ -82,7 +82,7 @@ def _equations(model: Model, kin: Kinematics, side: str | None) -> _Sample:
         v_T = v[:, None, :] + np.cross(w_[:, None, :], r_T)
     else:
         r_T, P, v_T = np.zeros((n, 0, 3)), np.zeros((n, 6, 0)), np.zeros((n, 0, 3))
-    inertial = model.crank_inertia * kin.ddtheta
+    inertial = model.crank_total_inertia * kin.ddtheta
     return _Sample(A, wrench, u_all, F_rest, lever, inertial, P, v_T, r_T)
 
 

@@ -73,4 +73,5 @@ def estimate_force(
         peak = int(abs(result.F_B[:, 2]).argmax()) if result.n else 0
         stdout.print(f"wrote {out} ({result.n} rows); largest |Fz| {abs(result.F_B[peak, 2]):.4g} N at t = {result.t[peak]:.4g} s "
                      f"(standard error {result.se[peak, 2]:.3g} N); pooled torque error sigma = {result.sigma:.3g} N*m; "
-                     f"rates {result.info['rates']['first']}/{result.info['rates']['second']}", highlight=False, markup=False)
+                     f"rates {result.info['rates']['first']}/{result.info['rates']['second']}; crank torques from the log's "
+                     f"{result.info['reads']}", highlight=False, markup=False)

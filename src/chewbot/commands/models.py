@@ -123,6 +123,12 @@ def _model_report(m, home: dict):
     facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home); "
                                f"μ_i: transmission angles (90 deg best, 0 at the dead point); kappa of the chains' Jacobian "
                                f"{home['kappa']:.3g} [-] (1 best, 0 singular)")
+    if m.drive is not None:
+        d = m.drive
+        facts.add_row("drive", f"rotor {d.rotor_inertia / g_mm2:.5g} g·mm² x {d.gear_ratio:g}² = {d.reflected_inertia:.4g} kg·m² at each "
+                               f"crank; efficiency {d.efficiency:g}; {d.torque_constant / factor('mN*m/A'):.4g} mN·m/A; "
+                               f"encoder {d.encoder_counts:.0f} counts per motor revolution = "
+                               f"{2 * np.pi / (d.encoder_counts * d.gear_ratio):.3g} rad at the crank (docs/models.md)")
     h = m.hkp
     for label, T, y_range in (("left condyle T_L", h.T_L, h.y_left), ("right condyle T_R", h.T_R, h.y_right)):
         text = f"({', '.join(f'{v / mm:.4g}' for v in T)}) mm in {{S}} at home"

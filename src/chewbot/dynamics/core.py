@@ -99,7 +99,7 @@ def _structured_inertia(model: SymbolicModel, x, R, M_0a, dx, chains):
     C6 = ca.mtimes(M_0a.T, ca.mtimes(Lam, A_dot) + ca.mtimes(0.5 * Lam_dot + Sk, M_0a))
     for i, (J6_i, r, s, rGS) in enumerate(chains):
         m = model.coupler_mass[i]
-        a = model.crank_inertia[i] + m * model.crank_length[i] ** 2 / 3
+        a = model.crank_total_inertia[i] + m * model.crank_length[i] ** 2 / 3
         j = J6_i.T  # column
         j_dot = ca.jtimes(j, x, dx)
         wM = ca.mtimes(M_0a.T, ca.vertcat(s, ca.cross(r, s)))  # W_M' s: s . v_M = wM' x_dot
@@ -141,7 +141,7 @@ def _core(model: SymbolicModel) -> ca.Function:
         W_M = ca.mtimes(ca.horzcat(ca.SX.eye(3), -_skew(r)), M_0a)  # v_M = v + omega x r
         m = model.coupler_mass[i]
         blocks += [J6_i, ca.mtimes(s, J6_i), W_M]
-        weights += [model.crank_inertia[i], ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3))) * m]
+        weights += [model.crank_total_inertia[i], ca.DM(np.kron([[1 / 3, 1 / 6], [1 / 6, 1 / 3]], np.eye(3))) * m]
         chains.append((J6_i, r, s, rGS))
         V += m * model.g * (S[2] + Mi[2]) / 2
         theta.append(th)

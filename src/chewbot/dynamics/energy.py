@@ -83,7 +83,7 @@ def _build(s: Symbolic) -> Energy:
     n = q.numel()
 
     M_cranks = ca.SX(n, n)
-    M_cranks[:6, :6] = ca.diag(model.crank_inertia)
+    M_cranks[:6, :6] = ca.diag(model.crank_total_inertia)
 
     couplers = []
     V = ca.SX(0)

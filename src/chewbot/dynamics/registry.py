@@ -25,6 +25,7 @@ from chewbot.dynamics.base import Dynamics
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.options import Orientation
 from chewbot.model import Model
+from chewbot.model import drive
 
 EA, EP = Orientation.euler_angles.value, Orientation.euler_parameters.value
 
@@ -96,7 +97,10 @@ def inverse_dynamics(model: Model, kin: Kinematics, method: str = DEFAULT_METHOD
     carries state); ``check()``: raises to stop the loops that may swallow a signal (where the formulation has such)."""
     f = formulation(method)
     extra = {**({"carry": carry} if f.carries else {}), **({"check": check} if f.checks else {})}
-    return f.solve(model, kin, **options, **extra)
+    dyn = f.solve(model, kin, **options, **extra)
+    if model.drive is not None:  # tau includes the rotors' inertia (Model.crank_total_inertia); the motors' share
+        drive.add_columns(dyn.table, model.drive, dyn.tau, kin.dtheta)
+    return dyn
 
 
 def formulation_kernels(mechanism: str, orientation: str, method: str, **options) -> list:

@@ -6,7 +6,7 @@ The bodies (SI units, the model's numbers; {S} = MuJoCo's world frame, gravity a
 | body | parent, joint | inertial | from the model |
 |---|---|---|---|
 | ``mandible`` | world, free joint ``mandible`` at O_M | mass m_EE at O_M, ``fullinertia`` about O_M in {M} | ``mandible_mass``, ``mandible_inertia`` |
-| ``crankI`` | world at G_i, frame R_C0,i, hinge ``crankI`` about its z (the shaft) | mass at G_i, diagonal (I, I, I) | ``crank_mass``, ``crank_inertia`` (axial) |
+| ``crankI`` | world at G_i, frame R_C0,i, hinge ``crankI`` about its z (the shaft) | mass at G_i, diagonal (I, I, I); the hinge's ``armature`` J_r N^2 with a drive | ``crank_mass``, ``crank_inertia`` (axial), ``drive`` (the rotor reflected to the crank) |
 | ``couplerI`` | ``crankI`` at S_i, hinges ``couplerI_a`` (local y), ``couplerI_b`` (local z) | m_i at the rod's middle, (0, m L^2/12, m L^2/12) + :data:`SPIN_INERTIA` | ``coupler_mass``, ``coupler_length`` |
 
 - **Cranks.** Only the axial inertia of a crank turning about a fixed shaft enters the dynamics (its mass centre on
@@ -157,8 +157,10 @@ def mjcf(model: Model, friction: bool = True) -> str:
     for i in range(6):
         k = i + 1
         crank = ET.SubElement(world, "body", name=f"crank{k}", pos=_vec(model.G[i]), quat=_vec(_quat(model.R_C0[i])))
-        ET.SubElement(crank, "joint", name=f"crank{k}", type="hinge", axis="0 0 1",
-                      damping=f"{model.friction.actuator_viscous if friction else 0.0:.17g}")
+        joint = ET.SubElement(crank, "joint", name=f"crank{k}", type="hinge", axis="0 0 1",
+                              damping=f"{model.friction.actuator_viscous if friction else 0.0:.17g}")
+        if model.drive is not None:
+            joint.set("armature", f"{model.drive.reflected_inertia:.17g}")
         ET.SubElement(crank, "inertial", pos="0 0 0", mass=f"{max(model.crank_mass[i], MASSLESS_COUPLER):.17g}",
                       diaginertia=_vec(crank_inertia_diagonal(model, i)))
         ET.SubElement(crank, "geom", type="capsule", fromto=_vec([0, 0, 0, model.crank_length[i], 0, 0]), size="0.002")

@@ -16,13 +16,14 @@ from chewbot.task import WINDOW_S
 
 def estimate_log(model: Model, log: RobotLog, *, side: str = "left", contact: str = "bilateral", friction: bool = True,
                  window_s: float = WINDOW_S, sigma: float | None = None) -> ForceEstimate:
-    """F_B, N_L, N_R with standard errors at every sample of ``log`` (its t, crank angles, optional rates, torques;
-    a logged bite force is not used). ``window_s``: the smoothing window of the rates the log does not give;
+    """F_B, N_L, N_R with standard errors at every sample of ``log`` (its t, crank angles, optional rates, torques or
+    currents: :meth:`~chewbot.identification.log.RobotLog.crank_torques`; a logged bite force is not used). ``window_s``: the smoothing window of the rates the log does not give;
     the other options as :func:`chewbot.dynamics.bite_force.estimate`. ``info["rates"]`` says how the rates were
     obtained."""
     motion = log_motion(model, log, side, window_s)
-    result = estimate(model, motion.kin, log.tau, side=side, contact=contact, friction=friction, sigma=sigma)
-    result.info.update({"rates": motion.rates, "window_samples": motion.window_samples, "window_s": window_s,
+    result = estimate(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), side=side, contact=contact,
+                      friction=friction, sigma=sigma)
+    result.info.update({"reads": log.reads(model), "rates": motion.rates, "window_samples": motion.window_samples, "window_s": window_s,
                         "angle_residual_rms_rad": float(np.sqrt(np.mean(motion.angle_residual**2)))})
     return result
 

@@ -168,7 +168,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
         raise ChewbotError(f"{log.source}: only {int(used.sum())} of {log.n} samples have every crank turning (faster than "
                            f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
-    problem = ReducedProblem(model, motion.kin, log.tau, used, check)
+    problem = ReducedProblem(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), used, check)
     progress("the start model")
     result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, progress)
     progress("results")

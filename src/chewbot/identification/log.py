@@ -1,4 +1,4 @@
-"""Robot logs: crank angles and measured torques over time, read from CSV.
+"""Robot logs: crank angles and measured torques or motor currents over time, read from CSV.
 
 One header row, then one row per sample, comma-separated; blank lines and lines starting with ``#`` are skipped
 (chewbot's marker line among them). Columns (any order):
@@ -6,12 +6,15 @@ One header row, then one row per sample, comma-separated; blank lines and lines 
 * ``t`` (strictly increasing; uniform steps where rates are estimated);
 * ``theta1`` .. ``theta6``, the crank angles, and optionally their rates ``dtheta1..6`` and ``ddtheta1..6``
   (all six of a kind or none);
-* ``tau1`` .. ``tau6``, the measured actuator torques;
+* ``tau1`` .. ``tau6``, the measured actuator torques at the cranks, or ``i1`` .. ``i6``, the motors' currents, or
+  both (all six of a kind or none): :meth:`RobotLog.crank_torques` gives the cranks' torques for a model, from the
+  currents through the model's drive (``[drive]``: torque constant, gear ratio, the gearbox's loss law at the crank
+  rates) where the model has one and the log has currents (what a real robot measures), else the logged torques;
 * optionally the bite force ``Fx, Fy, Fz`` on the mandible in {S} at the molar of ``--side`` (each one absent
   is zero).
 
 Values are SI (s, rad, N*m, N) unless the name carries a unit in brackets, as in task files: ``theta1[deg]``,
-``dtheta1[deg/s]``, ``tau1[N*mm]``, ``t[ms]``, ``Fz[kN]``. Errors are :class:`~chewbot.errors.TaskError`
+``dtheta1[deg/s]``, ``tau1[N*mm]``, ``i1[mA]``, ``t[ms]``, ``Fz[kN]``. Errors are :class:`~chewbot.errors.TaskError`
 naming the file and the line (1-based, as an editor shows it) and the column. The results.csv of a chewbot run or
 simulation is a log too: the other columns that its run.json lists are skipped.
 """
@@ -24,11 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.errors import TaskError
+from chewbot.model import drive as drive_law
 from chewbot.task.csvio import FORCES, columns_beside, read_signals
 
 ANGLES = tuple(f"theta{i}" for i in range(1, 7))
 TORQUES = tuple(f"tau{i}" for i in range(1, 7))
+CURRENTS = tuple(f"i{i}" for i in range(1, 7))
 COLUMNS = {"t": ("time", 0), **{f: ("force", 0) for f in FORCES}, **{c: ("torque", 0) for c in TORQUES},
+           **{c: ("current", 0) for c in CURRENTS},
            **{prefix + c: ("angle", order) for c in ANGLES for order, prefix in enumerate(("", "d", "dd"))}}
 
 
@@ -37,7 +43,7 @@ class RobotLog:
     """A log of the robot (arrays samples first, SI).
 
     ``t`` (N,) s; ``theta`` (N, 6) rad; ``dtheta``, ``ddtheta`` (N, 6) or None where the file does not give them;
-    ``tau`` (N, 6) N*m measured; ``force`` (N, 3) N, the bite force on the mandible in {S} (zero where not
+    ``tau`` (N, 6) N*m measured at the cranks, ``current`` (N, 6) A the motors' (either may be None, not both); ``force`` (N, 3) N, the bite force on the mandible in {S} (zero where not
     measured); ``lines``: each sample's line in the file.
     """
 
@@ -50,10 +56,27 @@ class RobotLog:
     force: np.ndarray
     lines: np.ndarray
     force_given: bool = False
+    current: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return self.t.shape[0]
+
+    def crank_torques(self, model, dtheta: np.ndarray) -> np.ndarray:
+        """The cranks' torques (N, 6) N*m for ``model`` at the crank rates ``dtheta`` (N, 6) rad/s: from the currents
+        through the model's drive where it has one and the log gives them, else the logged torques; a TaskError where
+        the log has currents only and the model no drive to read them with."""
+        if self.current is not None and (model.drive is not None or self.tau is None):
+            if model.drive is None:
+                raise TaskError(f"{self.source}: the log gives motor currents (i1..i6) and no torques, but the model "
+                                f"{model.name} has no drive ([drive], docs/models.md) to turn them into crank torques")
+            d = model.drive
+            return drive_law.crank_torque(d, drive_law.torque_of_current(d, self.current), np.asarray(dtheta, float))
+        return self.tau
+
+    def reads(self, model) -> str:
+        """What :meth:`crank_torques` reads for ``model``: ``"currents"`` or ``"torques"``."""
+        return "currents" if self.current is not None and (model.drive is not None or self.tau is None) else "torques"
 
     def where(self, i: int) -> str:
         """``line 12 (t = 0.011 s)``: sample ``i`` as a person finds it in the file."""
@@ -63,18 +86,22 @@ class RobotLog:
 def read_log(path: str | Path) -> RobotLog:
     """Read a robot log (see the module docstring)."""
     path = Path(path)
-    what = "a robot log (t, theta1..6, tau1..6)"
-    names, _, lines, col = read_signals(path, COLUMNS, ("t", *ANGLES, *TORQUES), what, columns_beside(path))
+    what = "a robot log (t, theta1..6, and tau1..6 or i1..6)"
+    names, _, lines, col = read_signals(path, COLUMNS, ("t", *ANGLES), what, columns_beside(path))
 
-    def block(prefix: str):
-        given = [prefix + c in col for c in ANGLES]
+    def block(names: tuple[str, ...], what: str):
+        given = [c in col for c in names]
         if not any(given):
             return None
         if not all(given):
-            missing = [prefix + c for c, g in zip(ANGLES, given) if not g]
-            raise TaskError(f"{path}: the log gives some {prefix}theta columns but not {', '.join(missing)}: give all six or none")
-        return np.column_stack([col[prefix + c] for c in ANGLES])
+            missing = [c for c, g in zip(names, given) if not g]
+            raise TaskError(f"{path}: the log gives some {what} columns but not {', '.join(missing)}: give all six or none")
+        return np.column_stack([col[c] for c in names])
 
+    tau, current = block(TORQUES, "torque"), block(CURRENTS, "current")
+    if tau is None and current is None:
+        raise TaskError(f"{path}: missing columns tau1..tau6 or i1..i6 ({what} needs the cranks' torques or the "
+                        "motors' currents)")
     force = np.column_stack([col.get(f, np.zeros_like(col["t"])) for f in FORCES])
-    return RobotLog(str(path), col["t"], block(""), block("d"), block("dd"), np.column_stack([col[c] for c in TORQUES]),
-                    force, lines, any(f in col for f in FORCES))
+    return RobotLog(str(path), col["t"], block(ANGLES, "theta"), *(block(tuple(p + c for c in ANGLES), p + "theta") for p in ("d", "dd")),
+                    tau, force, lines, any(f in col for f in FORCES), current)

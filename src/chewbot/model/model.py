@@ -20,6 +20,7 @@ TOML file). Arrays are read-only; a model is hashable by identity and safe to sh
 | ``g`` | () | m/s^2 | gravity, along -Z_S |
 | ``hkp`` | | | the HKP planes, sockets and condyle centres (:class:`HKPGeometry`) |
 | ``friction``, ``limits``, ``contact`` | | | :class:`Friction`, :class:`Limits`, :class:`Contact` |
+| ``drive`` | | | :class:`Drive` (each crank's motor and gearhead), or None: no drive (the torques act on the cranks) |
 
 :meth:`Model.vector` gives the numbers the CasADi graphs take as their input ``p``, in the fixed layout of
 :mod:`chewbot.model.vector`. The model holds nothing else: what is built from it (graphs, compiled kernels) is kept in
@@ -106,6 +107,28 @@ class Contact:
     preload: float = 0.0
 
 
+@dataclass(frozen=True)
+class Drive:
+    """The drive train of each of the six cranks (all alike): a DC motor on a gearhead. SI units.
+
+    ``rotor_inertia`` (kg m^2) is the rotor's at the motor shaft, ``gear_ratio`` N motor turns per crank turn,
+    ``efficiency`` the gearbox's (the loss law of :mod:`chewbot.model.drive`), ``torque_constant`` (N m/A) the motor's,
+    ``encoder_counts`` the counts per motor revolution after quadrature. The rotor is seen at the crank as
+    :attr:`reflected_inertia` J_r N^2."""
+
+    rotor_inertia: float  # kg m^2, at the motor
+    gear_ratio: float  # 1
+    efficiency: float  # 1
+    torque_constant: float  # N m / A
+    encoder_counts: float  # counts per motor revolution
+
+    @property
+    def reflected_inertia(self) -> float:
+        """J_r N^2 (kg m^2): the rotor's inertia seen at the crank."""
+        return self.rotor_inertia * self.gear_ratio**2
+
+
+
 class MechanismMixin:
     """What follows from the mechanism's name, shared by :class:`Model` and its symbolic counterpart
     (:class:`chewbot.model.vector.SymbolicModel`)."""
@@ -121,6 +144,13 @@ class MechanismMixin:
     def dof(self) -> int:
         """Degrees of freedom: 4 for the target, 6 for the 6RSS."""
         return 4 if self.has_hkp else 6
+
+    @property
+    def crank_total_inertia(self):
+        """Each crank's axial inertia with its drive's rotor reflected to it, I_i + J_r N^2 (kg m^2): what the dynamics
+        accelerates (the crank's own inertia, ``crank_inertia``, without a drive)."""
+        d = self.drive
+        return self.crank_inertia if d is None else self.crank_inertia + d.rotor_inertia * d.gear_ratio**2
 
     def molar(self, side: str):
         """The bite point B in {M} for ``side`` = ``"left"`` or ``"right"``."""
@@ -164,6 +194,7 @@ class Model(MechanismMixin):
     contact: Contact = field(default_factory=Contact)
     overrides: dict = field(default_factory=dict)  # the --set values applied to the file, as given
     identified: tuple[str, ...] = ()  # keys estimated from robot logs (the file's `identified`)
+    drive: Drive | None = None  # the file's [drive]; None: no drive train
     p: np.ndarray = field(init=False, repr=False)  # the parameter vector, derived from the fields above
 
     def __post_init__(self):

@@ -17,14 +17,14 @@ import math
 import re
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, Field, field_validator
 
 from chewbot.config import Plausible, Strict, key_error, read_text, unknown_key, validate
 from chewbot.errors import ParameterError
-from chewbot.model.model import Contact, Friction, HKPGeometry, Limits, Model
+from chewbot.model.model import Contact, Drive, Friction, HKPGeometry, Limits, Model
 from chewbot.units import factor
 
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
@@ -141,6 +141,23 @@ class ContactSection(Strict):
     preload_N: Annotated[float, Field(ge=0), Plausible(0.0, 1000.0, "N", "condyle preloads")] = 0.0
 
 
+def _whole(value: float) -> float:
+    if value != round(value):
+        raise ValueError(f"{value:g} is not a whole number of counts")
+    return value
+
+
+class DriveSection(Strict):
+    """Each crank's drive train (all six alike): a DC motor on a gearhead, with an encoder at the motor."""
+
+    rotor_inertia_g_mm2: Annotated[float, Field(ge=0), Plausible(1.0, 1e6, "g*mm^2", "rotors of DC motors (0.01 to 10000 g cm^2)")]
+    gear_ratio: Annotated[float, Field(gt=0), Plausible(1.0, 1000.0, "1", "gearheads' reductions")]
+    # above 0.11 the loss law's motor torque is a monotone function of the crank torque (docs/models.md)
+    gear_efficiency: Annotated[float, Field(ge=0.2, le=1.0), Plausible(0.3, 1.0, "1", "gearboxes' efficiencies")]
+    torque_constant_mNm_per_A: Annotated[float, Field(gt=0), Plausible(1.0, 1000.0, "mN*m/A", "DC motors' torque constants")]
+    encoder_counts_per_rev: Annotated[float, Field(gt=0), AfterValidator(_whole), Plausible(4.0, 1e7, "1", "incremental encoders' counts per revolution")]
+
+
 class ParameterFile(Strict):
     """The whole TOML file, as written (papers' units)."""
 
@@ -162,6 +179,7 @@ class ParameterFile(Strict):
     friction: FrictionSection
     limits: LimitsSection
     contact: ContactSection = ContactSection()
+    drive: DriveSection | None = None
 
 
 def builtin_model_path(name: str) -> Path:
@@ -338,6 +356,13 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
                       acceleration=lim.acceleration_rad_per_s2),
         contact=Contact(preload=f.contact.preload_N),
         overrides=dict(overrides or {}),
+        drive=None if f.drive is None else Drive(
+            rotor_inertia=f.drive.rotor_inertia_g_mm2 * g_mm2,
+            gear_ratio=f.drive.gear_ratio,
+            efficiency=f.drive.gear_efficiency,
+            torque_constant=f.drive.torque_constant_mNm_per_A * factor("mN*m/A"),
+            encoder_counts=f.drive.encoder_counts_per_rev,
+        ),
     )
 
 
@@ -380,7 +405,7 @@ def _numeric_keys() -> dict[str, object]:
     """Every numeric key of the schema ("section.key" or a top-level key) with its default (None: required)."""
     out = {}
     for name, info in ParameterFile.model_fields.items():
-        ann = info.annotation
+        ann = next((a for a in get_args(info.annotation) if a is not type(None)), info.annotation)  # an optional section's
         if isinstance(ann, type) and issubclass(ann, BaseModel):
             for sub, sub_info in ann.model_fields.items():
                 out[f"{name}.{sub}"] = None if sub_info.is_required() else sub_info.default

@@ -29,13 +29,15 @@ from chewbot.units import factor, key_unit
 @dataclass(frozen=True)
 class Block:
     """One named part of ``p``: the model attribute ``name`` (dotted for sub-objects), its shape and SI unit,
-    the parameter-file key it comes from, or ``key = None`` for a derived block."""
+    the parameter-file key it comes from, or ``key = None`` for a derived block; ``absent``: its value for a model
+    without the block's optional section (the drive's neutral entries, with which its law is the identity)."""
 
     name: str
     shape: tuple[int, ...]
     unit: str
     key: str | None
     description: str
+    absent: float | None = None
 
     @property
     def size(self) -> int:
@@ -84,6 +86,12 @@ BLOCKS: tuple[Block, ...] = (
     Block("limits.speed", (), "rad/s", "limits.speed_rad_per_s", "crank speed limit"),
     Block("limits.acceleration", (), "rad/s^2", "limits.acceleration_rad_per_s2", "crank acceleration limit"),
     Block("contact.preload", (), "N", "contact.preload_N", "smallest normal force of a unilateral HKP contact"),
+    # a model without a drive: no rotor, ratio 1, loss-free, 1 N m/A (the "current" is the crank torque), no encoder
+    Block("drive.rotor_inertia", (), "kg*m^2", "drive.rotor_inertia_g_mm2", "each motor's rotor inertia at the motor", 0.0),
+    Block("drive.gear_ratio", (), "1", "drive.gear_ratio", "motor turns per crank turn", 1.0),
+    Block("drive.efficiency", (), "1", "drive.gear_efficiency", "gearbox efficiency of the loss law", 1.0),
+    Block("drive.torque_constant", (), "N*m/A", "drive.torque_constant_mNm_per_A", "motor torque per ampere", 1.0),
+    Block("drive.encoder_counts", (), "1", "drive.encoder_counts_per_rev", "encoder counts per motor revolution after quadrature", 0.0),
 )
 
 _OFFSETS = np.cumsum([0] + [b.size for b in BLOCKS])
@@ -137,6 +145,9 @@ def model_vector(model) -> np.ndarray:
             value = model
             for part in b.name.split("."):
                 value = getattr(value, part)
+                if value is None:  # an optional section the model has not: its neutral entry
+                    value = b.absent
+                    break
         p[block_slice(b.name)] = np.ravel(np.asarray(value, dtype=float))
     p.setflags(write=False)
     return p

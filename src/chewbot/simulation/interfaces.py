@@ -34,12 +34,14 @@ StageInputs = Callable[[float, float], np.ndarray]
 class State:
     """What a controller is given at a tick: ``q`` (n,) the independent coordinates (Euler angles; m, rad) and ``dq``
     their rates; ``theta`` (6,) the crank angles the encoders read (rad), from which the estimate was made (None: not
-    given); ``force`` (3,) the force observer's bite force on the mandible (N, {S}), None where no observer runs."""
+    given); ``force`` (3,) the force observer's bite force on the mandible (N, {S}), None where no observer runs;
+    ``dtheta`` (6,) the crank rates (rad/s) the drive's loss law takes the power's direction from (None: not given)."""
 
     q: np.ndarray
     dq: np.ndarray
     theta: np.ndarray | None = None
     force: np.ndarray | None = None
+    dtheta: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

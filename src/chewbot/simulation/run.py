@@ -144,7 +144,8 @@ def build(options: SimulationOptions, task: Task | None = None, write_mjcf=None,
     plant = make_plant(options.engine, plant_model, options.friction, task.side, food, write_mjcf, options.bolus)
     row = options.controller
     controller = ControllerParts(row, model, reference, gains, options.inverse, not options.bite_unknown).build()
-    sensor = CrankSensor(model, options.noise_rad, gains["estimator"].cutoff_Hz, options.seed) if options.measured else None
+    sensor = (CrankSensor(model, options.noise_rad, gains["estimator"].cutoff_Hz, options.seed, plant_model.drive)
+              if options.measured else None)
     observer = (ForceObserver(model, gains["observer"].cutoff_Hz, task.side, options.inverse.friction)
                 if row.needs.observer else None)
     return Parts(model, plant_model, task, reference, gains, controller, plant, sensor, observer)
@@ -186,6 +187,10 @@ def compute(options: SimulationOptions, progress=None, check=None, task: Task | 
     step("models and task")
     parts = build(options, task, write_mjcf, models)
     model, plant_model, task, reference, plant = parts.model, parts.plant_model, parts.task, parts.reference, parts.plant
+    if options.rate is None and model.drive != plant_model.drive:
+        raise ChewbotError("--rate continuous applies the controller's torques to the plant as they are: the plant's "
+                           f"drive ([drive] of {options.plant_file or options.model}) must be the controller's model's; "
+                           "give a control rate (--rate HZ) to simulate a plant with another drive")
     loop_controller = parts.controller
     if options.exported:
         assert exported is not None, "options.exported: pass exported(controller, rate), the exported step's controller"
@@ -207,7 +212,7 @@ def compute(options: SimulationOptions, progress=None, check=None, task: Task | 
              f"{simulated / max(time.perf_counter() - loop_start[0], 1e-9):.2g} x real time")
 
     sim = simulate(plant, loop_controller, reference, options.rate, parts.sensor, progress=loop_progress, check=check,
-                   observer=parts.observer)
+                   observer=parts.observer, drive=model.drive)
     timings = {"simulation_s": time.perf_counter() - t0, "loop_s": sim.elapsed_s, "loop_cpu_s": sim.cpu_s}
     step("kinematics of the simulated motion")
     prepare_kernels([kinematics_kernel(plant_model.mechanism, ORIENTATION), plant_outputs_kernel(plant_model.mechanism)])
@@ -283,6 +288,10 @@ def simulation_table(plant, sim: Simulation, kin: Kinematics, kinematic_columns:
     table = kinematic_columns
     table.add_block([f"tau{i + 1}" for i in range(6)], sim.tau, "N*m", "actuator torques applied to the plant (saturated at limits.torque_Nm)")
     table.add_block([f"tau_cmd{i + 1}" for i in range(6)], sim.tau_cmd, "N*m", "actuator torques the controller commanded")
+    if sim.current is not None:
+        table.add_block([f"tau_motor{i + 1}" for i in range(6)], sim.tau_motor, "N*m", "motor torque of crank i's drive (the plant's)")
+        table.add_block([f"i{i + 1}" for i in range(6)], sim.current, "A",
+                        "motor current the controller commanded through its model's drive, held until the next row")
     names = coordinate_names(model)
     units = coordinate_units(names)
     for j, (name, unit) in enumerate(zip(names, units)):

@@ -1,6 +1,8 @@
 """Crank encoders with noise, and the state estimate a controller gets from them.
 
-The robot measures its six crank angles. With sensor noise (``--noise RAD``) the simulation adds independent Gaussian
+The robot measures its six crank angles, by encoders at the motors where the model has a drive (``[drive]``): the
+angles are then known on the grid of 2 pi / (counts N) rad (:func:`chewbot.model.drive.quantise`), after the noise.
+With sensor noise (``--noise RAD``) the simulation adds independent Gaussian
 noise of that standard deviation to each measured angle, and the controller no longer sees the plant's state but an
 estimate made from the measured angles alone, with the controller's model (it does not know the plant's):
 
@@ -10,7 +12,8 @@ estimate made from the measured angles alone, with the controller's model (it do
   For the target the six noisy angles over-determine the four coordinates: this is their least-squares fit;
 * velocity: the backward difference of consecutive position estimates, through a first-order low-pass of cut-off
   ``cutoff`` (Hz; ``estimator.cutoff_Hz`` of the gains): v_k = b v_(k-1) + (1 - b) (q_k - q_(k-1)) / dt,
-  b = exp(-2 pi cutoff dt). It trades noise (a raw difference amplifies the angles' noise by sqrt(2)/dt) for a lag of
+  b = exp(-2 pi cutoff dt), and the crank rates (which the drive's loss law needs) likewise from the measured angles.
+  It trades noise (a raw difference amplifies the angles' noise by sqrt(2)/dt) for a lag of
   about 1/(2 pi cutoff) seconds.
 
 The estimator starts from the simulation's initial state. It is what the controller is given with noise, and with
@@ -27,7 +30,8 @@ import numpy as np
 
 from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import closure_function
-from chewbot.model import Model
+from chewbot.model import Drive, Model
+from chewbot.model import drive as drive_law
 from chewbot.model.symbolic import c_name
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
 from chewbot.simulation.interfaces import State
@@ -80,20 +84,25 @@ def forward_kinematics_kernel(mechanism: str) -> KernelSpec:
 class CrankSensor:
     """Encoders on the six cranks with Gaussian noise of standard deviation ``noise`` (rad), and the estimator of the
     module docstring on the controller's ``model`` with the velocity low-pass at ``cutoff`` (Hz). ``seed`` fixes the
-    noise. :meth:`start` it at the initial state, then call it with each tick's true crank angles."""
+    noise. ``encoder``: the robot's drive (the plant's), whose encoders quantise the angles (None: not quantised).
+    :meth:`start` it at the initial state, then call it with each tick's true crank angles."""
 
     model: Model
     noise: float
     cutoff: float
     seed: int | None = 0
+    encoder: Drive | None = None
     _rng: np.random.Generator = field(init=False, repr=False)
     _q: np.ndarray = field(init=False, repr=False)
     _dq: np.ndarray = field(init=False, repr=False)
     _t: float = field(init=False, repr=False)
+    _theta: np.ndarray | None = field(init=False, repr=False)
+    _dtheta: np.ndarray = field(init=False, repr=False)
 
     def start(self, t: float, q: np.ndarray, dq: np.ndarray) -> None:
         self._rng = np.random.default_rng(self.seed)
         self._q, self._dq, self._t = np.array(q, float), np.array(dq, float), t
+        self._theta, self._dtheta = None, np.zeros(6)
         self._fk = native(forward_kinematics_kernel(self.model.mechanism))
         if len(q) != n_coordinates(self.model.mechanism):
             raise ValueError(f"the sensor's model is a {self.model.mechanism}, the state has {len(q)} coordinates")
@@ -101,10 +110,14 @@ class CrankSensor:
     def __call__(self, t: float, theta: np.ndarray) -> State:
         """The estimate at time t from the true crank angles ``theta`` (6,)."""
         measured = theta + self._rng.normal(0.0, self.noise, 6)
+        if self.encoder is not None:
+            measured = drive_law.quantise(self.encoder, measured)
         q = self._fk(measured, self._q, self.model.vector())[0]
         dt = t - self._t
         if dt > 0:
             b = np.exp(-2 * np.pi * self.cutoff * dt)
             self._dq = b * self._dq + (1 - b) * (q - self._q) / dt
-        self._q, self._t = q, t
-        return State(q, self._dq.copy(), measured)
+            if self._theta is not None:
+                self._dtheta = b * self._dtheta + (1 - b) * (measured - self._theta) / dt
+        self._q, self._t, self._theta = q, t, measured
+        return State(q, self._dq.copy(), measured, dtheta=self._dtheta.copy())

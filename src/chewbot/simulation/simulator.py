@@ -9,6 +9,13 @@ where their Newton iteration needs it). As in MuJoCo (``mj_step`` between the us
 controller sees only what it is given; the simulator knows both only by their declared interfaces
 (:mod:`chewbot.simulation.interfaces`) and what their capabilities say.
 
+With a drive train (the controller's model's or the plant's ``[drive]``, :mod:`chewbot.model.drive`) the controller
+commands currents: its saturated crank torques become motor currents through its model's drive at the crank rates it
+sees, and the currents, held between the ticks, become the plant's crank torques through the plant's drive at the
+plant's crank rates at the tick (the gearbox's loss law held with them for the tick). The force observer is given the
+torques the controller's model makes of its currents (its saturated commands). Without a drive on either side, the
+torques are held as they are.
+
 ``rate=None`` (``--rate continuous``) evaluates the controller at every stage of every integrator step instead, on
 the plant's true state: the closed loop is one system of equations, integrated as accurately as the plant alone
 (for verification: with the exact model, computed torque then sees only the integration error). It needs a plant
@@ -28,6 +35,7 @@ import numpy as np
 
 from chewbot.compiled.kernels import prepare_kernels
 from chewbot.errors import KinematicsError
+from chewbot.model import drive as drive_law
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.integrator import C, STAGES
 from chewbot.simulation.interfaces import PLANT_INPUTS, Controller, Plant, PlantState, State, StageInputs
@@ -43,6 +51,8 @@ class Simulation:
     ``t`` (K,); ``q``, ``dq`` (K, n) the plant's state in its independent coordinates (Euler angles); ``tau`` (K, 6)
     the torques applied from each row's time on (saturated), ``tau_cmd`` (K, 6) as the controller commanded them;
     ``force`` (K, 3) the bite force on the plant; ``q_ref``, ``dq_ref``, ``ddq_ref`` (K, n) the reference;
+    ``current`` (K, 6) the motors' currents held from each row's time on (A) and ``tau_motor`` (K, 6) their torques in the
+    plant (N m), None without a drive; ``limit`` the torque limit the commands were saturated at (N m);
     ``ddq`` (K, n) and ``N`` (K, 2 or 0) the accelerations and HKP normal forces that each row's state and torques
     produce (the plant's forward dynamics), ``residual`` (K,) their equations' residual (N m); ``stopped``: None, or
     {"t", "sample", "reason"} where the robot left the workspace; ``rate`` (Hz, None: continuous); ``splits``: steps
@@ -70,6 +80,9 @@ class Simulation:
     cpu_s: float = 0.0
     quantities: dict = field(default_factory=dict)
     observed: np.ndarray | None = None
+    current: np.ndarray | None = None
+    tau_motor: np.ndarray | None = None
+    limit: float = np.inf
 
     @property
     def n(self) -> int:
@@ -78,11 +91,11 @@ class Simulation:
     @property
     def saturated(self) -> np.ndarray:
         """(K, 6) True where the commanded torque was beyond the limit."""
-        return self.tau != self.tau_cmd
+        return np.abs(self.tau_cmd) > self.limit
 
 
 def simulate(plant: Plant, controller: Controller, reference: Reference, rate: float | None = DEFAULT_RATE,
-             sensor=None, progress=None, check=None, observer=None) -> Simulation:
+             sensor=None, progress=None, check=None, observer=None, drive=None) -> Simulation:
     """Simulate ``plant`` (:class:`~chewbot.simulation.interfaces.Plant`) under ``controller``
     (:class:`~chewbot.simulation.interfaces.Controller`) following ``reference`` from its first to its last sample,
     starting on the reference (its first sample's position and rate).
@@ -94,7 +107,8 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
     library swallowed: the command line's check). ``observer``: a force observer
     (:class:`~chewbot.simulation.observer.ForceObserver`) updated at each tick from the state the controller sees and
     the torques applied since the tick before; its estimate is the controller's ``State.force`` and the rows'
-    ``observed``.
+    ``observed``. ``drive``: the controller's model's drive (:class:`~chewbot.model.Drive`, None: none); with it or
+    the plant's, the controller commands currents (the module docstring).
     """
     continuous = rate is None
     if continuous:
@@ -122,22 +136,28 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
     if observer is not None:
         observer.start(times[0], q_ref[0], dq_ref[0])
     tau_k = np.zeros(6)
+    drives = None if drive is None and plant.model.drive is None else (drive or drive_law.NEUTRAL, drive_law.of(plant.model))
+    current, applied, dtheta = np.zeros((K, 6)), np.zeros((K, 6)), np.zeros((K, 6))
     stopped, last = None, K - 1
     if not continuous:  # the bite force at the stages of each tick's step, all at once
         stage_force = reference.force_at((times[:-1, None] + np.diff(times)[:, None] * C[None, :]).ravel()).reshape(K - 1, 3, 3)
     internal = [None] * K  # the plant's own state per row
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(K):
-        q[k], dq[k], internal[k] = state.q, state.dq, state.internal
+        q[k], dq[k], internal[k], dtheta[k] = state.q, state.dq, state.internal, state.dtheta
         if not continuous:
-            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq, state.theta)
+            seen = sensor(times[k], state.theta) if sensor is not None else State(state.q, state.dq, state.theta, dtheta=state.dtheta)
             if observer is not None:
                 if k:
                     observed[k] = observer.update(times[k], seen.q, seen.dq, tau_k)
                 seen = replace(seen, force=observed[k, :3].copy())
             tau_cmd[k] = controller(times[k], seen)
             tau_k = np.clip(tau_cmd[k], -limit, limit)
-            inputs = _held(tau_k, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
+            held = tau_k
+            if drives is not None:  # the controller's current, the plant's torque of it
+                current[k] = drive_law.current(drives[0], drive_law.motor_torque(drives[0], tau_k, seen.dtheta))
+                held = applied[k] = drive_law.crank_torque(drives[1], drive_law.torque_of_current(drives[1], current[k]), state.dtheta)
+            inputs = _held(held, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
         if k == K - 1:
             break
         if k % 250 == 0:
@@ -155,13 +175,21 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
     if continuous:  # the law at each row's state, as the integrator evaluated it there
         tau_cmd[rows] = controller.commands(times[rows], q[rows], dq[rows])
     tau = np.clip(tau_cmd[rows], -limit, limit)
+    tau_motor = None
+    if drives is not None:
+        if continuous:  # the law's torques through the one drive (compute() refuses two different ones)
+            current[rows] = drive_law.current(drives[0], drive_law.motor_torque(drives[0], tau, dtheta[rows]))
+        else:
+            tau = applied[rows]
+        tau_motor = drive_law.torque_of_current(drives[1], current[rows])
     force_rows, quantities = plant.outputs(times[rows], q[rows], dq[rows], force[rows], internal[: last + 1])
     force = np.array(force)
     force[rows] = force_rows
     fwd = plant.forward(q[rows], dq[rows], tau, force[rows])
     return Simulation(times[rows], q[rows], dq[rows], tau, tau_cmd[rows], force[rows], q_ref[rows], dq_ref[rows], ddq_ref[rows],
                       fwd.ddq, fwd.N, fwd.residual, rate, stopped, plant.splits, elapsed, cpu, quantities=quantities,
-                      observed=None if observed is None else observed[rows])
+                      observed=None if observed is None else observed[rows],
+                      current=None if drives is None else current[rows], tau_motor=tau_motor, limit=limit)
 
 
 _TAU, _F_B = (PLANT_INPUTS.slices()[name] for name in ("tau", "F_B"))

@@ -123,7 +123,7 @@ def estimate_from_log(model: Model, log, side: str) -> tuple[dict, dict]:
     from chewbot.identification.motion import log_motion
 
     motion = log_motion(model, log, side)
-    est = estimate(model, motion.kin, log.tau, side=side, friction=False)
+    est = estimate(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), side=side, friction=False)
     q, dq, _ = motion.kin.euler_angle_state()
     curve = {"t": est.t, "gap": gap(model, side, q, dq)["gap"], "force": -est.F_B[:, 2], "se": est.se[:, 2]}
     return curve, {"method": "chewbot.dynamics.bite_force.estimate on the motion recovered from the crank angles "
@@ -133,13 +133,14 @@ def estimate_from_log(model: Model, log, side: str) -> tuple[dict, dict]:
 
 
 def simulated_log(result: SimulateResult):
-    """What the robot would log in a simulation: times, crank angles and applied torques (no rates, no force)."""
+    """What the robot would log in a simulation: times, crank angles, applied torques and, with a drive, the motors'
+    currents (no rates, no force)."""
     from chewbot.identification.log import RobotLog
 
     sim = result.simulation
     n = sim.t.size
     return RobotLog(f"simulated {result.task.name}", sim.t, result.kinematics.theta, None, None, sim.tau, np.zeros((n, 3)),
-                    np.arange(n) + 2)
+                    np.arange(n) + 2, current=sim.current)
 
 
 def tpa_from_log(path, model_name: str = "target", side: str = "left") -> tuple[dict, dict, dict]:

@@ -148,7 +148,7 @@ def coefficients_kernel(mechanism: str, orientation: str) -> KernelSpec:
         if nN:
             blocks += [ca.vec(ca.vertcat(*[ca.mtimes(U[:, i], X[i, 2 + 2 * j: 4 + 2 * j]) for i in range(6)]))
                        for j in range(2)]
-        inertial = m.crank_inertia * ddth
+        inertial = m.crank_total_inertia * ddth
         D = ca.vertcat(*blocks, *fE, *r_GS, inertial, dth)
         vh = ca.horzcat(*vhat) if nN else ca.SX(3, 0)
         vt = ca.horzcat(*v_T) if nN else ca.SX(3, 0)

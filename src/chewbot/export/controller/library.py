@@ -19,7 +19,7 @@ from chewbot.compiled.cache import KERNELS, c_compiler
 from chewbot.export.controller.layout import CONTEXT, structures
 from chewbot.export.controller.sources import STRICT_FLAGS, dimensions, filled, write_sources
 from chewbot.export.controller.step import PREFIX, STATUS_BITS, StepSpec, fk_function, law_function
-from chewbot.model import Model
+from chewbot.model import Model, drive
 from chewbot.simulation.controllers.law import CompiledLaw
 from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
 
@@ -201,7 +201,8 @@ class ExportedController:
 
 def simulation_log(result) -> np.ndarray:
     """The rows of example/log.csv from a simulation of the controller with the measured sensor path
-    (:class:`chewbot.simulation.run.SimulateResult`): t, the plant's crank angles (what the encoders read: noise-free),
-    the controller's commanded torques."""
+    (:class:`chewbot.simulation.run.SimulateResult`): t, the plant's crank angles as its encoders read them (noise-free;
+    on their grid where the plant has a drive), the controller's commanded torques."""
     sim = result.simulation
-    return np.column_stack([sim.t, result.kinematics.theta, sim.tau_cmd])
+    read = drive.quantise(drive.of(result.plant_model), result.kinematics.theta)
+    return np.column_stack([sim.t, read, sim.tau_cmd])
