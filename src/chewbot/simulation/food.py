@@ -35,7 +35,8 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
-from chewbot.food.law import CASADI, N_FOOD, NUMPY, Food, breaking, elastic_force, maxwell_force, normal_force, tangential_force
+from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, loaded_force, maxwell_force,
+                              normal_force, tangential_force)
 from chewbot.compiled.layout import Layout
 from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C, STAGES
@@ -44,9 +45,10 @@ from chewbot.simulation.plant import MAX_STEP, PLANT_SHARED, Plant, Solved, Step
 
 # Step lengths of the located events are found to this (s).
 EVENT_TOLERANCE = 1e-10
-EVENTS = ("contact", "teeth", "fracture", "adhesion")
-# The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N).
-STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1)
+EVENTS = FOOD_EVENTS
+# The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N), the
+# deepest compression so far delta_max (m).
+STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1)
 # W of the food's step: the torques and each stage's time since the step's start (s); s: the plant's, the food's
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
@@ -55,9 +57,11 @@ FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_h
 
 @dataclass(frozen=True)
 class FoodState:
-    """The food's state at one time: ``broken`` (0/1), ``F_m`` the Maxwell branch's force (N), and what the state
-    gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative: apart), ``F_v``
-    the force before the clamp F_d + F_m (N), ``F_n`` the normal force (N)."""
+    """The food's state at one time: ``broken`` (0/1), ``F_m`` the Maxwell branch's force (N), ``delta_max`` the
+    deepest compression so far (m; with ``broken`` it gives the permanent set, :func:`chewbot.food.law.permanent_set`),
+    and what the state gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative:
+    apart), ``ddelta`` its rate (m/s), ``F_v`` the force before the clamp F_d + F_m (N), ``F_n`` the normal force
+    (N)."""
 
     broken: int
     F_m: float
@@ -65,20 +69,24 @@ class FoodState:
     delta: float
     F_v: float
     F_n: float
+    delta_max: float = 0.0
+    ddelta: float = 0.0
 
 
-def _food_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
-    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e, the bite point's velocity,
-    cos of the lower tooth's tilt."""
+def _food_sx(mechanism: str, q, dq, B, p, f, broken, delta_max0, z_home):
+    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, the deepest compression so far
+    (delta_max at the step's start or delta, the larger: the ``turn`` and ``yield`` events keep a step from
+    straddling the kinks where it stops growing), b F_e, the bite point's velocity, cos of the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
-    bFe = breaking(f, broken) * elastic_force(CASADI, f, delta)
-    return delta, ddelta, bFe, velocity, cos_tilt
+    delta_max = ca.fmax(delta_max0, delta)
+    bFe = loaded_force(CASADI, f, delta, broken, delta_max)
+    return delta, ddelta, delta_max, bFe, velocity, cos_tilt
 
 
-def _force_sx(f, delta, ddelta, broken, F_m, velocity):
-    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m)
+def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
+    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max)
     Fx, Fy = tangential_force(CASADI, f, F_n, velocity[0], velocity[1])
     return F_n, F_v, ca.vertcat(Fx, Fy, -F_n)
 
@@ -94,9 +102,10 @@ def food_stage(mechanism: str) -> ca.Function:
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
         s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
         B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
+        delta, ddelta, delta_max, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["delta_max"],
+                                                              shared["z_home"])
         F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
-        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)
+        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, delta_max, velocity)
         r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
         return ca.Function("food_stage", [q, v, a, N, w, s], [r])
 
@@ -111,21 +120,37 @@ def food_step_kernel(mechanism: str) -> KernelSpec:
 
 
 def food_function(mechanism: str) -> ca.Function:
-    """The food at states: (q, dq, B, p, food, broken, F_m, z_home) -> delta (m), ddelta (m/s), bFe, F_v, F_n (N),
-    F (3, the force on the mandible in {S}, N), cos_tilt."""
+    """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, z_home) -> delta (m), ddelta (m/s), delta_max
+    (m, with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N), cos_tilt."""
     m = symbols(mechanism)
 
     def build():
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
-        broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
-        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
-        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, z_home], [delta, ddelta, bFe, F_v, F_n, F, cos_tilt],
-                           ["q", "dq", "B", "p", "food", "broken", "F_m", "z_home"],
-                           ["delta", "ddelta", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
+        broken, F_m, delta_max0, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("delta_max"), ca.SX.sym("z_home")
+        delta, ddelta, delta_max, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, delta_max0, z_home)
+        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity)
+        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
+                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt],
+                           ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "z_home"],
+                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
 
-    return cached_graph(m, ("food-quantities",), build)
+    return cached_graph(m, ("food-quantities-state",), build)
+
+
+def food_quantities_kernel(mechanism: str) -> KernelSpec:
+    """:func:`food_function` compiled: the food's quantities at one state (each step's end, the events' guards) and
+    at the rows."""
+    from chewbot.model.symbolic import c_name
+
+    name = f"food_quantities_{c_name(mechanism)}"
+
+    def build(params):
+        fn = food_function(mechanism)
+        x = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+        return ca.Function(name, x, fn.call(x), fn.name_in(), fn.name_out(), {"cse": True})
+
+    return KernelSpec(name, build, (mechanism, "food-state"), mechanism)
 
 
 @dataclass(frozen=True)
@@ -157,39 +182,39 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [food_step_kernel(self.mechanism), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
+        return [food_step_kernel(self.mechanism), food_quantities_kernel(self.mechanism), forward_kernel(self.mechanism),
+                plant_outputs_kernel(self.mechanism)]
 
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
-                                z_home=self._z_home)
+                                delta_max=0.0, z_home=self._z_home)
 
-    def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
-        """The food's state at one plant state."""
+    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> FoodState:
+        """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
         if self._fn is None:
-            self._fn = food_function(self.mechanism)
-        delta, _, bFe, F_v, F_n, _, _ = self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home)
-        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n))
+            self._fn = native(food_quantities_kernel(self.mechanism))
+        delta, ddelta, deepest, bFe, F_v, F_n, _, _ = (np.asarray(v).flat[0] for v in self._fn(
+            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, self._z_home))
+        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
+                         float(ddelta))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0)))
+        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0)))
 
     def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        b = start.internal.food.broken
-        bFe = self.quantities(end.q, end.dq, b, 0.0).bFe
-        F_m = float(maxwell_force(NUMPY, self._f, start.internal.food.F_m, start.internal.food.bFe, bFe, h))
-        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, b, F_m)))
+        food = start.internal.food
+        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max).bFe
+        F_m = float(maxwell_force(NUMPY, self._f, food.F_m, food.bFe, bFe, h))
+        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max)))
 
     # ---------------------------------------------------------------------------------------------- events
 
     def guards(self, state: FoodState) -> np.ndarray:
-        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed)."""
-        f = self.food
-        fracture = (state.delta / f.height - f.fracture_strain if f.fracture_strain is not None and not state.broken
-                    else np.nan)
-        adhesion = state.F_v + f.adhesion if state.delta > 0 else np.nan
-        return np.array([state.delta, state.delta - f.height, fracture, adhesion])
+        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
+        (:func:`chewbot.food.law.guards`)."""
+        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max)
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
         """The state after h seconds under the torques of ``inputs`` (their bite forces are not used: the food's force
@@ -201,6 +226,7 @@ class FoodPlant(Plant):
                 s = s0.copy()
                 blocks, food = FOOD_SHARED.unpack(s), state.internal.food
                 blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+                blocks["delta_max"][:] = food.delta_max
                 return s
 
             self._step = Step(native(food_step_kernel(self.mechanism)), shared)
@@ -240,8 +266,9 @@ class FoodPlant(Plant):
             after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
-            b = self.food.stiffness_after_fracture
-            food = self.quantities(after.q, after.dq, 1, after.internal.food.F_m * b)
+            now = after.internal.food
+            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max)
+            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
             after = replace(after, internal=replace(after.internal, food=food))
         return after
 
@@ -249,13 +276,14 @@ class FoodPlant(Plant):
 
     def outputs(self, t, q, dq, force, internal) -> tuple[np.ndarray, dict]:
         """The food's force on the mandible at the rows, and the food's quantities: ``compression`` (m, max(0, delta)),
-        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad) and ``F_m`` (N)."""
+        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad), ``F_m`` (N) and ``delta_max`` (m)."""
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
-        delta, _, _, _, F_n, F, cos_tilt = evaluate(food_function(self.mechanism), q, dq, self._B, self._p, self._f,
-                                                    broken, F_m, np.full(len(t), self._z_home))
+        delta_max = np.array([s.food.delta_max for s in internal], float)
+        delta, _, _, _, _, F_n, F, cos_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq, self._B, self._p,
+                                                       self._f, broken, F_m, delta_max, np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
-                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m}
+                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m, "delta_max": delta_max}
         return F, quantities
 
     def columns(self, quantities: dict) -> list[Column]:
@@ -279,6 +307,26 @@ class FoodPlant(Plant):
                          "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
 
 
+def food_checks(sim, info: dict) -> list:
+    """The food simulation's check (a failure): ``teeth-met``, the compression reached the sample's height (the teeth
+    pressed on each other through it, the tooth contact's stiff spring instead of the food's law). The food's events
+    themselves are run.json's ``food.events`` and the report's section."""
+    from chewbot.analysis.checks import CheckResult
+
+    delta, h0 = sim.quantities["delta"], info["food"]["height_mm"] * 1e-3
+    met = np.flatnonzero(delta >= h0)
+    teeth = [e for e in info["events"] if e["event"] == "teeth"]
+    k = int(met[0]) if met.size else None
+    ok = k is None and not teeth
+    first = None if ok else ({"index": k, "t": float(sim.t[k])} if k is not None else {"index": None, "t": teeth[0]["t"]})
+    worst = float(np.max(delta) * 1e3) if delta.size else 0.0
+    checks = [CheckResult("teeth-met", ok, 0 if ok else max(int(met.size), 1), first, {"value": worst, "unit": "mm of compression"},
+                          f"the deepest compression was {worst:.4g} mm of the sample's {h0 * 1e3:.4g} mm"
+                          + ("" if ok else f": the teeth met through the sample (peak force {np.max(sim.quantities['force']):.4g} N)"),
+                          "failure")]
+    return checks
+
+
 def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
     """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
     :class:`FoodPlant`."""
@@ -292,5 +340,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_checks", "food_function", "food_quantities_kernel",
            "food_stage", "food_step_kernel", "start_gap"]

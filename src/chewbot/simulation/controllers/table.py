@@ -70,6 +70,9 @@ CONTROLLERS: dict[str, ControllerRow] = {row.name: row for row in (
                   "control along z following the task's Fz [N]; docs/bite_force.md", "hybrid", gains="hybrid",
                   needs=Needs(inverse_dynamics=True, target=True, observer=True, food=True), continuous=False,
                   force_reference=True),
+    ControllerRow("crosshead", "computed torque with integral action on the independent coordinates: a texture analyser's "
+                  "crosshead that holds its path under a load it is not told (chewbot tpa's)", "crosshead", gains="crosshead",
+                  needs=Needs(inverse_dynamics=True), continuous=False),
 )}
 NAMES = tuple(CONTROLLERS)
 COMPARED = tuple(r.name for r in CONTROLLERS.values() if r.compared)
