@@ -44,7 +44,7 @@ BREAK_DROP = 0.05  # a break: the force falls 5 % below its running maximum whil
 AT_SPEED = 0.95  # ... at 95 % of the stroke's speed or more (the turn's slowing fades a viscous force: no break)
 CONTACT_FRACTION = 0.01  # contact where no trigger force is given: the force above 1 % of the hardness
 # The energy readings of a passive sample are in [0, 1] within this: the trapezoids at 1 kHz leave less than 1e-4 on
-# the closed-form curves of the tests, an estimated curve's noise about 1e-3 (the elastic bolus read 0.999
+# the closed-form curves of the tests, an estimated curve's noise about 1e-3 (an elastic bolus read 0.999
 # from the torques); 0.5 % keeps both inside and puts the impossible values (1.011, 1.176) outside.
 RATIO_TOLERANCE = 0.005
 # The protocol is held where the deepest compression is within 1 % of its target and the 2nd-98th percentiles of the

@@ -205,7 +205,7 @@ def texture_checks(result: SimulateResult, food: Food, profile: Profile, g_plant
     """The checks of a simulated texture test (module docstring): the simulation's, the protocol's on the plant's gap
     and force, the energy readings of both analyses."""
     sim = result.simulation
-    held = protocol_checks(sim.t, g_plant["gap"], sim.quantities["force"], profile, rate=-g_plant["rate"])
+    held = protocol_checks(sim.t, g_plant["gap"], sim.quantities["force"], profile, rate=g_plant["rate"])
     return [*result.checks, *held, *plant.checks, *estimated.checks]
 
 
