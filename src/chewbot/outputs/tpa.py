@@ -82,12 +82,20 @@ def _unit_rows(entries: dict) -> list[list]:
     return rows
 
 
+def _named(key: str) -> str:
+    """A measure's key as a header: its name and its unit in brackets (``hardness_N``: hardness [N])."""
+    from chewbot.units import key_unit
+
+    name, unit = key_unit(key)
+    return name.replace("_", " ") + (f" [{unit}]" if unit else "")
+
+
 def tpa_html(record: dict) -> str:
     """A food scientist's report: the measures of both readings side by side with their definitions, the checks, the
     protocol as run, the sample, and the force-time (anchors and areas shaded) and force-displacement figures."""
     columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
     definitions = record.get("definitions", {})
-    measures = [[m.replace("_", " "), *(record[c].get(m) for c in columns), definitions.get(m, "")] for m in MEASURES]
+    measures = [[_named(m), *(record[c].get(m) for c in columns), definitions.get(m, "")] for m in MEASURES]
     checks = [[c["name"], {True: "passed", False: "FAILED" if c["severity"] == "failure" else "warning", None: "not evaluated"}[c["passed"]],
                c["message"]] for c in record.get("checks", [])]
     failed = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] == "failure"]

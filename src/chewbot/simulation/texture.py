@@ -38,7 +38,8 @@ from chewbot.food.tpa import HOLD, Profile, Protocol, TpaAnalysis, TpaError, ana
 from chewbot.model import Model
 from chewbot.simulation.controllers.table import controller_row
 from chewbot.simulation.options import SimulationOptions, resolve
-from chewbot.simulation.run import SimulateResult, compute, load_models
+from chewbot.simulation.run import SimulateResult, build, compute, load_models
+from chewbot.simulation.simulator import simulate
 
 # The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
 TPA_CONTROLLER = controller_row("crosshead")
@@ -136,10 +137,29 @@ class TpaResult:
         return {"chewbot_tpa": 2, "options": self.options.record(), "food": self.food.as_dict(),
                 "protocol": self.profile.record(), "largest_height_mm": {self.options.side: self.largest_height * 1e3},
                 "deepest_compression_mm": info.get("deepest_compression_m", 0.0) * 1e3,
-                "tilt_at_deepest_deg": info.get("tilt_at_deepest_deg"), "events": info.get("events", []),
+                "tilt_at_deepest_deg": info.get("tilt_at_deepest_deg"), "face": self.face(),
+                "events": info.get("events", []),
                 "plant": self.plant.measures, "estimated": self.estimated.measures,
                 "definitions": self.plant.definitions, "anchors": {"plant": self.plant.anchors, "estimated": self.estimated.anchors},
                 "estimator": self.estimator, "checks": [c.as_dict() for c in self.checks]}
+
+
+    def face(self) -> dict:
+        """The lower tooth's face at the deepest point of the first bite: its tilt against the upper tooth, the spread
+        of the gap across the sample's face (its diameter x sin tilt) and the bite point's horizontal slide from
+        where the test started (mm, deg)."""
+        from chewbot.food.geometry import bite_point_function
+        from chewbot.compiled.kernels import evaluate
+
+        sim, model = self.simulation.simulation, self.simulation.plant_model
+        k = int(np.argmin(self.curves["gap_plant"]))
+        point, _, cos_tilt = evaluate(bite_point_function(model.mechanism), sim.q[[0, k]], sim.dq[[0, k]],
+                                      np.asarray(model.molar(self.options.side), float), model.vector())
+        tilt = float(np.arccos(np.clip(cos_tilt[1, 0], -1.0, 1.0)))
+        diameter = 0.0 if self.food.diameter is None else self.food.diameter
+        return {"path": "the bite point straight down along {S}'s z, alpha pinned at 0: no slide commanded, the face "
+                        "tilts with beta", "tilt_deg": float(np.degrees(tilt)),
+                "spread_mm": diameter * np.sin(tilt) * 1e3, "slide_mm": float(np.linalg.norm(point[1, :2] - point[0, :2]) * 1e3)}
 
 
 def check_height(model: Model, food: Food, side: str) -> float:
@@ -152,12 +172,7 @@ def check_height(model: Model, food: Food, side: str) -> float:
     return h_max
 
 
-def _simulate(options: TpaOptions, model: Model, t, path, name: str, step, check) -> SimulateResult:
-    task = molar_path_task(model, options.side, t, *path, name=name)
-    return compute(options.simulation, progress=step, check=check, task=task)
-
-
-def find_trigger(options: TpaOptions, model: Model, food: Food, step=None, check=None) -> float:
+def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
     """The time (s) the plant's food force first reaches the trigger force on the approach from h0 + approach at the
     pre-test speed, interpolated between the ticks (the approach simulated until then)."""
     p = options.protocol
@@ -165,7 +180,10 @@ def find_trigger(options: TpaOptions, model: Model, food: Food, step=None, check
     reach = p.approach + TRIGGER_SEARCH
     while True:
         t = np.arange(int(np.ceil((HOLD + p.blend + reach / p.pre_test_speed) * options.rate)) + 1) / options.rate
-        sim = _simulate(options, model, t, p.approach_path(start, t), f"approach to the {food.name}", step, check).simulation
+        task = molar_path_task(model, options.side, t, *p.approach_path(start, t), name=f"approach to the {food.name}")
+        parts = build(options.simulation, task)  # the loop alone: the approach's rows are not kept
+        sim = simulate(parts.plant, parts.controller, parts.reference, options.rate, parts.sensor, check=check,
+                       observer=parts.observer)
         F = sim.quantities["force"]
         hits = np.flatnonzero(F >= p.trigger_force)
         if hits.size:
@@ -184,10 +202,12 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     food = load_food(options.food)
     model, plant_model, _ = load_models(options.simulation)
     h_max = check_height(plant_model, food, options.side)
-    t_trigger = find_trigger(options, model, food, step, check)
+    step("the approach, until the trigger", stage="simulation")
+    t_trigger = find_trigger(options, model, food, check)
     profile = options.protocol.profile(food.height + options.protocol.approach, t_trigger, options.rate)
     t = profile.times()
-    result = _simulate(options, model, t, profile.path(t), f"texture test of the {food.name}", step, check)
+    task = molar_path_task(model, options.side, t, *profile.path(t), name=f"texture test of the {food.name}")
+    result = compute(options.simulation, progress=step, check=check, task=task)
     sim = result.simulation
     g_plant = gap(plant_model, options.side, sim.q, sim.dq)
     plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")

@@ -1,0 +1,136 @@
+"""The robot as a texture analyser held to a texture analyser's protocol, with its friction: the trigger, the test
+speed and the compression checked on an elastic, a stiff (1 MPa) and a crushing sample; the force the robot estimates
+from its torques against the plant's; a crushing sample's springiness against the law's recovery r; failures that
+exit 4."""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from chewbot.simulation.texture import estimate_trigger, resolve_tpa, run_tpa
+
+runner = CliRunner()
+SPEED = 4.0  # mm/s: a shorter test than the default 2 mm/s, the same protocol
+SAMPLES = {  # h0 6 mm, d 10 mm cylinders
+    "elastic": {"young_modulus_kPa": 20.0},
+    "stiff": {"young_modulus_kPa": 1000.0},
+    "crushing": {"young_modulus_kPa": 100.0, "fracture_strain": 0.3, "stiffness_after_fracture": 0.5,
+                 "recovery_after_fracture": 0.1},
+}
+
+
+def food_file(folder, name: str) -> str:
+    keys = {"name": f"{name} cylinder", "shape": "cylinder", "height_mm": 6.0, "diameter_mm": 10.0, "tooth_friction": 0.3,
+            **SAMPLES[name]}
+    path = folder / f"{name}.toml"
+    path.write_text("[food]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v}\n" for k, v in keys.items()))
+    return str(path)
+
+
+@functools.cache
+def _tpa(tmp: str, name: str):
+    from pathlib import Path
+
+    return run_tpa(resolve_tpa(food_file(Path(tmp), name), speed=SPEED, pause=0.5))
+
+
+@pytest.fixture(scope="module")
+def tpa(tmp_path_factory):
+    tmp = str(tmp_path_factory.mktemp("texture"))
+    return lambda name: _tpa(tmp, name)
+
+
+@pytest.mark.parametrize("name", list(SAMPLES))
+def test_the_protocol_is_held_with_friction(tpa, name):
+    """The robot, with its friction, holds the protocol on each sample: the compression within 1 % of its target, the
+    speed's 2nd-98th percentiles within 1 % of the stroke's (the checks of chewbot.food.tpa.protocol_checks, tested
+    there on curves built by hand), the teeth apart; the trigger where the plant's force reached 0.049 N. (The stiff
+    sample's 39 N lifts a condyle off its plane: ``contact-pull`` fails there, which the test reports.)"""
+    r = tpa(name)
+    assert r.options.friction and r.simulation.options.friction and r.simulation.options.inverse.friction
+    checks = {c.name: c for c in r.checks}
+    for key in ("compression-reached", "speed-held", "teeth-met"):
+        assert checks[key].passed, checks[key].message
+    assert {c.name for c in r.checks if c.fails_run} <= {"contact-pull"}
+    k = int(np.searchsorted(r.curves["t"], r.profile.trigger_time))
+    assert r.curves["force_plant"][k - 1] < 0.049 <= r.curves["force_plant"][k + 1]
+
+
+def test_the_estimate_recovers_the_plants_force(tpa):
+    """The force the robot estimates from its crank angles and torques (chewbot estimate-force's estimator and its
+    default, the model's friction subtracted) is the plant's to 2 % RMS of the peak, on every sample."""
+    for name in SAMPLES:
+        c = tpa(name).curves
+        error = c["force_estimated"] - c["force_plant"]
+        assert np.sqrt(np.mean(error**2)) < 0.02 * np.max(c["force_plant"]), name
+
+
+def test_a_crushed_sample_springs_back_by_r(tpa):
+    """Broken in the first bite, the sample is crushed to h0 - delta_max (1 - r): the second bite meets it r delta_max
+    below contact, its springiness is r (0.1) within 0.02; its cohesiveness is far below an elastic sample's."""
+    r = tpa("crushing")
+    assert [e["event"] for e in r.record()["events"]].count("fracture") == 1
+    assert r.plant.measures["springiness"] == pytest.approx(0.1, abs=0.02)
+    assert r.estimated.measures["springiness"] == pytest.approx(0.1, abs=0.02)
+    assert r.plant.measures["cohesiveness"] < 0.2
+
+
+def test_tpa_json_gives_both_readings_definitions_and_checks(tpa):
+    record = tpa("elastic").record()
+    assert record["chewbot_tpa"] == 2
+    for key in ("hardness_N", "fracturability_N", "cohesiveness", "springiness", "resilience", "adhesiveness_mJ",
+                "gumminess_N", "chewiness_N", "springiness_at_peak", "resilience_at_peak"):
+        assert key in record["plant"] and key in record["estimated"] and key in record["definitions"]
+    assert {"compression-reached", "speed-held", "teeth-met", "contact-pull", "plant-springiness-range",
+            "estimated-resilience-range"} <= {c["name"] for c in record["checks"]}
+    assert record["protocol"]["trigger_force_N"] == 0.049 and record["options"]["friction"] == "on"
+    json.dumps(record)
+
+
+def test_estimate_trigger_stays_above_the_noise():
+    """On white noise of 0.1 N the estimate's contact force is 5 sigma (0.5 N within 10 %), not the trigger force; on a
+    smooth curve the trigger force."""
+    rng = np.random.default_rng(0)
+    contact, noise = estimate_trigger(rng.normal(0, 0.1, 20000), 0.049)
+    assert noise == pytest.approx(0.1, rel=0.05) and contact == pytest.approx(0.5, rel=0.1)
+    contact, _ = estimate_trigger(np.sin(np.linspace(0, 3, 5000)), 0.049)
+    assert contact == 0.049
+
+
+def test_a_missed_compression_exits_4(tmp_path):
+    """A soft position loop without its integral yields under a stiff sample: the compression is missed, tpa.json says
+    so in its checks, the command exits 4 (the folder written)."""
+    food = food_file(tmp_path, "stiff")
+    r = runner.invoke(app, ["tpa", "--food", food, "--speed", str(SPEED), "--pause", "0.5", "--gain", "crosshead.frequency_Hz=10",
+                            "--gain", "crosshead.integral_Hz=0", "--out", str(tmp_path / "soft"), "-q"])
+    assert r.exit_code == EXIT_CHECK_FAILED, r.output
+    record = json.loads((tmp_path / "soft" / "tpa.json").read_text())
+    missed = {c["name"]: c for c in record["checks"]}["compression-reached"]
+    assert missed["passed"] is False and "compression-reached" in r.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--compression", "0.5"], "did you mean 50 %?"),
+    (["--compression", "50", "--distance", "3"], "give one"),
+    (["--trigger-force", "0"], "--trigger-force 0"),
+    (["--friction", "maybe"], "friction"),
+])
+def test_tpa_refuses_bad_settings(tmp_path, args, message):
+    r = runner.invoke(app, ["tpa", "--food", "cheddar", *args, "--out", str(tmp_path / "x")])
+    assert r.exit_code == EXIT_BAD_INPUT and message in r.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_gain_does_not_apply_to_a_log(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text("t [s]\n0\n")
+    r = runner.invoke(app, ["tpa", "--log", str(log), "--gain", "crosshead.integral_Hz=1", "--out", str(tmp_path / "x")])
+    assert r.exit_code == EXIT_BAD_INPUT and "--gain" in r.output
