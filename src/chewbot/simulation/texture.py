@@ -48,6 +48,10 @@ TPA_METHOD = "newton-euler"
 # differences over sqrt 2: white noise's standard deviation, blind to a force that changes smoothly at 1 kHz): a
 # 5-sigma threshold, which noise alone crosses at about 3e-7 of the samples.
 NOISE_FACTOR = 5.0
+# The estimated force's contact is where it reaches its contact force and stays above it this long (s): a compression
+# lasts seconds, the estimate's excursions where the robot starts or stops moving (its friction model's share of the
+# torques misread over the rates' smoothing window) tens of milliseconds.
+CONTACT_HOLD = 0.1
 # The approach is first simulated this far past the sample's unloaded top (m), then twice as far until it triggers.
 TRIGGER_SEARCH = 0.5e-3
 
@@ -213,7 +217,8 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")
     step("bite force from the torques")
     curve, estimator = estimate_from_log(model, simulated_log(result), options.side, options.friction)
-    estimated = analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated")
+    estimated = analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
+                        contact_hold=CONTACT_HOLD)
     curves = {"t": sim.t, "gap_plant": g_plant["gap"], "force_plant": sim.quantities["force"], "gap_estimated": curve["gap"],
               "force_estimated": curve["force"], "force_estimated_se": curve["se"]}
     checks = texture_checks(result, food, profile, g_plant, plant, estimated)
@@ -259,7 +264,8 @@ def estimate_from_log(model: Model, log, side: str, friction: bool = True, trigg
                    "friction": "on" if friction else "off", "rates": motion.rates, "window_samples": motion.window_samples,
                    "sigma_Nm": est.sigma, "noise_N": noise, "contact_force_N": contact,
                    "contact_force_rule": f"the larger of the trigger force and {NOISE_FACTOR:g} x the estimate's noise "
-                                         "(1.4826 MAD of its sample-to-sample differences / sqrt 2)",
+                                         "(1.4826 MAD of its sample-to-sample differences / sqrt 2), held for "
+                                         f"{CONTACT_HOLD:g} s",
                    "ill_conditioned_samples": int(np.size(est.ill_conditioned)), "warnings": list(est.warnings)}
 
 
@@ -282,9 +288,10 @@ def tpa_from_log(options: TpaOptions) -> tuple[TpaAnalysis, dict, dict]:
     model = load_model(options.model)
     log = read_log(options.log)
     curve, estimator = estimate_from_log(model, log, options.side, options.friction, options.protocol.trigger_force)
-    return analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated"), curve, estimator
+    return (analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
+                    contact_hold=CONTACT_HOLD), curve, estimator)
 
 
-__all__ = ["NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult", "check_height",
+__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult", "check_height",
            "estimate_from_log", "estimate_trigger", "find_trigger", "resolve_tpa", "run_tpa", "simulated_log",
            "texture_checks", "tpa_from_log"]
