@@ -30,7 +30,7 @@ def _foods() -> str:
 
 def tpa(
     food: str | None = typer.Option(None, "--food", show_default=False, help=f"The sample: a built-in food ({_foods()}) or a TOML food file (docs/food.md). Required without --log; with --log it only gives h0 for the force-displacement figure."),
-    compression: float | None = typer.Option(None, "--compression", show_default=False, help="How far each bite compresses the sample: a percentage of its height at the trigger (default 50: to half of it; 1-99, e.g. 50, not 0.5). Exclusive with --distance."),
+    compression: float | None = typer.Option(None, "--compression", show_default=False, help="How far each bite compresses the sample: the fraction of its height at the trigger, in % (default 50: to half of it; 1-99, e.g. 50, not 0.5). Exclusive with --distance."),
     distance: float | None = typer.Option(None, "--distance", show_default=False, help="How far each bite compresses the sample from the trigger, in mm (e.g. 5), instead of --compression."),
     speed: float = typer.Option(2.0, "--speed", help="Test speed: the molar point's speed along z while it compresses (mm/s, e.g. 2)."),
     pre_test_speed: float = typer.Option(1.0, "--pre-test-speed", help="Speed of the approach until the trigger (mm/s, e.g. 1)."),
