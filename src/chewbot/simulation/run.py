@@ -49,6 +49,9 @@ from chewbot.simulation.reference import Reference
 from chewbot.simulation.sensor import CrankSensor
 from chewbot.simulation.simulator import Simulation, simulate
 from chewbot.table import Table
+from chewbot.units import factor, shown
+
+MM = factor("mm")
 
 
 @dataclass
@@ -164,8 +167,8 @@ def load_food_for(options: SimulationOptions, plant_model: Model, task: Task, re
                            "which reads its Fz as the force reference")
     g0 = start_gap(plant_model, task.side, reference.q[0], reference.dq[0])
     if g0 < food.height:
-        raise ChewbotError(f"--food {options.food}: the {food.name} (h0 = {food.height * 1e3:.4g} mm) does not fit at the "
-                           f"task's start: the gap at the {task.side} bite point is {g0 * 1e3:.4g} mm at sample 0 "
+        raise ChewbotError(f"--food {options.food}: the {food.name} (h0 = {food.height / MM:.4g} mm) does not fit at the "
+                           f"task's start: the gap at the {task.side} bite point is {g0 / MM:.4g} mm at sample 0 "
                            f"(t = {task.t[0]:.6g} s); start the task with the teeth at least h0 apart")
     return food
 
@@ -343,15 +346,16 @@ def tracking_metrics(sim: Simulation, names) -> dict:
     e = sim.q_ref - sim.q
     linear = [j for j, n in enumerate(names) if n in ("X", "Y", "Z")]
     angular = [j for j, n in enumerate(names) if n not in ("X", "Y", "Z")]
-    pos_mm = np.linalg.norm(e[:, linear], axis=1) * 1e3
-    ang_deg = np.degrees(np.linalg.norm(e[:, angular], axis=1))
+    (to_mm, mm), (to_deg, deg) = shown("m"), shown("rad")
+    pos_mm = np.linalg.norm(e[:, linear], axis=1) * to_mm
+    ang_deg = np.linalg.norm(e[:, angular], axis=1) * to_deg
 
     def rms(x):
         return float(np.sqrt(np.mean(x**2)))
 
     per = {}
     for j, n in enumerate(names):
-        scale, unit = (1e3, "mm") if j in linear else (180 / np.pi, "deg")
+        scale, unit = (to_mm, mm) if j in linear else (to_deg, deg)
         per[n] = {"rms": rms(e[:, j]) * scale, "peak": float(np.max(np.abs(e[:, j]))) * scale, "unit": unit}
     saturated = sim.saturated.any(axis=1)
     return {"rms_position_mm": rms(pos_mm), "peak_position_mm": float(pos_mm.max()), "rms_orientation_deg": rms(ang_deg),
