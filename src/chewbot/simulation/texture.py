@@ -36,13 +36,13 @@ from chewbot.food.geometry import gap, largest_height, molar_path_task
 from chewbot.food.law import Food, load_food
 from chewbot.food.tpa import HOLD, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
 from chewbot.model import Model
-from chewbot.simulation.controllers.table import controller_row
+from chewbot.simulation.controllers.table import TEXTURE_CONTROLLER, controller_row
 from chewbot.simulation.options import SimulationOptions, resolve
 from chewbot.simulation.run import SimulateResult, build, compute, load_models
 from chewbot.simulation.simulator import simulate
 
 # The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
-TPA_CONTROLLER = controller_row("crosshead")
+TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
 TPA_METHOD = "newton-euler"
 # The estimate's contact force is at least this many times its noise (1.4826 MAD of its sample-to-sample
 # differences over sqrt 2: white noise's standard deviation, blind to a force that changes smoothly at 1 kHz): a

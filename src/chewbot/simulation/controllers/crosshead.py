@@ -30,10 +30,6 @@ from chewbot.simulation.controllers.law import ControllerParts, control_kernel
 from chewbot.simulation.controllers.table import controller_row
 from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
 
-# The law whose compiled kernel the crosshead evaluates.
-POSITION_LAW = "computed-torque"
-
-
 class Gains(ErrorDynamics):
     """``[crosshead]``: the error dynamics' natural frequency (Hz) and damping ratio, and the integral's corner
     frequency (Hz, ki = kp 2 pi integral_Hz), per coordinate."""
@@ -76,7 +72,7 @@ class CrossheadController:
     _ki: np.ndarray = field(default=None, init=False, repr=False)
 
     def kernel_spec(self) -> KernelSpec:
-        return control_kernel(controller_row(POSITION_LAW), self.parts.model.mechanism, self.parts.inverse)
+        return control_kernel(controller_row(self.parts.row.extends), self.parts.model.mechanism, self.parts.inverse)
 
     def kernels(self) -> list[KernelSpec]:
         return [self.kernel_spec()]
