@@ -217,8 +217,8 @@ class FoodPlant(Plant):
         return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max)
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
-        """The state after h seconds under the torques of ``inputs`` (their bite forces are not used: the food's force
-        replaces them), with the food's events located (module docstring)."""
+        """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
+        used: the food's force replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
 
@@ -231,8 +231,12 @@ class FoodPlant(Plant):
 
             self._step = Step(native(food_step_kernel(self.mechanism)), shared)
 
+        # the torques are held over the interval (the simulator's zero-order hold): read once, at the interval's own
+        # step, whose inputs the simulator has ready (the bite forces of other steps' stages are not needed here)
+        tau = PLANT_INPUTS.unpack(inputs(state.t, h))["tau"].copy()
+
         def stage(t0: float, dt: float) -> np.ndarray:
-            return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
+            return FOOD_INPUTS.pack(columns=STAGES, tau=tau, elapsed=C * dt)
 
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
