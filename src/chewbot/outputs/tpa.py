@@ -99,10 +99,12 @@ def tpa_html(record: dict) -> str:
     checks = [[c["name"], {True: "passed", False: "FAILED" if c["severity"] == "failure" else "warning", None: "not evaluated"}[c["passed"]],
                c["message"]] for c in record.get("checks", [])]
     failed = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] == "failure"]
+    warned = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] != "failure"]
     food = record.get("food") or {}
     verdict = (f'<p class="bad">{len(failed)} check(s) failed: {html.escape(", ".join(c["name"] for c in failed))}. '
                "The measures below are not those of the protocol asked for.</p>" if failed else
-               '<p class="good">Every check passed: the protocol was held and the measures are in their ranges.</p>')
+               '<p class="good">No check failed: the protocol was held and the measures are in their ranges'
+               + (f' ({len(warned)} warning(s): {html.escape(", ".join(c["name"] for c in warned))}).</p>' if warned else '.</p>'))
     estimator = record.get("estimator") or {}
     est_rows = [[k.replace("_", " "), v] for k, v in estimator.items() if not isinstance(v, (list, dict))]
     return f"""<!DOCTYPE html>
