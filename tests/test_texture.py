@@ -164,3 +164,21 @@ def test_teeth_meeting_through_the_sample_fails():
     met = food_checks(through, info)[0]
     assert met.name == "teeth-met" and met.fails_run and met.first_sample["t"] == pytest.approx(1.0)
     assert "4.2 mm" in met.message and "130 N" in met.message
+
+
+def test_tpa_options_resolve_once():
+    """resolve_tpa: the compression defaults to 50 % unless a distance is given; the plant's model and its overrides
+    reach the simulation's options (the controller's and the estimator's model stay --model's), with friction, the
+    crosshead, Newton-Euler with friction and the unilateral contact; a plant with a log is refused."""
+    from chewbot.run.options import OptionError
+
+    o = resolve_tpa("cheddar", plant_file="target", plant_overrides={"mandible.mass_g": 400.0})
+    assert o.protocol.compression == 0.5 and o.protocol.distance is None
+    sim = o.simulation
+    assert (sim.plant_file, sim.plant_overrides, sim.model) == ("target", {"mandible.mass_g": 400.0}, "target")
+    assert sim.controller.name == "crosshead" and sim.inverse.method == "newton-euler" and sim.inverse.friction
+    assert sim.friction and sim.contact.value == "unilateral"
+    d = resolve_tpa("cheddar", distance=3.0, friction="off")
+    assert d.protocol.compression is None and d.protocol.distance == pytest.approx(3e-3) and not d.simulation.friction
+    with pytest.raises(OptionError, match="plant-set"):
+        resolve_tpa(log="log.csv", plant_overrides={"mandible.mass_g": 400.0})
