@@ -5,13 +5,16 @@ the bite point of its side. The bite force in the equations of motion is no long
 integrator step it is the food's force at the stage's state (:func:`food_stage`): the compression delta from the bite
 point's gap (:mod:`chewbot.food.geometry`), its rate, the sliding velocity, and the food's own state, the
 :class:`FoodState`: ``broken`` (0/1), the Maxwell branch's force F_m (integrated exactly over the step for a linear
-change of b F_e, :func:`chewbot.food.law.maxwell_force`). The derivatives the step's Newton iteration needs are
+change of b F_e, :func:`chewbot.food.law.maxwell_force`) and the deepest compression so far delta_max (with
+``broken`` or the yield it sets the sample's permanent set, :func:`chewbot.food.law.permanent_set`). The derivatives the step's Newton iteration needs are
 CasADi's, exact. The food's state at a step's start is part of the step's shared inputs, laid out by name
 (:data:`STEP_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
 
-Events. The law has kinks and one jump (:mod:`chewbot.food.law`): contact (delta = 0), the teeth meeting
-(delta = h0), the adhesion clamp (F_d + F_m = -adhesion_N) and the fracture (delta / h0 = fracture_strain, which
-switches ``broken``). Each is a guard function of the state; after every step the guards at its ends are compared,
+Events. The law has kinks and one jump (:mod:`chewbot.food.law`, its guards :func:`chewbot.food.law.guards` in the
+order of :data:`~chewbot.food.law.FOOD_EVENTS`): contact, the teeth meeting (delta = h0), the fracture (delta / h0 =
+fracture_strain, which switches ``broken``: :func:`chewbot.food.law.fracture_state`), the adhesion clamp
+(F_d + F_m = -adhesion_N), the yield and the turn (where delta_max stops growing). Each is a guard function of the
+state; after every step the guards at its ends are compared,
 and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
 on the guard of the step's end as a function of the step length (each evaluation one compiled Radau IIA step from
 the start), to :data:`EVENT_TOLERANCE`; the step is taken to just past it, the state switched (fracture), and the
@@ -73,16 +76,16 @@ class FoodState:
     ddelta: float = 0.0
 
 
-def _food_sx(mechanism: str, q, dq, B, p, f, broken, delta_max0, z_home):
-    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, the deepest compression so far
-    (delta_max at the step's start or delta, the larger: the ``turn`` and ``yield`` events keep a step from
-    straddling the kinks where it stops growing), b F_e, the bite point's velocity, cos of the lower tooth's tilt."""
+def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home, delta_max0=0.0):
+    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e of the sample in its state
+    (``delta_max0`` the deepest compression before: the deepest so far is it or delta, the larger; the ``turn`` and
+    ``yield`` events keep a step from straddling the kinks where it stops growing), the bite point's velocity, cos of
+    the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
-    delta_max = ca.fmax(delta_max0, delta)
-    bFe = loaded_force(CASADI, f, delta, broken, delta_max)
-    return delta, ddelta, delta_max, bFe, velocity, cos_tilt
+    bFe = loaded_force(CASADI, f, delta, broken, ca.fmax(delta_max0, delta))
+    return delta, ddelta, bFe, velocity, cos_tilt
 
 
 def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
@@ -94,22 +97,32 @@ def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
 def food_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
     s as :data:`FOOD_SHARED`."""
+    return stage_with_food(mechanism, "food_stage", FOOD_SHARED,
+                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(
+                               f, delta, ddelta, shared["broken"], F_m, ca.fmax(shared["delta_max"], delta), velocity)[2])
+
+
+def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
+    """A stage residual of the plant with a food: (q, v, a, N, w, s) -> r, w laid out as :data:`FOOD_INPUTS` and s as
+    ``shared`` (:data:`FOOD_SHARED` and what ``force`` reads beyond it); ``force(f, delta, ddelta, F_m, velocity,
+    blocks)`` the food's force on the mandible (3,) from the food's vector, the compression and its rate, the Maxwell
+    branch's force over the stage, the bite point's velocity and the blocks of s."""
     m = symbols(mechanism)
 
     def build():
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
-        s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
-        B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, delta_max, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["delta_max"],
-                                                              shared["z_home"])
-        F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
-        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, delta_max, velocity)
-        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
-        return ca.Function("food_stage", [q, v, a, N, w, s], [r])
+        s, blocks = shared.symbols("s", ca.SX.sym)
+        B, p, f = blocks["B"], blocks["p"], blocks["food"]
+        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"],
+                                                           blocks["delta_max"])
+        F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
+        F = force(f, delta, ddelta, F_m, velocity, blocks)
+        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
+        return ca.Function(name, [q, v, a, N, w, s], [r])
 
-    return cached_graph(m, ("food-stage",), build)
+    return cached_graph(m, (name,), build)
 
 
 def food_step_kernel(mechanism: str) -> KernelSpec:
@@ -128,7 +141,8 @@ def food_function(mechanism: str) -> ca.Function:
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
         broken, F_m, delta_max0, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("delta_max"), ca.SX.sym("z_home")
-        delta, ddelta, delta_max, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, delta_max0, z_home)
+        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
+        delta_max = ca.fmax(delta_max0, delta)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity)
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
                            [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt],
@@ -139,18 +153,17 @@ def food_function(mechanism: str) -> ca.Function:
 
 
 def food_quantities_kernel(mechanism: str) -> KernelSpec:
-    """:func:`food_function` compiled: the food's quantities at one state (each step's end, the events' guards) and
-    at the rows."""
+    """:func:`food_function` compiled: the food's state at each step's end is one call of it."""
     from chewbot.model.symbolic import c_name
 
     name = f"food_quantities_{c_name(mechanism)}"
 
     def build(params):
         fn = food_function(mechanism)
-        x = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
-        return ca.Function(name, x, fn.call(x), fn.name_in(), fn.name_out(), {"cse": True})
+        inputs = fn.sx_in()
+        return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
 
-    return KernelSpec(name, build, (mechanism, "food-state"), mechanism)
+    return KernelSpec(name, build, (mechanism, "food-quantities-state"), mechanism)
 
 
 @dataclass(frozen=True)
@@ -182,13 +195,25 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [food_step_kernel(self.mechanism), food_quantities_kernel(self.mechanism), forward_kernel(self.mechanism),
+        return [self.step_kernel(), food_quantities_kernel(self.mechanism), forward_kernel(self.mechanism),
                 plant_outputs_kernel(self.mechanism)]
+
+    def step_kernel(self) -> KernelSpec:
+        """The compiled step it advances by (:func:`food_step_kernel`)."""
+        return food_step_kernel(self.mechanism)
 
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
                                 delta_max=0.0, z_home=self._z_home)
+
+    def shared_at(self, s0: np.ndarray, state: PlantState) -> np.ndarray:
+        """s of a step from ``state``: ``s0`` (:meth:`shared`) with the food's state at the step's start."""
+        s = s0.copy()
+        blocks, food = FOOD_SHARED.split(s), state.internal.food
+        blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+        blocks["delta_max"][:] = food.delta_max
+        return s
 
     def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> FoodState:
         """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
@@ -211,6 +236,10 @@ class FoodPlant(Plant):
 
     # ---------------------------------------------------------------------------------------------- events
 
+    def guards_at(self, internal: FoodSolved) -> np.ndarray:
+        """The guard functions at the plant's own state (:meth:`guards` of its food's)."""
+        return self.guards(internal.food)
+
     def guards(self, state: FoodState) -> np.ndarray:
         """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
         (:func:`chewbot.food.law.guards`)."""
@@ -221,15 +250,7 @@ class FoodPlant(Plant):
         used: the food's force replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
-
-            def shared(state: PlantState) -> np.ndarray:  # s with the food's state at the step's start
-                s = s0.copy()
-                blocks, food = FOOD_SHARED.unpack(s), state.internal.food
-                blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
-                blocks["delta_max"][:] = food.delta_max
-                return s
-
-            self._step = Step(native(food_step_kernel(self.mechanism)), shared)
+            self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
 
         # the torques are held over the interval (the simulator's zero-order hold): read once, at the interval's own
         # step, whose inputs the simulator has ready (the bite forces of other steps' stages are not needed here)
@@ -250,14 +271,14 @@ class FoodPlant(Plant):
         """One step of h seconds from ``state``, or to just past the first event within it (then switched)."""
         step = self._step
         trial = self.interval(step, stage, state, h, 0)
-        g0, g1 = self.guards(state.internal.food), self.guards(trial.internal.food)
+        g0, g1 = self.guards_at(state.internal), self.guards_at(trial.internal)
         crossed = np.flatnonzero(np.sign(g0) * np.sign(g1) < 0)
         if not crossed.size or not trial.margin > 0:
             return trial
         first, root = None, h
         for i in crossed:
             def guard(dt, i=i):
-                return self.guards(self.interval(step, stage, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
+                return self.guards_at(self.interval(step, stage, state, dt, 0).internal)[i] if dt > 0 else g0[i]
 
             r = brentq(guard, 0.0, h, xtol=EVENT_TOLERANCE, rtol=4 * np.finfo(float).eps)
             if r < root or first is None:
@@ -265,7 +286,7 @@ class FoodPlant(Plant):
         # just past the crossing: the step whose end has the guard's new sign
         past = min(h, root + EVENT_TOLERANCE)
         after = self.interval(step, stage, state, past, 0)
-        while np.sign(self.guards(after.internal.food)[first]) == np.sign(g0[first]) and past < h:
+        while np.sign(self.guards_at(after.internal)[first]) == np.sign(g0[first]) and past < h:
             past = min(h, past + EVENT_TOLERANCE * 10)
             after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
@@ -331,9 +352,8 @@ def food_checks(sim, info: dict) -> list:
     return checks
 
 
-def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
-    """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
-    :class:`FoodPlant`."""
+def build(model, friction: bool, side: str, food: Food | None = None) -> Plant:
+    """chewbot's :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a :class:`FoodPlant`."""
     if food is None:
         return Plant(model, friction=friction, side=side)
     return FoodPlant(model, friction=friction, side=side, food=food)
@@ -344,5 +364,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_checks", "food_function", "food_quantities_kernel",
-           "food_stage", "food_step_kernel", "start_gap"]
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_checks", "food_function", "food_geometry_sx", "food_quantities_kernel",
+           "food_stage", "food_step_kernel", "stage_with_food", "start_gap"]
