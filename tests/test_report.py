@@ -321,3 +321,54 @@ def test_the_formulation_s_flags_read_as_words():
 
     assert solver_notes({"friction": False, "strict": True, "goal": "min-torque", "iterations": 3, "table": [1]}) == {
         "friction": "off", "strict": "yes", "goal": "min-torque", "iterations": 3}
+
+
+def _tpa_folder(folder: Path) -> Path:
+    """A texture test's folder from a hand-built two-bite curve (an elastic cylinder of 1000 N/m along a profile of
+    the protocol): tpa.json, the two figures, tpa.html, as ``chewbot tpa --log`` writes them."""
+    from chewbot.food.tpa import Protocol, analyse
+    from chewbot.outputs.tpa import write_tpa_log
+
+    profile = Protocol(pause=0.5).profile(0.011, 1.25)
+    t = profile.times()
+    g = profile.path(t)[0]
+    F = 1000.0 * np.maximum(0.010 - g, 0.0)
+    analysis = analyse(t, g, F, 0.049, label="estimated")
+    record = {"chewbot_tpa": 2, "options": {"log": "hand-built"}, "protocol": profile.record(), "food": None, "plant": None,
+              "estimated": analysis.measures, "definitions": analysis.definitions, "anchors": {"estimated": analysis.anchors},
+              "estimator": {"contact_force_N": 0.049}, "checks": [c.as_dict() for c in analysis.checks]}
+    return write_tpa_log(record, {"t": t, "gap": g, "force": F}, 0.010, "hand-built cylinder", folder / "tpa")
+
+
+def test_tpa_report_is_tables_and_figures_not_raw_json(tmp_path):
+    page = (_tpa_folder(tmp_path) / "tpa.html").read_text(encoding="utf-8")
+    assert "<pre>" not in page and "{&quot;" not in page and '{"' not in page
+    for heading in ("Measures", "Force over time", "Force over compression", "Checks", "The protocol as run"):
+        assert f"<h2>{heading}</h2>" in page
+    assert "estimated-springiness-range" in page and "<td>hardness [N]</td>" in page and "<td>springiness at peak</td>" in page
+
+
+@pytest.mark.browser
+def test_tpa_report_renders_in_headless_chromium(tmp_path):
+    """tpa.html opened from disk: no exception or console error, no network request, both figures loaded."""
+    sync_api = _chromium()
+    report = _tpa_folder(tmp_path) / "tpa.html"
+    errors: list[str] = []
+    profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch_persistent_context(profile, executable_path=str(CHROMIUM), headless=True,
+                                                           args=["--headless", "--no-sandbox", "--disable-gpu"])
+            page = browser.new_page()
+            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
+            page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
+            page.goto(report.as_uri())
+            page.wait_for_load_state("load")
+            widths = page.eval_on_selector_all("img", "els => els.map(e => e.naturalWidth)")
+            assert len(widths) == 2 and all(w > 300 for w in widths), widths
+            assert page.eval_on_selector_all("table", "els => els.length") >= 4
+            browser.close()
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)
+    assert errors == []

@@ -117,6 +117,23 @@ def test_measures_of_an_elastic_curve():
     assert a.anchors["areas_mJ"]["first_compression"] == pytest.approx(K * 0.005**2 / 2 * 1e3, rel=1e-4)
 
 
+def test_contact_held_ignores_brief_excursions():
+    """An estimated force's blip above the contact force where the probe starts moving (20 ms, 0.1 N, before either
+    bite's contact) moves contact there, and springiness with it; held for 100 ms (``contact_hold``), contact is the
+    blip-free curve's to the sample."""
+    p, t, g, _, delta = curve()
+    F = K * np.maximum(delta, 0)
+    clean = analyse(t, g, F, contact_force=0.05)
+    blipped = F.copy()
+    for start in (HOLD, p.stops[1] + p.pause):  # where each approach starts
+        blipped[(t >= start) & (t < start + 0.02)] += 0.1
+    assert analyse(t, g, blipped, contact_force=0.05).anchors["contact_1"]["t_s"] < clean.anchors["contact_1"]["t_s"] - 0.5
+    held = analyse(t, g, blipped, contact_force=0.05, contact_hold=0.1)
+    for key in ("contact_1", "contact_2"):
+        assert held.anchors[key]["index"] == clean.anchors[key]["index"]
+    assert held.measures["springiness"] == pytest.approx(clean.measures["springiness"], rel=1e-12)
+
+
 def test_resilience_of_a_kelvin_voigt_curve():
     """F = k delta (1 + c d(delta)/dt / v) at the held speed v: the work returned over the work taken is
     (1 - c) / (1 + c); the changes of speed at the turn (the damping fades while the probe stops) move it by less than

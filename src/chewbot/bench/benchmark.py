@@ -424,7 +424,8 @@ def single_calls(per_run: list[tuple[float, float, float]]) -> tuple[float, floa
 
 # --- the exported controller step --------------------------------------------------------------------------
 
-# The exported step's cases: label, chewbot simulate options (the controller exported), and the budget of the issue (us).
+# The exported step's cases: label, chewbot simulate options (the controller exported), and its budget (us): the share
+# of a 1 kHz tick the step may take beside the rest of a robot's loop.
 STEP_CASES = (("computed torque, Hessian (minimum-norm)", {"method": "hessian"}, 25.0),
               ("computed torque, Newton-Euler G1 with friction", {"method": "newton-euler", "friction": "on"}, 60.0))
 
@@ -545,7 +546,7 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress: Progress = SILENT) ->
     return out
 
 
-SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (issue: 10,240 evaluations in 10 minutes)
+SCALE_SPEC = "sobol-scale"  # the built-in SPEC of the scale study (its budget: 10,240 evaluations in 10 minutes)
 
 
 @dataclass(frozen=True)

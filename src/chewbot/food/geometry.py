@@ -32,7 +32,8 @@ from chewbot.units import factor
 ORIENTATION = "euler-angles"
 # Newton's tolerance on the bite point's position (m) for the point path.
 PATH_TOLERANCE = 1e-12
-# The gap at the start of a texture test is h0 + this (m): the "from a gap of h0 + 1 mm".
+# The gap at the start of a texture test is h0 + this (m): a texture analyser's probe starts a millimetre or so above the
+# sample and finds it at its pre-test speed.
 APPROACH = 1e-3
 
 

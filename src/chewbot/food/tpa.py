@@ -44,7 +44,7 @@ BREAK_DROP = 0.05  # a break: the force falls 5 % below its running maximum whil
 AT_SPEED = 0.95  # ... at 95 % of the stroke's speed or more (the turn's slowing fades a viscous force: no break)
 CONTACT_FRACTION = 0.01  # contact where no trigger force is given: the force above 1 % of the hardness
 # The energy readings of a passive sample are in [0, 1] within this: the trapezoids at 1 kHz leave less than 1e-4 on
-# the closed-form curves of the tests, an estimated curve's noise about 1e-3 (the issue's elastic bolus read 0.999
+# the closed-form curves of the tests, an estimated curve's noise about 1e-3 (an elastic bolus read 0.999
 # from the torques); 0.5 % keeps both inside and puts the impossible values (1.011, 1.176) outside.
 RATIO_TOLERANCE = 0.005
 # The protocol is held where the deepest compression is within 1 % of its target and the 2nd-98th percentiles of the
@@ -331,10 +331,14 @@ def bites(t, g) -> tuple[slice, slice, int, int]:
     return slice(0, split + 1), slice(split, g.size), m1, m2
 
 
-def _contact(F, g, lo: int, m: int, threshold: float) -> tuple[int, float] | None:
-    """The first sample from ``lo`` to ``m`` where F reaches ``threshold``, and the gap there interpolated between it
-    and the sample before; None if it never does."""
-    above = np.flatnonzero(F[lo:m + 1] >= threshold)
+def _contact(F, g, lo: int, m: int, threshold: float, hold: int = 1) -> tuple[int, float] | None:
+    """The first sample from ``lo`` to ``m`` where F reaches ``threshold`` and stays there for ``hold`` samples (or to
+    ``m``), and the gap there interpolated between it and the sample before; None if it never does."""
+    above = (F[lo:m + 1] >= threshold).astype(int)
+    if hold > 1:
+        held = np.convolve(above, np.ones(hold, int), "full")[hold - 1:]  # samples above from each one on, up to hold
+        above = above * (held >= np.minimum(hold, above.size - np.arange(above.size)))
+    above = np.flatnonzero(above)
     if not above.size:
         return None
     k = lo + int(above[0])
@@ -355,12 +359,13 @@ def _at_speed(t, g) -> np.ndarray:
 
 
 def analyse(t, g, F, contact_force: float | None = None, tolerance: float = RATIO_TOLERANCE,
-            label: str = "") -> TpaAnalysis:
+            label: str = "", contact_hold: float = 0.0) -> TpaAnalysis:
     """Bourne's measures of a two-bite test in both readings (module docstring): times ``t`` (s), the gap ``g`` (m) at
     the bite point and the sample's force ``F`` (N, positive pushing the teeth apart). Contact is where the force
     reaches ``contact_force`` (N; the protocol's trigger force; None: :data:`CONTACT_FRACTION` of the hardness). The
     checks hold cohesiveness, springiness and resilience in [0, 1] within ``tolerance``; ``label`` (e.g. "plant")
-    prefixes their names."""
+    prefixes their names. ``contact_hold`` (s): contact is where the force reaches the
+    contact force and stays there that long (an estimated force's brief excursions are not contact)."""
     from chewbot.analysis.checks import CheckResult
 
     t, g, F = (np.asarray(x, float) for x in (t, g, F))
@@ -381,7 +386,8 @@ def analyse(t, g, F, contact_force: float | None = None, tolerance: float = RATI
     breaks = np.flatnonzero((compressing < (1 - BREAK_DROP) * running) & (running > threshold)
                             & _at_speed(t[:m1 + 1], g[:m1 + 1]))
     fracture = int(np.argmax(compressing[:breaks[0] + 1])) if breaks.size else None
-    c1, c2 = _contact(F, g, 0, m1, threshold), _contact(F, g, two.start, m2, threshold)
+    hold = max(1, int(round(contact_hold / np.median(np.diff(t))))) if contact_hold > 0 else 1
+    c1, c2 = _contact(F, g, 0, m1, threshold, hold), _contact(F, g, two.start, m2, threshold, hold)
     D1 = c1[1] - g[m1] if c1 else 0.0
     D2 = c2[1] - g[m2] if c2 else 0.0
     P1 = c1[1] - g[peak1] if c1 else 0.0

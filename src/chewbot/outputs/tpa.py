@@ -48,35 +48,89 @@ def write_tpa_log(record: dict, curve: dict, height: float | None, name: str, ou
 def _write_common(folder: Path, record: dict, curves: dict, height: float | None, name: str) -> None:
     from chewbot.report.tpa_figures import force_displacement, force_time
 
-    force_time(curves, folder / "force_time.png", name)
+    force_time(curves, record.get("anchors", {}), folder / "force_time.png", name)
     force_displacement(curves, folder / "force_displacement.png", height, name)
     (folder / TPA_FILE).write_text(to_json(record))
     (folder / "tpa.html").write_text(tpa_html(record), encoding="utf-8")
 
 
-def tpa_html(record: dict) -> str:
-    """A one-page report: the food, the protocol, the measures side by side, the two figures."""
-    columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
+def _cell(v) -> str:
+    if v is None:
+        return "&ndash;"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return html.escape(str(v))
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _unit_rows(entries: dict) -> list[list]:
+    """Rows (name, value, unit) of tpa.json's protocol or food entries, the unit read from the end of the key (a
+    speed's ``_mm_s`` is mm/s there)."""
+    from chewbot.units import key_unit
+
     rows = []
-    for m in MEASURES:
-        cells = []
-        for k in columns:
-            v = record[k].get(m)
-            cells.append("null" if v is None else f"{v:.4g}")
-        rows.append(f"<tr><th>{html.escape(m)}</th>{''.join(f'<td>{c}</td>' for c in cells)}</tr>")
-    food = record.get("food", {})
-    facts = {k: record[k] for k in ("protocol", "deepest_compression_mm", "tilt_at_deepest_deg", "largest_height_mm",
-                                     "estimator") if k in record}
+    for key, value in entries.items():
+        if isinstance(value, (dict, list)):
+            continue
+        name, unit = key_unit(key)
+        rows.append([name.replace("_", " "), value, (unit or "").replace("mm*s", "mm/s")])
+    return rows
+
+
+def _named(key: str) -> str:
+    """A measure's key as a header: its name and its unit in brackets (``hardness_N``: hardness [N])."""
+    from chewbot.units import key_unit
+
+    name, unit = key_unit(key)
+    return name.replace("_", " ") + (f" [{unit}]" if unit else "")
+
+
+def tpa_html(record: dict) -> str:
+    """A food scientist's report: the measures of both readings side by side with their definitions, the checks, the
+    protocol as run, the sample, and the force-time (anchors and areas shaded) and force-displacement figures."""
+    columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
+    definitions = record.get("definitions", {})
+    measures = [[_named(m), *(record[c].get(m) for c in columns), definitions.get(m, "")] for m in MEASURES]
+    checks = [[c["name"], {True: "passed", False: "FAILED" if c["severity"] == "failure" else "warning", None: "not evaluated"}[c["passed"]],
+               c["message"]] for c in record.get("checks", [])]
+    failed = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] == "failure"]
+    warned = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] != "failure"]
+    food = record.get("food") or {}
+    verdict = (f'<p class="bad">{len(failed)} check(s) failed: {html.escape(", ".join(c["name"] for c in failed))}. '
+               "The measures below are not those of the protocol asked for.</p>" if failed else
+               '<p class="good">No check failed: the protocol was held and the measures are in their ranges'
+               + (f' ({len(warned)} warning(s): {html.escape(", ".join(c["name"] for c in warned))}).</p>' if warned else '.</p>'))
+    estimator = record.get("estimator") or {}
+    est_rows = [[k.replace("_", " "), v] for k, v in estimator.items() if not isinstance(v, (list, dict))]
     return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>Texture test: {html.escape(str(food.get('name', '')))}</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}td,th{{padding:2px 10px;text-align:right}}
-pre{{background:#f4f4f4;padding:8px;overflow:auto}}</style></head><body>
-<h1>Texture profile analysis: {html.escape(str(food.get('name', '')))}</h1>
-<p>Bourne's measures of the two-bite test (definitions: docs/food.md). Areas are works of the force over the probe's
-travel.</p>
-<table><tr><th>measure</th>{''.join(f'<th>{c}</th>' for c in columns)}</tr>{''.join(rows)}</table>
-<h2>Force over time</h2><img src="force_time.png" alt="force over time" width="900">
+<html lang="en"><head><meta charset="utf-8"><title>Texture test: {html.escape(str(food.get('name', 'logged')))}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}}td,th{{padding:2px 10px;text-align:left;
+vertical-align:top}}table{{border-collapse:collapse;margin-bottom:1em}}tr:nth-child(even){{background:#f4f4f4}}
+.bad{{color:#a00;font-weight:bold}}.good{{color:#070}}</style></head><body>
+<h1>Texture profile analysis: {html.escape(str(food.get('name', 'logged test')))}</h1>
+{verdict}
+<h2>Measures</h2>
+<p>Bourne's measures of the two-bite test; "plant" is the sample's force in the simulation (the load cell), "estimated"
+the force the robot estimates from its crank angles and torques. Areas are works of the force over the probe's travel.</p>
+{_table(["measure", *columns, "definition"], measures)}
+<h2>Force over time</h2>
+<p>The anchors a texture analyser's software marks (contact, fracture, peaks, deepest points) and the areas: the first
+compression (A1 up to the deepest point), the first withdrawal (its returned work, resilience's numerator), the second
+bite (A2). The plant's force is the solid line, the estimate the dashed one over it.</p>
+<img src="force_time.png" alt="force over time" width="1000">
 <h2>Force over compression</h2><img src="force_displacement.png" alt="force over compression" width="700">
-<h2>The food and the test</h2><pre>{html.escape(to_json({'food': food, **facts}))}</pre>
+<h2>Checks</h2>
+{_table(["check", "verdict", "what was found"], checks)}
+<h2>The protocol as run</h2>
+{_table(["setting", "value", "unit"], _unit_rows(record.get("protocol") or {}))}
+<h2>The sample</h2>
+{_table(["property", "value", "unit"], _unit_rows(food))}
+<h2>The force estimate</h2>
+{_table(["", "value"], est_rows)}
 </body></html>
 """

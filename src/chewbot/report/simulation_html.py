@@ -47,7 +47,7 @@ def write_simulation_report(result, record: dict, view: RunView, path: Path, fil
     figures: dict[str, dict] = {}
     o = result.options
     body = [_robots_section(result, view, figures), checks_section(record), _tracking_section({o.controller.name: result}),
-            plots_section(view, figures), _run_section(result, files or [])]
+            _food_section(result), plots_section(view, figures), _run_section(result, files or [])]
     return _page(f"chewbot simulation: {o.controller.name} on {result.plant_model.name}, {result.task.name} ({result.task.side} side)",
                  f"{controller_label(result)} · {result.table.n} rows · plant {o.engine.name}, friction {_switch(o.friction)}", body,
                  figures, path)
@@ -99,6 +99,37 @@ def _tracking_section(results: dict) -> str:
             "of the errors of the Euler angles, over the rows; peak torque: the largest applied abs(τ<sub>i</sub>); saturated: "
             "how long a commanded torque was beyond the limit.</p><h3>Per coordinate</h3>"
             + html_table(["controller", "coordinate", "RMS", "peak", "unit"], per) + "</section>")
+
+
+def _food_section(result) -> str:
+    """With a food in the plant: the force tracking of a controller that follows the task's Fz, the sample, and the
+    food's events (the law's kinks and its fracture, located between the ticks); empty without a food."""
+    food = result.info.get("food")
+    if food is None:
+        return ""
+    parts = ['<section id="food"><h2>The food</h2>']
+    f = food["food"]
+    parts.append(html_table(["sample", "height [mm]", "peak force [N]", "deepest compression [mm]", "tilt there [deg]"],
+                            [[escape(f["name"]), number(f["height_mm"]), number(food["peak_force_N"]),
+                              number(food["deepest_compression_m"] / factor("mm")), number(food["tilt_at_deepest_deg"])]]))
+    tracking = result.metrics.get("force")
+    if tracking is not None:
+        parts.append("<h3>Force tracking</h3>")
+        if tracking["samples"]:
+            parts.append(html_table(["RMS error [N]", "RMS error [% of the reference's peak]", "peak error [N]", "reference's peak [N]"],
+                                    [[number(tracking["rms_N"]), number(tracking["rms_percent"]), number(tracking["peak_N"]),
+                                      number(tracking["reference_peak_N"])]]))
+            parts.append('<p class="note">The plant\'s Fz minus the task\'s Fz where the reference is not zero; the check '
+                         "<code>force-tracking</code> bounds the RMS.</p>")
+        else:
+            parts.append('<p class="note">The task\'s force reference is zero throughout.</p>')
+    events = food["events"]
+    parts.append(f"<h3>The food's events ({len(events)})</h3>")
+    if events:
+        parts.append(html_table(["t [s]", "event", "compression [mm]"],
+                                [[number(e["t"], 6), escape(e["event"]), number(e["delta_m"] / factor("mm"))] for e in events]))
+    parts.append(f'<p class="note">{escape(food["event_location"])}.</p></section>')
+    return "".join(parts)
 
 
 def _integrator_text(info: dict, sim) -> str:

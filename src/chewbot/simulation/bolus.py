@@ -36,7 +36,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate
 from chewbot.compiled.layout import Layout
 from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, bed_normal_force, comminution_of
 from chewbot.food.law import CASADI, N_FOOD, maxwell_force, normal_force, tangential_force
-from chewbot.simulation.food import FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx, stage_with_food
+from chewbot.simulation.food import EVENTS, FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx, stage_with_food
 from chewbot.simulation.food import build as food_plant
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.interfaces import Column, PlantCapabilities, PlantState
@@ -174,7 +174,7 @@ class BolusPlant(FoodPlant):
         if not internal.food.broken:
             return super().guards_at(internal)
         g, _ = self.gap_and_force(internal)
-        return np.array([internal.bed[0] - g, np.nan, np.nan, np.nan])
+        return np.array([internal.bed[0] - g, *([np.nan] * (len(EVENTS) - 1))])
 
     def outputs(self, t, q, dq, force, internal) -> tuple[np.ndarray, dict]:
         """The food plant's quantities with the bed's force once broken, ``h0_bed`` (m) and ``strokes`` (the count

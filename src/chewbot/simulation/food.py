@@ -5,13 +5,16 @@ the bite point of its side. The bite force in the equations of motion is no long
 integrator step it is the food's force at the stage's state (:func:`food_stage`): the compression delta from the bite
 point's gap (:mod:`chewbot.food.geometry`), its rate, the sliding velocity, and the food's own state, the
 :class:`FoodState`: ``broken`` (0/1), the Maxwell branch's force F_m (integrated exactly over the step for a linear
-change of b F_e, :func:`chewbot.food.law.maxwell_force`). The derivatives the step's Newton iteration needs are
+change of b F_e, :func:`chewbot.food.law.maxwell_force`) and the deepest compression so far delta_max (with
+``broken`` or the yield it sets the sample's permanent set, :func:`chewbot.food.law.permanent_set`). The derivatives the step's Newton iteration needs are
 CasADi's, exact. The food's state at a step's start is part of the step's shared inputs, laid out by name
 (:data:`STEP_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
 
-Events. The law has kinks and one jump (:mod:`chewbot.food.law`): contact (delta = 0), the teeth meeting
-(delta = h0), the adhesion clamp (F_d + F_m = -adhesion_N) and the fracture (delta / h0 = fracture_strain, which
-switches ``broken``). Each is a guard function of the state; after every step the guards at its ends are compared,
+Events. The law has kinks and one jump (:mod:`chewbot.food.law`, its guards :func:`chewbot.food.law.guards` in the
+order of :data:`~chewbot.food.law.FOOD_EVENTS`): contact, the teeth meeting (delta = h0), the fracture (delta / h0 =
+fracture_strain, which switches ``broken``: :func:`chewbot.food.law.fracture_state`), the adhesion clamp
+(F_d + F_m = -adhesion_N), the yield and the turn (where delta_max stops growing). Each is a guard function of the
+state; after every step the guards at its ends are compared,
 and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
 on the guard of the step's end as a function of the step length (each evaluation one compiled Radau IIA step from
 the start), to :data:`EVENT_TOLERANCE`; the step is taken to just past it, the state switched (fracture), and the
@@ -35,7 +38,8 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
-from chewbot.food.law import CASADI, N_FOOD, NUMPY, Food, breaking, elastic_force, maxwell_force, normal_force, tangential_force
+from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, loaded_force, maxwell_force,
+                              normal_force, tangential_force)
 from chewbot.compiled.layout import Layout
 from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C, STAGES
@@ -44,9 +48,10 @@ from chewbot.simulation.plant import MAX_STEP, PLANT_SHARED, Plant, Solved, Step
 
 # Step lengths of the located events are found to this (s).
 EVENT_TOLERANCE = 1e-10
-EVENTS = ("contact", "teeth", "fracture", "adhesion")
-# The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N).
-STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1)
+EVENTS = FOOD_EVENTS
+# The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N), the
+# deepest compression so far delta_max (m).
+STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1)
 # W of the food's step: the torques and each stage's time since the step's start (s); s: the plant's, the food's
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
@@ -55,9 +60,11 @@ FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_h
 
 @dataclass(frozen=True)
 class FoodState:
-    """The food's state at one time: ``broken`` (0/1), ``F_m`` the Maxwell branch's force (N), and what the state
-    gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative: apart), ``F_v``
-    the force before the clamp F_d + F_m (N), ``F_n`` the normal force (N)."""
+    """The food's state at one time: ``broken`` (0/1), ``F_m`` the Maxwell branch's force (N), ``delta_max`` the
+    deepest compression so far (m; with ``broken`` it gives the permanent set, :func:`chewbot.food.law.permanent_set`),
+    and what the state gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative:
+    apart), ``ddelta`` its rate (m/s), ``F_v`` the force before the clamp F_d + F_m (N), ``F_n`` the normal force
+    (N)."""
 
     broken: int
     F_m: float
@@ -65,20 +72,24 @@ class FoodState:
     delta: float
     F_v: float
     F_n: float
+    delta_max: float = 0.0
+    ddelta: float = 0.0
 
 
-def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
-    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e, the bite point's velocity,
-    cos of the lower tooth's tilt."""
+def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home, delta_max0=0.0):
+    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e of the sample in its state
+    (``delta_max0`` the deepest compression before: the deepest so far is it or delta, the larger; the ``turn`` and
+    ``yield`` events keep a step from straddling the kinks where it stops growing), the bite point's velocity, cos of
+    the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
-    bFe = breaking(f, broken) * elastic_force(CASADI, f, delta)
+    bFe = loaded_force(CASADI, f, delta, broken, ca.fmax(delta_max0, delta))
     return delta, ddelta, bFe, velocity, cos_tilt
 
 
-def _force_sx(f, delta, ddelta, broken, F_m, velocity):
-    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m)
+def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
+    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max)
     Fx, Fy = tangential_force(CASADI, f, F_n, velocity[0], velocity[1])
     return F_n, F_v, ca.vertcat(Fx, Fy, -F_n)
 
@@ -87,7 +98,8 @@ def food_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
     s as :data:`FOOD_SHARED`."""
     return stage_with_food(mechanism, "food_stage", FOOD_SHARED,
-                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)[2])
+                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(
+                               f, delta, ddelta, shared["broken"], F_m, ca.fmax(shared["delta_max"], delta), velocity)[2])
 
 
 def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
@@ -103,7 +115,8 @@ def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Func
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
         s, blocks = shared.symbols("s", ca.SX.sym)
         B, p, f = blocks["B"], blocks["p"], blocks["food"]
-        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"])
+        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"],
+                                                           blocks["delta_max"])
         F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
         F = force(f, delta, ddelta, F_m, velocity, blocks)
         r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
@@ -120,21 +133,23 @@ def food_step_kernel(mechanism: str) -> KernelSpec:
 
 
 def food_function(mechanism: str) -> ca.Function:
-    """The food at states: (q, dq, B, p, food, broken, F_m, z_home) -> delta (m), ddelta (m/s), bFe, F_v, F_n (N),
-    F (3, the force on the mandible in {S}, N), cos_tilt."""
+    """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, z_home) -> delta (m), ddelta (m/s), delta_max
+    (m, with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N), cos_tilt."""
     m = symbols(mechanism)
 
     def build():
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
-        broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
-        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
-        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, z_home], [delta, ddelta, bFe, F_v, F_n, F, cos_tilt],
-                           ["q", "dq", "B", "p", "food", "broken", "F_m", "z_home"],
-                           ["delta", "ddelta", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
+        broken, F_m, delta_max0, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("delta_max"), ca.SX.sym("z_home")
+        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
+        delta_max = ca.fmax(delta_max0, delta)
+        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity)
+        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
+                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt],
+                           ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "z_home"],
+                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
 
-    return cached_graph(m, ("food-quantities",), build)
+    return cached_graph(m, ("food-quantities-state",), build)
 
 
 def food_quantities_kernel(mechanism: str) -> KernelSpec:
@@ -148,7 +163,7 @@ def food_quantities_kernel(mechanism: str) -> KernelSpec:
         inputs = fn.sx_in()
         return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
 
-    return KernelSpec(name, build, (mechanism, "food-quantities"), mechanism)
+    return KernelSpec(name, build, (mechanism, "food-quantities-state"), mechanism)
 
 
 @dataclass(frozen=True)
@@ -190,31 +205,34 @@ class FoodPlant(Plant):
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
-                                z_home=self._z_home)
+                                delta_max=0.0, z_home=self._z_home)
 
     def shared_at(self, s0: np.ndarray, state: PlantState) -> np.ndarray:
         """s of a step from ``state``: ``s0`` (:meth:`shared`) with the food's state at the step's start."""
         s = s0.copy()
         blocks, food = FOOD_SHARED.split(s), state.internal.food
         blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+        blocks["delta_max"][:] = food.delta_max
         return s
 
-    def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
-        """The food's state at one plant state."""
+    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> FoodState:
+        """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
         if self._fn is None:
             self._fn = native(food_quantities_kernel(self.mechanism))
-        delta, _, bFe, F_v, F_n, _, _ = (x[0] for x in self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home))
-        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n))
+        delta, ddelta, deepest, bFe, F_v, F_n, _, _ = (np.asarray(v).flat[0] for v in self._fn(
+            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, self._z_home))
+        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
+                         float(ddelta))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0)))
+        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0)))
 
     def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        b = start.internal.food.broken
-        bFe = self.quantities(end.q, end.dq, b, 0.0).bFe
-        F_m = float(maxwell_force(NUMPY, self._f, start.internal.food.F_m, start.internal.food.bFe, bFe, h))
-        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, b, F_m)))
+        food = start.internal.food
+        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max).bFe
+        F_m = float(maxwell_force(NUMPY, self._f, food.F_m, food.bFe, bFe, h))
+        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max)))
 
     # ---------------------------------------------------------------------------------------------- events
 
@@ -223,22 +241,23 @@ class FoodPlant(Plant):
         return self.guards(internal.food)
 
     def guards(self, state: FoodState) -> np.ndarray:
-        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed)."""
-        f = self.food
-        fracture = (state.delta / f.height - f.fracture_strain if f.fracture_strain is not None and not state.broken
-                    else np.nan)
-        adhesion = state.F_v + f.adhesion if state.delta > 0 else np.nan
-        return np.array([state.delta, state.delta - f.height, fracture, adhesion])
+        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
+        (:func:`chewbot.food.law.guards`)."""
+        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max)
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
-        """The state after h seconds under the torques of ``inputs`` (their bite forces are not used: the food's force
-        replaces them), with the food's events located (module docstring)."""
+        """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
+        used: the food's force replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
             self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
 
+        # the torques are held over the interval (the simulator's zero-order hold): read once, at the interval's own
+        # step, whose inputs the simulator has ready (the bite forces of other steps' stages are not needed here)
+        tau = PLANT_INPUTS.unpack(inputs(state.t, h))["tau"].copy()
+
         def stage(t0: float, dt: float) -> np.ndarray:
-            return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
+            return FOOD_INPUTS.pack(columns=STAGES, tau=tau, elapsed=C * dt)
 
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
@@ -272,8 +291,9 @@ class FoodPlant(Plant):
             after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
-            b = self.food.stiffness_after_fracture
-            food = self.quantities(after.q, after.dq, 1, after.internal.food.F_m * b)
+            now = after.internal.food
+            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max)
+            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
             after = replace(after, internal=replace(after.internal, food=food))
         return after
 
@@ -281,13 +301,14 @@ class FoodPlant(Plant):
 
     def outputs(self, t, q, dq, force, internal) -> tuple[np.ndarray, dict]:
         """The food's force on the mandible at the rows, and the food's quantities: ``compression`` (m, max(0, delta)),
-        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad) and ``F_m`` (N)."""
+        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad), ``F_m`` (N) and ``delta_max`` (m)."""
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
-        delta, _, _, _, F_n, F, cos_tilt = evaluate(food_function(self.mechanism), q, dq, self._B, self._p, self._f,
-                                                    broken, F_m, np.full(len(t), self._z_home))
+        delta_max = np.array([s.food.delta_max for s in internal], float)
+        delta, _, _, _, _, F_n, F, cos_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq, self._B, self._p,
+                                                       self._f, broken, F_m, delta_max, np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
-                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m}
+                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m, "delta_max": delta_max}
         return F, quantities
 
     def columns(self, quantities: dict) -> list[Column]:
@@ -311,6 +332,26 @@ class FoodPlant(Plant):
                          "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
 
 
+def food_checks(sim, info: dict) -> list:
+    """The food simulation's check (a failure): ``teeth-met``, the compression reached the sample's height (the teeth
+    pressed on each other through it, the tooth contact's stiff spring instead of the food's law). The food's events
+    themselves are run.json's ``food.events`` and the report's section."""
+    from chewbot.analysis.checks import CheckResult
+
+    delta, h0 = sim.quantities["delta"], info["food"]["height_mm"] * 1e-3
+    met = np.flatnonzero(delta >= h0)
+    teeth = [e for e in info["events"] if e["event"] == "teeth"]
+    k = int(met[0]) if met.size else None
+    ok = k is None and not teeth
+    first = None if ok else ({"index": k, "t": float(sim.t[k])} if k is not None else {"index": None, "t": teeth[0]["t"]})
+    worst = float(np.max(delta) * 1e3) if delta.size else 0.0
+    checks = [CheckResult("teeth-met", ok, 0 if ok else max(int(met.size), 1), first, {"value": worst, "unit": "mm of compression"},
+                          f"the deepest compression was {worst:.4g} mm of the sample's {h0 * 1e3:.4g} mm"
+                          + ("" if ok else f": the teeth met through the sample (peak force {np.max(sim.quantities['force']):.4g} N)"),
+                          "failure")]
+    return checks
+
+
 def build(model, friction: bool, side: str, food: Food | None = None) -> Plant:
     """chewbot's :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a :class:`FoodPlant`."""
     if food is None:
@@ -323,5 +364,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx", "food_quantities_kernel",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_checks", "food_function", "food_geometry_sx", "food_quantities_kernel",
            "food_stage", "food_step_kernel", "stage_with_food", "start_gap"]

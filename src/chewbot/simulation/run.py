@@ -237,7 +237,34 @@ def compute(options: SimulationOptions, progress=None, check=None, task: Task | 
     from chewbot.analysis.checks import run_checks
 
     result.checks = run_checks(plant_model, table, None, options.contact, planned=False)
+    if plant.capabilities.food:
+        from chewbot.simulation.food import food_checks
+
+        result.checks += food_checks(sim, plant_info["food"])
+    if options.controller.force_reference:
+        result.checks.append(force_tracking_check(metrics["force"], sim))
     return result
+
+
+# The force-tracking error a controller that follows the task's Fz may leave: 10 % RMS of the reference's peak (the
+# hybrid law's force loop at its default gains tracks a 20 N bite on the gummy to a few per cent; an error of this size
+# means the food could not give the force, or the teeth met).
+FORCE_TRACKING_BOUND_PERCENT = 10.0
+
+
+def force_tracking_check(tracking: dict, sim: Simulation):
+    """``force-tracking``: the RMS of the plant's Fz minus the task's within :data:`FORCE_TRACKING_BOUND_PERCENT` of
+    the reference's peak (a failure)."""
+    from chewbot.analysis.checks import CheckResult
+
+    rms = tracking.get("rms_percent")
+    if rms is None:
+        return CheckResult("force-tracking", None, None, None, None, "not evaluated: the task's force reference is zero",
+                           "failure")
+    ok = bool(rms <= FORCE_TRACKING_BOUND_PERCENT)
+    return CheckResult("force-tracking", ok, 0 if ok else tracking["samples"], None, {"value": rms, "unit": "% RMS of the reference's peak"},
+                       f"the bite force followed its reference to {rms:.3g} % RMS of its peak ({tracking['rms_N']:.3g} N RMS, "
+                       f"{tracking['peak_N']:.3g} N at worst); allowed {FORCE_TRACKING_BOUND_PERCENT:g} %", "failure")
 
 
 def add_control_columns(table: Table, sim: Simulation, observer, controller) -> None:

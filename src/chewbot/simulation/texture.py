@@ -1,82 +1,169 @@
-"""The robot as a texture analyser: the two-bite test of :mod:`chewbot.food.tpa` simulated with the food in the plant.
+"""The robot as a texture analyser: the two-bite protocol of :mod:`chewbot.food.tpa` held by the robot with the food
+in the plant, its measures and its validity checks.
 
-:func:`run_tpa` builds the test as a point-path task (the bite point of ``side`` along {S}'s z, alpha pinned at 0:
-:func:`chewbot.food.geometry.molar_path_task`), simulates it under position control (computed torque, the controller
-not told the food's force: :mod:`chewbot.simulation.run` with the food in the plant), and computes Bourne's measures
-twice: ``plant``, from the food's force in the plant and the plant's gap; ``estimated``, from what a robot would log,
-the crank angles and the torques, through the bite-force estimator (:func:`chewbot.identification.force.estimate_angles`:
-rates smoothed from the angles, F_B by least squares on the model's dynamics), and the gap from the angles' pose.
-:func:`tpa_from_log` computes the second from a robot's log alone.
+:func:`resolve_tpa` resolves the test's options once (:class:`TpaOptions`: the protocol of a texture analyser, the
+robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it as a texture analyser does:
+
+1. **The trigger.** The molar point approaches from rest at h0 + ``approach`` along {S}'s z at the pre-test speed
+   (alpha pinned at 0: :func:`chewbot.food.geometry.molar_path_task`) until the plant's food force (the analyser's
+   load cell) reaches the trigger force; the gap there, the reference's, is the sample's height h_t as the analyser
+   measures it. The approach is simulated until the trigger, the time of the trigger interpolated between the ticks.
+2. **The test.** The profile from the trigger on (:class:`chewbot.food.tpa.Profile`: test speed to h_t (1 -
+   compression), post-test speed back to h_t, pause, again, back to the start) is simulated from the start: the
+   approach's samples are the same, so the trigger comes where it came. The robot is the model's robot with its
+   friction (``--friction on``); the position loop is the ``crosshead`` controller
+   (:mod:`chewbot.simulation.controllers.crosshead`: computed torque with integral action), its inverse dynamics
+   Newton-Euler with the model's friction.
+3. **The measures** (:func:`chewbot.food.tpa.analyse`, both readings) twice: ``plant``, from the food's force in the
+   plant and the plant's gap, contact at the trigger force; ``estimated``, from what the robot logs, the crank angles
+   and the torques, through the bite-force estimator with the model's friction (as ``chewbot estimate-force``), contact
+   at :func:`estimate_trigger` (the trigger force or five times the estimate's noise, the larger).
+4. **The checks** (:func:`texture_checks`): the simulation's own (torque limits, a condyle lifted off its plane under
+   the unilateral contact model, ...), the food's (the teeth met), the protocol's (compression reached, speed held:
+   :func:`chewbot.food.tpa.protocol_checks` on the plant's gap and force) and the energy readings of both analyses in
+   [0, 1].
+
+:func:`tpa_from_log` analyses a robot's logged test the same way from its angles and torques alone.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from chewbot.food.geometry import gap, largest_height, molar_path_task
 from chewbot.food.law import Food, load_food
-from chewbot.food.tpa import Protocol, TpaError, protocol, tpa_measures
+from chewbot.food.tpa import HOLD, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
 from chewbot.model import Model
-from chewbot.model.params import load_model
-from chewbot.simulation.controllers.table import DEFAULT_CONTROLLER, controller_row
-from chewbot.simulation.options import resolve
-from chewbot.simulation.run import SimulateResult, compute
+from chewbot.simulation.controllers.table import TEXTURE_CONTROLLER, controller_row
+from chewbot.simulation.options import SimulationOptions, resolve
+from chewbot.simulation.run import SimulateResult, build, compute, load_models
+from chewbot.simulation.simulator import simulate
 
-
-# The test's position controller: chewbot simulate's default, computed torque.
-TPA_CONTROLLER = controller_row(DEFAULT_CONTROLLER)
-# A texture analyser's crosshead is stiff: the test's computed-torque controller has its error dynamics at this
-# frequency. Not told the food's force, it yields about 1 mm per 160 N along z at the molar (gains.toml's 30 Hz: 1 mm
-# per 14 N, half a millimetre under the cheddar); --gain computed_torque.frequency_Hz=... overrides it.
-TPA_FREQUENCY_HZ = 100.0
+# The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
+TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
+TPA_METHOD = "newton-euler"
+# The estimate's contact force is at least this many times its noise (1.4826 MAD of its sample-to-sample
+# differences over sqrt 2: white noise's standard deviation, blind to a force that changes smoothly at 1 kHz): a
+# 5-sigma threshold, which noise alone crosses at about 3e-7 of the samples.
+NOISE_FACTOR = 5.0
+# The estimated force's contact is where it reaches its contact force and stays above it this long (s): a compression
+# lasts seconds, the estimate's excursions where the robot starts or stops moving (its friction model's share of the
+# torques misread over the rates' smoothing window) tens of milliseconds.
+CONTACT_HOLD = 0.1
+# The approach is first simulated this far past the sample's unloaded top (m), then twice as far until it triggers.
+TRIGGER_SEARCH = 0.5e-3
 
 
 @dataclass(frozen=True)
 class TpaOptions:
-    """A texture test: the ``food`` (built-in name or file), ``compression`` (% of h0), ``speed`` (mm/s), ``pause``
-    (s), ``side``, ``model`` (the robot's, controller and plant), ``gain_overrides`` of the computed-torque controller
-    (``--gain``), ``rate`` (Hz)."""
+    """A texture test, resolved (:func:`resolve_tpa`): the ``food`` (built-in name or file; None with a log that gives
+    none), the ``protocol`` (:class:`chewbot.food.tpa.Protocol`, SI), ``side``, ``model`` (the controller's and the
+    estimator's), ``plant_file`` (the plant's; None: the model's) and ``plant_overrides``, ``friction`` (the robot's:
+    the plant's, the controller's model's and the estimator's), ``gain_overrides``, ``rate`` (Hz), ``log`` (a robot's
+    logged test: no simulation) and ``simulation`` (the simulation's options, None with a log)."""
 
-    food: str
-    compression: float = 50.0
-    speed: float = 2.0
-    pause: float = 2.0
+    food: str | None
+    protocol: Protocol
     side: str = "left"
     model: str = "target"
+    plant_file: str | None = None
+    plant_overrides: dict = field(default_factory=dict)
+    friction: bool = True
     gain_overrides: dict = field(default_factory=dict)
     rate: float = 1000.0
+    log: str | None = None
+    simulation: SimulationOptions | None = None
+
+    def record(self) -> dict:
+        """tpa.json's ``"options"``."""
+        return {"food": self.food, "side": self.side, "model": self.model, "plant": self.plant_file,
+                "plant_overrides": dict(self.plant_overrides), "friction": "on" if self.friction else "off",
+                "gain_overrides": dict(self.gain_overrides), "rate_Hz": self.rate, "log": self.log,
+                "controller": None if self.log else TPA_CONTROLLER.name, "method": None if self.log else TPA_METHOD}
+
+
+def resolve_tpa(food: str | None = None, *, compression: float | None = None, distance: float | None = None,
+                speed: float = 2.0, pre_test_speed: float = 1.0, post_test_speed: float | None = None,
+                trigger_force: float | None = None, pause: float = 5.0, side: str = "left", model: str = "target",
+                plant_file: str | None = None, plant_overrides: dict | None = None, friction: bool | str = True,
+                gain_overrides: dict | None = None, rate: float = 1000.0, log: str | None = None) -> TpaOptions:
+    """The options of ``chewbot tpa``, every rule written here once (the command line's units: %, mm, mm/s, N, s).
+    :class:`TpaError` or :class:`chewbot.run.options.OptionError` name the option: a compression below 1 % (a
+    fraction meant as a percentage), a compression with a distance, a food missing without a log, gains or a plant
+    with a log (nothing is simulated). ``compression`` defaults to 50 % unless ``distance`` is given."""
+    from chewbot.food.tpa import TRIGGER_FORCE
+    from chewbot.run.options import OptionError
+
+    if isinstance(friction, str):
+        if friction not in ("on", "off"):
+            raise OptionError("friction", f"must be on or off, not {friction!r}")
+        friction = friction == "on"
+    if compression is None and distance is None:
+        compression = 50.0  # a texture analyser's TPA default
+    protocol = settings(compression, speed, pause, pre_test_speed_mm_s=pre_test_speed, post_test_speed_mm_s=post_test_speed,
+                        trigger_force_N=TRIGGER_FORCE if trigger_force is None else trigger_force, distance_mm=distance)
+    gain_overrides, plant_overrides = dict(gain_overrides or {}), dict(plant_overrides or {})
+    if log is not None:
+        for option, given in (("gain", gain_overrides), ("plant", plant_file), ("plant-set", plant_overrides)):
+            if given:
+                raise OptionError(option, "does not apply to --log: a logged test is not simulated")
+        return TpaOptions(food, protocol, side, model, None, {}, bool(friction), {}, rate, str(log))
+    if food is None:
+        raise OptionError("food", "required (the sample to test), unless --log gives a robot's logged test")
+    sim = resolve(TPA_CONTROLLER, model=model, side=side, method=TPA_METHOD, friction=bool(friction), rate=rate,
+                  plant_file=plant_file, plant_overrides=plant_overrides, gain_overrides=gain_overrides, food=food,
+                  contact="unilateral")
+    return TpaOptions(food, protocol, side, model, plant_file, plant_overrides, bool(friction), gain_overrides, rate, None, sim)
 
 
 @dataclass
 class TpaResult:
-    """A texture test: its options, the food, the protocol, the simulation, the measures (``plant`` and
-    ``estimated``), the curves both were computed from and the largest sample height at the side (m)."""
+    """A simulated texture test: its options, the food, the profile as run, the simulation, the two analyses
+    (``plant``, ``estimated``), the curves they were computed from, the largest sample height at the side (m), what
+    the estimator did, the checks and the approach's trigger."""
 
     options: TpaOptions
     food: Food
-    protocol: Protocol
+    profile: Profile
     simulation: SimulateResult
-    plant: dict
-    estimated: dict | None
+    plant: TpaAnalysis
+    estimated: TpaAnalysis
     curves: dict
     largest_height: float
     estimator: dict
+    checks: list
 
     def record(self) -> dict:
-        """tpa.json."""
+        """tpa.json (``"chewbot_tpa": 2``)."""
         info = self.simulation.info.get("food", {})
-        return {"chewbot_tpa": 1, "options": vars(self.options), "food": self.food.as_dict(),
-                "protocol": {"start_gap_mm": self.protocol.start_gap * 1e3, "deepest_gap_mm": self.protocol.deepest_gap * 1e3,
-                             "speed_mm_s": self.protocol.speed * 1e3, "pause_s": self.protocol.pause,
-                             "duration_s": self.protocol.duration, "controller": TPA_CONTROLLER.name,
-                             "pinned": "alpha = 0"},
-                "largest_height_mm": {self.options.side: self.largest_height * 1e3},
+        return {"chewbot_tpa": 2, "options": self.options.record(), "food": self.food.as_dict(),
+                "protocol": self.profile.record(), "largest_height_mm": {self.options.side: self.largest_height * 1e3},
                 "deepest_compression_mm": info.get("deepest_compression_m", 0.0) * 1e3,
-                "tilt_at_deepest_deg": info.get("tilt_at_deepest_deg"), "events": info.get("events", []),
-                "plant": self.plant, "estimated": self.estimated, "estimator": self.estimator,
-                "definitions": "docs/food.md#texture-profile-analysis"}
+                "tilt_at_deepest_deg": info.get("tilt_at_deepest_deg"), "face": self.face(),
+                "events": info.get("events", []),
+                "plant": self.plant.measures, "estimated": self.estimated.measures,
+                "definitions": self.plant.definitions, "anchors": {"plant": self.plant.anchors, "estimated": self.estimated.anchors},
+                "estimator": self.estimator, "checks": [c.as_dict() for c in self.checks]}
+
+
+    def face(self) -> dict:
+        """The lower tooth's face at the deepest point of the first bite: its tilt against the upper tooth, the spread
+        of the gap across the sample's face (its diameter x sin tilt) and the bite point's horizontal slide from
+        where the test started (mm, deg)."""
+        from chewbot.food.geometry import bite_point_function
+        from chewbot.compiled.kernels import evaluate
+
+        sim, model = self.simulation.simulation, self.simulation.plant_model
+        k = int(np.argmin(self.curves["gap_plant"]))
+        point, _, cos_tilt = evaluate(bite_point_function(model.mechanism), sim.q[[0, k]], sim.dq[[0, k]],
+                                      np.asarray(model.molar(self.options.side), float), model.vector())
+        tilt = float(np.arccos(np.clip(cos_tilt[1, 0], -1.0, 1.0)))
+        diameter = 0.0 if self.food.diameter is None else self.food.diameter
+        return {"path": "the bite point straight down along {S}'s z, alpha pinned at 0: no slide commanded, the face "
+                        "tilts with beta", "tilt_deg": float(np.degrees(tilt)),
+                "spread_mm": diameter * np.sin(tilt) * 1e3, "slide_mm": float(np.linalg.norm(point[1, :2] - point[0, :2]) * 1e3)}
 
 
 def check_height(model: Model, food: Food, side: str) -> float:
@@ -89,46 +176,96 @@ def check_height(model: Model, food: Food, side: str) -> float:
     return h_max
 
 
+def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
+    """The time (s) the plant's food force first reaches the trigger force on the approach from h0 + approach at the
+    pre-test speed, interpolated between the ticks (the approach simulated until then)."""
+    p = options.protocol
+    start = food.height + p.approach
+    reach = p.approach + TRIGGER_SEARCH
+    while True:
+        t = np.arange(int(np.ceil((HOLD + p.blend + reach / p.pre_test_speed) * options.rate)) + 1) / options.rate
+        task = molar_path_task(model, options.side, t, *p.approach_path(start, t), name=f"approach to the {food.name}")
+        parts = build(options.simulation, task)  # the loop alone: the approach's rows are not kept
+        sim = simulate(parts.plant, parts.controller, parts.reference, options.rate, parts.sensor, check=check,
+                       observer=parts.observer)
+        F = sim.quantities["force"]
+        hits = np.flatnonzero(F >= p.trigger_force)
+        if hits.size:
+            k = int(hits[0])
+            w = (p.trigger_force - F[k - 1]) / (F[k] - F[k - 1])
+            return float(sim.t[k - 1] + w * (sim.t[k] - sim.t[k - 1]))
+        if reach >= start:
+            raise TpaError(f"the {food.name} never pushed back {p.trigger_force:g} N (--trigger-force) before the teeth met")
+        reach = min(2 * reach, start)
+
+
 def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
-    """Build, simulate and analyse the two-bite test (module docstring)."""
+    """Trigger, test, measures and checks (module docstring)."""
     step = progress or (lambda msg, stage=None: None)
-    step("food, protocol and task")
+    step("food, protocol and trigger")
     food = load_food(options.food)
-    model = load_model(options.model)
-    h_max = check_height(model, food, options.side)
-    p = replace(protocol(food.height, options.compression, options.speed, options.pause), rate=options.rate)
-    t = p.times()
-    task = molar_path_task(model, options.side, t, *p.path(t), name=f"texture test of the {food.name}")
-    gains = {f"{TPA_CONTROLLER.gains}.frequency_Hz": TPA_FREQUENCY_HZ, **options.gain_overrides}
-    sim_options = resolve(TPA_CONTROLLER, model=options.model, side=options.side, rate=options.rate, gain_overrides=gains,
-                          food=options.food)
-    result = compute(sim_options, progress=step, check=check, task=task)
+    model, plant_model, _ = load_models(options.simulation)
+    h_max = check_height(plant_model, food, options.side)
+    step("the approach, until the trigger", stage="simulation")
+    t_trigger = find_trigger(options, model, food, check)
+    profile = options.protocol.profile(food.height + options.protocol.approach, t_trigger, options.rate)
+    t = profile.times()
+    task = molar_path_task(model, options.side, t, *profile.path(t), name=f"texture test of the {food.name}")
+    result = compute(options.simulation, progress=step, check=check, task=task)
     sim = result.simulation
-    g_plant = food.height - sim.quantities["delta"]
-    plant = tpa_measures(sim.t, g_plant, sim.quantities["force"])
+    g_plant = gap(plant_model, options.side, sim.q, sim.dq)
+    plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")
     step("bite force from the torques")
-    curve, estimator = estimate_from_log(result.plant_model, simulated_log(result), options.side)
-    estimated_measures = tpa_measures(curve["t"], curve["gap"], curve["force"])
-    curves = {"t": sim.t, "gap_plant": g_plant, "force_plant": sim.quantities["force"], "gap_estimated": curve["gap"],
+    curve, estimator = estimate_from_log(model, simulated_log(result), options.side, options.friction)
+    estimated = analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
+                        contact_hold=CONTACT_HOLD)
+    curves = {"t": sim.t, "gap_plant": g_plant["gap"], "force_plant": sim.quantities["force"], "gap_estimated": curve["gap"],
               "force_estimated": curve["force"], "force_estimated_se": curve["se"]}
-    return TpaResult(options, food, p, result, plant, estimated_measures, curves, h_max, estimator)
+    checks = texture_checks(result, food, profile, g_plant, plant, estimated)
+    return TpaResult(options, food, profile, result, plant, estimated, curves, h_max, estimator, checks)
 
 
-def estimate_from_log(model: Model, log, side: str) -> tuple[dict, dict]:
+def texture_checks(result: SimulateResult, food: Food, profile: Profile, g_plant: dict, plant: TpaAnalysis,
+                   estimated: TpaAnalysis) -> list:
+    """The checks of a simulated texture test (module docstring): the simulation's, the protocol's on the plant's gap
+    and force, the energy readings of both analyses."""
+    sim = result.simulation
+    held = protocol_checks(sim.t, g_plant["gap"], sim.quantities["force"], profile, rate=g_plant["rate"])
+    return [*result.checks, *held, *plant.checks, *estimated.checks]
+
+
+def estimate_trigger(force: np.ndarray, trigger_force: float) -> tuple[float, float]:
+    """The contact force of an estimated curve (N) and the estimate's noise (N): the larger of ``trigger_force`` and
+    :data:`NOISE_FACTOR` times the noise, 1.4826 MAD(diff F) / sqrt 2 (white noise's standard deviation; a force that
+    changes smoothly from sample to sample barely moves it)."""
+    d = np.diff(np.asarray(force, float))
+    noise = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2)) if d.size else 0.0
+    return max(float(trigger_force), NOISE_FACTOR * noise), noise
+
+
+def estimate_from_log(model: Model, log, side: str, friction: bool = True, trigger_force: float | None = None) -> tuple[dict, dict]:
     """The sample's force along the gap from a log's crank angles and torques: the motion as ``chewbot identify``
     recovers it (poses by least squares on the angles, rates smoothed from them unless logged), the force by the
-    bite-force estimator (friction as in ``model``'s plant: off), the gap from the recovered poses. Returns the curve
-    {"t", "gap", "force", "se"} and what tpa.json says of the estimator."""
+    bite-force estimator (``friction``: the model's friction subtracted, as ``chewbot estimate-force``'s default), the
+    gap from the recovered poses. Returns the curve {"t", "gap", "force", "se"} and what tpa.json says of the estimator,
+    with the contact force the measures use (:func:`estimate_trigger`)."""
     from chewbot.dynamics.bite_force import estimate
+    from chewbot.food.tpa import TRIGGER_FORCE
     from chewbot.identification.motion import log_motion
 
     motion = log_motion(model, log, side)
-    est = estimate(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), side=side, friction=False)
+    est = estimate(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), side=side, friction=friction)
     q, dq, _ = motion.kin.euler_angle_state()
-    curve = {"t": est.t, "gap": gap(model, side, q, dq)["gap"], "force": -est.F_B[:, 2], "se": est.se[:, 2]}
+    force = -est.F_B[:, 2]
+    contact, noise = estimate_trigger(force, TRIGGER_FORCE if trigger_force is None else trigger_force)
+    curve = {"t": est.t, "gap": gap(model, side, q, dq)["gap"], "force": force, "se": est.se[:, 2]}
     return curve, {"method": "chewbot.dynamics.bite_force.estimate on the motion recovered from the crank angles "
-                             "(chewbot.identification.motion.log_motion), the model's friction off",
-                   "rates": motion.rates, "window_samples": motion.window_samples, "sigma_Nm": est.sigma,
+                             f"(chewbot.identification.motion.log_motion), the model's friction {'on' if friction else 'off'}",
+                   "friction": "on" if friction else "off", "rates": motion.rates, "window_samples": motion.window_samples,
+                   "sigma_Nm": est.sigma, "noise_N": noise, "contact_force_N": contact,
+                   "contact_force_rule": f"the larger of the trigger force and {NOISE_FACTOR:g} x the estimate's noise "
+                                         "(1.4826 MAD of its sample-to-sample differences / sqrt 2), held for "
+                                         f"{CONTACT_HOLD:g} s",
                    "ill_conditioned_samples": int(np.size(est.ill_conditioned)), "warnings": list(est.warnings)}
 
 
@@ -143,15 +280,19 @@ def simulated_log(result: SimulateResult):
                     np.arange(n) + 2, current=sim.current)
 
 
-def tpa_from_log(path, model_name: str = "target", side: str = "left") -> tuple[dict, dict, dict]:
-    """Bourne's measures of a robot's logged two-bite test (``chewbot identify``'s log format): (measures, curve,
-    estimator)."""
+def tpa_from_log(options: TpaOptions) -> tuple[TpaAnalysis, dict, dict]:
+    """Bourne's measures of a robot's logged two-bite test (``chewbot identify``'s log format, ``options.log``):
+    (analysis, curve, estimator)."""
     from chewbot.identification.log import read_log
+    from chewbot.model.params import load_model
 
-    model = load_model(model_name)
-    log = read_log(path)
-    curve, estimator = estimate_from_log(model, log, side)
-    return tpa_measures(curve["t"], curve["gap"], curve["force"]), curve, estimator
+    model = load_model(options.model)
+    log = read_log(options.log)
+    curve, estimator = estimate_from_log(model, log, options.side, options.friction, options.protocol.trigger_force)
+    return (analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
+                    contact_hold=CONTACT_HOLD), curve, estimator)
 
 
-__all__ = ["TPA_FREQUENCY_HZ", "TpaError", "TpaOptions", "TpaResult", "check_height", "estimate_from_log", "run_tpa", "simulated_log", "tpa_from_log"]
+__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult", "check_height",
+           "estimate_from_log", "estimate_trigger", "find_trigger", "resolve_tpa", "run_tpa", "simulated_log",
+           "texture_checks", "tpa_from_log"]

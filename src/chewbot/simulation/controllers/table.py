@@ -40,7 +40,8 @@ class ControllerRow:
     this package), ``gains`` (its section of the gains file, None: no gains), ``needs``; ``continuous``: its law is one
     CasADi function of the state, evaluated at every integrator stage with ``--rate continuous``; ``exportable``: the
     exported C step runs it; ``compared``: one of ``--compare``'s; ``force_reference``: with a food it reads the task's
-    bite force as its force reference (a task that carries one is then accepted)."""
+    bite force as its force reference (a task that carries one is then accepted); ``extends``: the row whose compiled
+    law it evaluates with its own state added (None: its own law)."""
 
     name: str
     help: str
@@ -51,6 +52,7 @@ class ControllerRow:
     exportable: bool = False
     compared: bool = False
     force_reference: bool = False
+    extends: str | None = None
 
     def module(self) -> ModuleType:
         """The module of its law: ``build(parts)`` and ``Gains``."""
@@ -70,12 +72,17 @@ CONTROLLERS: dict[str, ControllerRow] = {row.name: row for row in (
                   "control along z following the task's Fz [N]; docs/bite_force.md", "hybrid", gains="hybrid",
                   needs=Needs(inverse_dynamics=True, target=True, observer=True, food=True), continuous=False,
                   force_reference=True),
+    ControllerRow("crosshead", "computed torque with integral action on the independent coordinates: a texture analyser's "
+                  "crosshead that holds its path under a load it is not told (chewbot tpa's)", "crosshead", gains="crosshead",
+                  needs=Needs(inverse_dynamics=True), continuous=False, extends="computed-torque"),
 )}
 NAMES = tuple(CONTROLLERS)
 COMPARED = tuple(r.name for r in CONTROLLERS.values() if r.compared)
 EXPORTABLE = tuple(r.name for r in CONTROLLERS.values() if r.exportable)
 # The controller of chewbot simulate (and of the Python API's simulate) where none is named.
 DEFAULT_CONTROLLER = "computed-torque"
+# The position loop of chewbot tpa, a texture analyser's crosshead.
+TEXTURE_CONTROLLER = "crosshead"
 
 
 def controller_row(name: str) -> ControllerRow:

@@ -1,0 +1,184 @@
+"""The robot as a texture analyser held to a texture analyser's protocol, with its friction: the trigger, the test
+speed and the compression checked on an elastic, a stiff (1 MPa) and a crushing sample; the force the robot estimates
+from its torques against the plant's; a crushing sample's springiness against the law's recovery r; failures that
+exit 4."""
+
+from __future__ import annotations
+
+import functools
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from chewbot.cli import app
+from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from chewbot.simulation.texture import estimate_trigger, resolve_tpa, run_tpa
+
+runner = CliRunner()
+SPEED = 4.0  # mm/s: a shorter test than the default 2 mm/s, the same protocol
+SAMPLES = {  # h0 6 mm, d 10 mm cylinders
+    "elastic": {"young_modulus_kPa": 20.0},
+    "stiff": {"young_modulus_kPa": 1000.0},
+    "crushing": {"young_modulus_kPa": 100.0, "fracture_strain": 0.3, "stiffness_after_fracture": 0.5,
+                 "recovery_after_fracture": 0.1},
+}
+
+
+def food_file(folder, name: str) -> str:
+    keys = {"name": f"{name} cylinder", "shape": "cylinder", "height_mm": 6.0, "diameter_mm": 10.0, "tooth_friction": 0.3,
+            **SAMPLES[name]}
+    path = folder / f"{name}.toml"
+    path.write_text("[food]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v}\n" for k, v in keys.items()))
+    return str(path)
+
+
+@functools.cache
+def _tpa(tmp: str, name: str):
+    from pathlib import Path
+
+    return run_tpa(resolve_tpa(food_file(Path(tmp), name), speed=SPEED, pause=0.5))
+
+
+@pytest.fixture(scope="module")
+def tpa(tmp_path_factory):
+    tmp = str(tmp_path_factory.mktemp("texture"))
+    return lambda name: _tpa(tmp, name)
+
+
+@pytest.mark.parametrize("name", list(SAMPLES))
+def test_the_protocol_is_held_with_friction(tpa, name):
+    """The robot, with its friction, holds the protocol on each sample: the compression within 1 % of its target and
+    the teeth apart; on the elastic and the stiff sample the speed's 2nd-98th percentiles within 1 % of the stroke's
+    (the checks of chewbot.food.tpa.protocol_checks, tested there on curves built by hand); the trigger where the
+    plant's force reached 0.049 N. The crushing sample's force falls by 93 % within a tick at its fracture: the
+    crosshead lunges, its speed off by up to 50 % for about 35 ms of the first compression's 750, more than the 2 % the
+    percentiles leave out, and ``speed-held`` fails there, as it must (docs/food.md, "At a brittle fracture")."""
+    r = tpa(name)
+    assert r.options.friction and r.simulation.options.friction and r.simulation.options.inverse.friction
+    checks = {c.name: c for c in r.checks}
+    for key in ("compression-reached", "teeth-met") + (("speed-held",) if name != "crushing" else ()):
+        assert checks[key].passed, checks[key].message
+    assert {c.name for c in r.checks if c.fails_run} <= {"contact-pull", "speed-held"}
+    k = int(np.searchsorted(r.curves["t"], r.profile.trigger_time))
+    assert r.curves["force_plant"][k - 1] < 0.049 <= r.curves["force_plant"][k + 1]
+
+
+def test_the_estimate_recovers_the_plants_force(tpa):
+    """The force the robot estimates from its crank angles and torques (chewbot estimate-force's estimator and its
+    default, the model's friction subtracted) is the plant's to 2 % RMS of the peak on the stiff sample (39 N); on the
+    elastic one (0.8 N) the friction model's misreadings where the robot starts and stops, about 0.02 N, are 3 % of
+    its peak."""
+    c = tpa("stiff").curves
+    error = c["force_estimated"] - c["force_plant"]
+    assert np.sqrt(np.mean(error**2)) < 0.02 * np.max(c["force_plant"])
+    c = tpa("elastic").curves
+    error = c["force_estimated"] - c["force_plant"]
+    assert np.sqrt(np.mean(error**2)) < 0.03 * np.max(c["force_plant"])
+
+
+def test_a_lifted_condyle_fails_the_test(tpa):
+    """The stiff sample's 39 N at the left molar: the controller's torques (Newton-Euler's distribution, which knows
+    no unilateral contact) let the right plane pull its condyle, N_R < 0: the condyle lifts. The test runs under the
+    unilateral contact model, so ``contact-pull`` fails it (exit 4 on the command line)."""
+    pull = {c.name: c for c in tpa("stiff").checks}["contact-pull"]
+    assert pull.passed is False and pull.fails_run and pull.worst["value"] < 0
+
+
+def test_a_crushed_sample_springs_back_by_r(tpa):
+    """Broken in the first bite, the sample is crushed to h0 - delta_max (1 - r): the second bite meets it r delta_max
+    below contact, its springiness is r (0.1) within 0.02; its cohesiveness is far below an elastic sample's."""
+    r = tpa("crushing")
+    assert [e["event"] for e in r.record()["events"]].count("fracture") == 1
+    assert r.plant.measures["springiness"] == pytest.approx(0.1, abs=0.02)
+    assert r.estimated.measures["springiness"] == pytest.approx(0.1, abs=0.02)
+    assert r.plant.measures["cohesiveness"] < 0.2
+
+
+def test_tpa_json_gives_both_readings_definitions_and_checks(tpa):
+    record = tpa("elastic").record()
+    assert record["chewbot_tpa"] == 2
+    for key in ("hardness_N", "fracturability_N", "cohesiveness", "springiness", "resilience", "adhesiveness_mJ",
+                "gumminess_N", "chewiness_N", "springiness_at_peak", "resilience_at_peak"):
+        assert key in record["plant"] and key in record["estimated"] and key in record["definitions"]
+    assert {"compression-reached", "speed-held", "teeth-met", "contact-pull", "plant-springiness-range",
+            "estimated-resilience-range"} <= {c["name"] for c in record["checks"]}
+    assert record["protocol"]["trigger_force_N"] == 0.049 and record["options"]["friction"] == "on"
+    json.dumps(record)
+
+
+def test_estimate_trigger_stays_above_the_noise():
+    """On white noise of 0.1 N the estimate's contact force is 5 sigma (0.5 N within 10 %), not the trigger force; on a
+    smooth curve the trigger force."""
+    rng = np.random.default_rng(0)
+    contact, noise = estimate_trigger(rng.normal(0, 0.1, 20000), 0.049)
+    assert noise == pytest.approx(0.1, rel=0.05) and contact == pytest.approx(0.5, rel=0.1)
+    contact, _ = estimate_trigger(np.sin(np.linspace(0, 3, 5000)), 0.049)
+    assert contact == 0.049
+
+
+def test_a_missed_compression_exits_4(tmp_path):
+    """A soft position loop without its integral yields under a stiff sample: the compression is missed, tpa.json says
+    so in its checks, the command exits 4 (the folder written)."""
+    food = food_file(tmp_path, "stiff")
+    r = runner.invoke(app, ["tpa", "--food", food, "--speed", str(SPEED), "--pause", "0.5", "--gain", "crosshead.integral_Hz=0",
+                            "--gain", "crosshead.frequency_Hz=10", "--out", str(tmp_path / "soft"), "-q"])
+    assert r.exit_code == EXIT_CHECK_FAILED, r.output
+    record = json.loads((tmp_path / "soft" / "tpa.json").read_text())
+    missed = {c["name"]: c for c in record["checks"]}["compression-reached"]
+    assert missed["passed"] is False and "compression-reached" in r.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--compression", "0.5"], "did you mean 50 %?"),
+    (["--compression", "50", "--distance", "3"], "give one"),
+    (["--trigger-force", "0"], "--trigger-force 0"),
+    (["--friction", "maybe"], "friction"),
+])
+def test_tpa_refuses_bad_settings(tmp_path, args, message):
+    r = runner.invoke(app, ["tpa", "--food", "cheddar", *args, "--out", str(tmp_path / "x")])
+    assert r.exit_code == EXIT_BAD_INPUT and message in r.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_gain_does_not_apply_to_a_log(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text("t [s]\n0\n")
+    r = runner.invoke(app, ["tpa", "--log", str(log), "--gain", "crosshead.integral_Hz=1", "--out", str(tmp_path / "x")])
+    assert r.exit_code == EXIT_BAD_INPUT and "--gain" in r.output
+
+
+def test_teeth_meeting_through_the_sample_fails():
+    """``teeth-met``: a compression that reaches the sample's height fails (where and how deep named); one that stays
+    short of it passes."""
+    from types import SimpleNamespace
+
+    from chewbot.simulation.food import food_checks
+
+    t = np.linspace(0, 1, 11)
+    info = {"food": {"height_mm": 4.0}, "events": []}
+    short = SimpleNamespace(t=t, quantities={"delta": np.linspace(0, 3.9e-3, 11), "force": np.linspace(0, 10, 11)})
+    through = SimpleNamespace(t=t, quantities={"delta": np.linspace(0, 4.2e-3, 11), "force": np.linspace(0, 130, 11)})
+    assert food_checks(short, info)[0].passed
+    met = food_checks(through, info)[0]
+    assert met.name == "teeth-met" and met.fails_run and met.first_sample["t"] == pytest.approx(1.0)
+    assert "4.2 mm" in met.message and "130 N" in met.message
+
+
+def test_tpa_options_resolve_once():
+    """resolve_tpa: the compression defaults to 50 % unless a distance is given; the plant's model and its overrides
+    reach the simulation's options (the controller's and the estimator's model stay --model's), with friction, the
+    crosshead, Newton-Euler with friction and the unilateral contact; a plant with a log is refused."""
+    from chewbot.run.options import OptionError
+
+    o = resolve_tpa("cheddar", plant_file="target", plant_overrides={"mandible.mass_g": 400.0})
+    assert o.protocol.compression == 0.5 and o.protocol.distance is None
+    sim = o.simulation
+    assert (sim.plant_file, sim.plant_overrides, sim.model) == ("target", {"mandible.mass_g": 400.0}, "target")
+    assert sim.controller.name == "crosshead" and sim.inverse.method == "newton-euler" and sim.inverse.friction
+    assert sim.friction and sim.contact.value == "unilateral"
+    d = resolve_tpa("cheddar", distance=3.0, friction="off")
+    assert d.protocol.compression is None and d.protocol.distance == pytest.approx(3e-3) and not d.simulation.friction
+    with pytest.raises(OptionError, match="plant-set"):
+        resolve_tpa(log="log.csv", plant_overrides={"mandible.mass_g": 400.0})
