@@ -184,6 +184,28 @@ def references(model: Model, x0: np.ndarray) -> np.ndarray:
     return ref
 
 
+def default_status(model: Model, fix: tuple[str, ...] = (), free: tuple[str, ...] = ()) -> list[str]:
+    """The status of each parameter before the fit: "" (to estimate), ``fixed`` (a key of ``fix``), ``given`` (the
+    file's value by default, unless its key is in ``free``), ``not in the model`` (the 6RSS has no HKP) or ``no
+    arm`` (R = 0 in the file: R mu_c cannot be written back)."""
+    status = ["" for _ in PARAMETERS]
+    for j, p in enumerate(PARAMETERS):
+        if p.group in fix:
+            status[j] = "fixed"
+        elif p.given and p.group not in free:
+            status[j] = "given"
+        elif j in HKP and not model.has_hkp:
+            status[j] = "not in the model"
+    if model.friction.actuator_arm == 0 and "friction.actuator_coulomb" not in fix:
+        status[NAMES_INDEX["R*mu_c"]] = "no arm"
+    return status
+
+
+def estimated_by_default(model: Model) -> np.ndarray:
+    """(N_X,) True for the parameters ``chewbot identify`` estimates without --fix or --free."""
+    return np.array([s == "" for s in default_status(model)])
+
+
 def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
              fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
              progress=None, check=None, free: tuple[str, ...] = ()) -> Identification:
@@ -210,17 +232,9 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     step("motion from the crank angles")
     motion = log_motion(model, log, side, window_s)
     x0 = x_of(model)
-    status = ["" for _ in PARAMETERS]
+    status = default_status(model, fix, free)
     notes = []
-    for j, p in enumerate(PARAMETERS):
-        if p.group in fix:
-            status[j] = "fixed"
-        elif p.given and p.group not in free:
-            status[j] = "given"
-        elif j in HKP and not model.has_hkp:
-            status[j] = "not in the model"
-    if model.friction.actuator_arm == 0 and "friction.actuator_coulomb" not in fix:
-        status[NAMES_INDEX["R*mu_c"]] = "no arm"
+    if status[NAMES_INDEX["R*mu_c"]] == "no arm":
         notes.append("friction.actuator_arm_mm is 0: the actuators' Coulomb friction R mu_c cannot be written back as "
                      "mu_c; it is not estimated")
     free = np.array([s == "" for s in status])
