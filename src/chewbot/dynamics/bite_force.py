@@ -119,7 +119,7 @@ def sensitivity_kernel(mechanism: str) -> KernelSpec:
         named = dict(zip(residual.name_in(), ins))
         r, G = residual(*[ca.DM.zeros(2) if k == "signs" else v for k, v in named.items()])
         g = ca.mtimes(G.T, r)
-        p = params.p
+        p = named["p"]
         dp = ca.SX.sym("dp", p.numel())
         inputs = [v for k, v in named.items() if k != "signs"]
         return ca.Function(name, [*inputs, dp], [ca.jacobian(g, named["u"]), ca.jtimes(g, p, dp)],
@@ -261,7 +261,8 @@ def covariance(model: Model, H, G, r, free, residual, dq, ddq, rate_sd, accelera
             step = np.zeros((n, 5))
             for pattern in np.unique(free, axis=0):
                 rows = np.all(free == pattern, axis=1)
-                step[np.ix_(rows, pattern)] = -np.linalg.solve(H[rows][:, pattern][:, :, pattern], g_p[rows][:, pattern])
+                step[np.ix_(rows, pattern)] = -np.linalg.solve(H[rows][:, pattern][:, :, pattern],
+                                                               g_p[rows][:, pattern][..., None])[..., 0]
             du.append(step)
         du = np.stack(du, axis=2)  # (n, 5, k)
         C_p = du @ unc.cov @ np.swapaxes(du, 1, 2)

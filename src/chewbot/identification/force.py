@@ -71,7 +71,7 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
     of it. The first sample after the step is the first near k whose pose departs from the motion before it
     (:func:`_first_deviations`), else k + 1. Events closer than a smoothing window to each other or to an end of the
     log are left out (no window would fit between them)."""
-    from chewbot.dynamics.bite_force import estimate_states
+    from chewbot.dynamics.bite_force import solve_states
     from chewbot.identification.motion import fit_poses
     from chewbot.kinematics.motion import solve_kinematics
     from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
@@ -86,8 +86,8 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
         task = Task(name=log.source, t=log.t, coords=TARGET_COORDS if model.has_hkp else FULL_COORDS, q=q, dq=fits.rate,
                     ddq=fits.acceleration, force=np.zeros((log.n, 3)), side=side)
         kin = solve_kinematics(model, task, "euler-angles")
-        F[anchor] = estimate_states(model, log.t, kin.theta, q, fits.rate, fits.acceleration, fits.held, side=side,
-                                    contact=contact, friction=friction, sigma=1.0).F_B
+        F[anchor] = solve_states(model, kin.theta, q, fits.rate, fits.acceleration, fits.held, side=side, contact=contact,
+                                 friction=friction)[0][:, :3]
     D = np.linalg.norm(F["right"][1:] - F["left"][:-1], axis=1)
     if not D.size:
         return ()

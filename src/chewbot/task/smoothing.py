@@ -74,6 +74,9 @@ def derivatives(t: np.ndarray, y: np.ndarray, window_s: float = WINDOW_S, polyor
 # local_fits takes the half window where its acceleration differs from the full window's by more than this many
 # standard deviations of their difference's noise.
 ADAPT_SCALES = 3.0
+# ... down to windows of this many times the fewest samples a polynomial of the degree needs (7 for degree 5): the
+# shortest windows are all but interpolations, and average the held torques' noise over too few samples.
+MIN_WINDOW_FACTOR = 1.5
 # The differences that estimate a signal's noise (noise_level): of this order, so that a smooth motion sampled at
 # 1 kHz contributes far less than any sensor's noise (dt^6 times its sixth derivative).
 NOISE_DIFFERENCES = 6
@@ -182,28 +185,52 @@ def local_fits(t: np.ndarray, y: np.ndarray, window_s: float = WINDOW_S, cuts: t
     full, avg, norms = fits(w)
     if not adaptive:
         return LocalFits(*full, avg, noise * norms[:, 1:2], noise * norms[:, 2:3], noise, w, tuple(bounds[1:-1]))
-    h = max(w // 2 | 1, polyorder + 2 | 1)
-    half, avg_h, norms_h = fits(h)
-    # Where the half window's acceleration differs from the full one's by more than their noise explains, the full
-    # window smooths over something (a friction reversal, an event): the sample takes the half window (all its
-    # coordinates, so that the held average matches every acceleration), as does every sample near a cut.
-    spread = noise * np.sqrt(np.maximum(norms_h[:, 2:3] ** 2 - norms[:, 2:3] ** 2, 0.0))
-    diff = [full[d] - half[d] for d in (1, 2)]
-    shorter = np.any(np.abs(diff[1]) > ADAPT_SCALES * spread, axis=1)
+    # The scales: the window, then halved down to the shortest a polynomial of the degree allows. A sample keeps the
+    # longest window whose acceleration the next shorter one confirms (they differ by less than ADAPT_SCALES times
+    # the noise of their difference, Var(short - long) = Var(short) - Var(long) for nested least squares): where the
+    # long window smooths over something (a friction reversal, an event), a shorter one takes over, for all of the
+    # sample's coordinates so that the held average matches every acceleration. Within half a window of a cut the
+    # half window is taken: the samples next to an event are fitted from one side, where a shorter window is
+    # nearly an interpolation of the motion's transient.
+    widths = [w]
+    while widths[-1] // 2 | 1 >= MIN_WINDOW_FACTOR * (polyorder + 2 | 1) and widths[-1] // 2 | 1 < widths[-1]:
+        widths.append(widths[-1] // 2 | 1)
+    scales = [(full, avg, norms)] + [fits(width) for width in widths[1:]]
+    if len(scales) == 1:
+        return LocalFits(*full, avg, noise * norms[:, 1:2], noise * norms[:, 2:3], noise, w, tuple(bounds[1:-1]))
+    chosen = np.full(n, len(scales) - 1)
+    undecided = np.ones(n, dtype=bool)
+    near = np.zeros(n, dtype=bool)
     for c in bounds[1:-1]:
-        shorter[max(c - w // 2, 0):c + w // 2] = True
-    pick = shorter[:, None]
-    value, rate, acc = (np.where(pick, half[d], full[d]) for d in range(3))
+        near[max(c - w // 2, 0):c + w // 2] = True
+    for i in range(len(scales) - 1):
+        (long, _, n_long), (short, _, n_short) = scales[i], scales[i + 1]
+        spread = noise * np.sqrt(np.maximum(n_short[:, 2:3] ** 2 - n_long[:, 2:3] ** 2, 0.0))
+        agree = np.all(np.abs(long[2] - short[2]) <= ADAPT_SCALES * spread, axis=1)
+        take = undecided & agree & ~near
+        chosen[take], undecided[take] = i, False
+    chosen[near] = 1
+    rows = np.arange(n)
+    pick = lambda values: np.stack(values)[chosen, rows]  # noqa: E731
+    value, rate, acc = (pick([sc[0][d] for sc in scales]) for d in range(3))
     if held is not None:
-        avg = np.where(pick, avg_h, avg)
+        avg = pick([sc[1] for sc in scales])
     sd = []
-    for d, dd in ((1, diff[0]), (2, diff[1])):
-        # the full window: its noise, and the smoothing error the half window reveals beyond the noise
-        # (Var(half - full) = Var(half) - Var(full) for nested least squares); the half window: its noise, and the
-        # whole difference as its smoothing error (the shorter window's own is not known, and not larger)
-        excess = dd**2 - noise**2 * np.maximum(norms_h[:, d:d + 1] ** 2 - norms[:, d:d + 1] ** 2, 0.0)
-        sd.append(np.where(pick, np.sqrt((noise * norms_h[:, d:d + 1]) ** 2 + dd**2),
-                           np.sqrt((noise * norms[:, d:d + 1]) ** 2 + np.maximum(excess, 0.0))))
+    for d in (1, 2):
+        # a window the next shorter one confirms: its noise and the smoothing error their difference shows beyond
+        # the noise; the shortest: its noise and its whole difference from the next longer as its smoothing error
+        parts = []
+        for i, (est, _, nrm) in enumerate(scales):
+            j = i + 1 if i + 1 < len(scales) else i - 1
+            other, n_other = scales[j][0][d], scales[j][2]
+            diff2 = (est[d] - other) ** 2
+            own = (noise * nrm[:, d:d + 1]) ** 2
+            if j > i:
+                parts.append(np.sqrt(own + np.maximum(diff2 - noise**2 * np.maximum(n_other[:, d:d + 1] ** 2 - nrm[:, d:d + 1] ** 2, 0.0), 0.0)))
+            else:
+                parts.append(np.sqrt(own + diff2))
+        sd.append(pick(parts))
+    shorter = chosen > 0
     return LocalFits(value, rate, acc, avg, sd[0], sd[1], noise, w, tuple(bounds[1:-1]), shorter)
 
 
