@@ -194,7 +194,7 @@ def periods_of(duration: float, period: float) -> int:
     return max(1, int(round(duration / period)))
 
 
-class _Problem:
+class DesignProblem:
     """The design's objective and constraints as functions of the scaled coefficients y (with their gradients), on
     the grid of one period."""
 
@@ -246,6 +246,8 @@ class _Problem:
         n = self.t.size
         W = out["W"].reshape(n, N_X, 6).transpose(0, 2, 1)[:, :, self.estimated] * self.ref[self.estimated]  # (n, 6, e)
         A = np.einsum("nij,nik->jk", W, W) / n
+        if not np.isfinite(A).all():  # a trial point out of reach (the solver's step): no information there
+            return (-np.inf, np.zeros(self.size)) if gradient else (-np.inf, A)
         sign, logdet = np.linalg.slogdet(A)
         if sign <= 0:
             logdet = -np.inf
@@ -333,7 +335,7 @@ def design(model: Model, seed: int = 0, side: str = "left", progress=None, check
     from chewbot.identification.parameters import NAMES, x_of
 
     estimated = estimated_by_default(model)
-    problem = _Problem(model, estimated, references(model, x_of(model)))
+    problem = DesignProblem(model, estimated, references(model, x_of(model)))
     rng = np.random.default_rng(seed)
     y0 = rng.standard_normal(problem.size)
     if side == "right":  # the mirror image: Y and alpha change sign
@@ -373,7 +375,7 @@ def design(model: Model, seed: int = 0, side: str = "left", progress=None, check
                   [NAMES[j] for j in np.flatnonzero(estimated)], seed, side)
 
 
-def _feasible_start(problem: _Problem, y: np.ndarray) -> np.ndarray:
+def _feasible_start(problem: DesignProblem, y: np.ndarray) -> np.ndarray:
     """``y`` scaled so that the speeds, accelerations and torques use at most :data:`START_USE` of what the design
     allows them, every other constraint holding (bisection on the scale, the motion growing from rest at home)."""
     def fits(s):

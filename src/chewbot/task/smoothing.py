@@ -207,9 +207,9 @@ def local_fits(t: np.ndarray, y: np.ndarray, window_s: float = WINDOW_S, cuts: t
         (long, _, n_long), (short, _, n_short) = scales[i], scales[i + 1]
         spread = noise * np.sqrt(np.maximum(n_short[:, 2:3] ** 2 - n_long[:, 2:3] ** 2, 0.0))
         agree = np.all(np.abs(long[2] - short[2]) <= ADAPT_SCALES * spread, axis=1)
-        take = undecided & agree & ~near
+        take = undecided & agree & ~(near & (i == 0))
         chosen[take], undecided[take] = i, False
-    chosen[near] = 1
+    chosen[near] = np.maximum(chosen[near], 1)
     rows = np.arange(n)
     pick = lambda values: np.stack(values)[chosen, rows]  # noqa: E731
     value, rate, acc = (pick([sc[0][d] for sc in scales]) for d in range(3))
