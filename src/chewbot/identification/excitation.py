@@ -64,6 +64,7 @@ QUANTITIES = ("dtheta", "ddtheta", "tau", "T", "reach", "transmission")
 
 
 def coordinates(model: Model) -> tuple[str, ...]:
+    """The independent coordinates the series moves, named as in task files."""
     return TARGET_COORDS if model.has_hkp else FULL_COORDS
 
 
@@ -394,21 +395,23 @@ def _feasible_start(problem: DesignProblem, y: np.ndarray) -> np.ndarray:
 
 
 def identification_condition(model: Model, task: Task) -> float:
-    """The condition number ``chewbot identify`` reports at the start (unit-norm columns of the estimated
-    parameters, its samples where every crank turns) on the noise-free log of ``task``: the model's Newton-Euler
-    torques with friction and the minimum-torque distribution, exact rates."""
+    """The condition number ``chewbot identify`` reports at the start (unit-norm columns of the parameters it
+    estimates by default, the samples where every crank turns) on the noise-free log of ``task``: the model's
+    Newton-Euler torques with friction and the minimum-torque distribution, the exact rates; the log goes the
+    identification's own way (:func:`chewbot.identification.motion.log_motion`)."""
     from chewbot.dynamics.registry import inverse_dynamics
     from chewbot.identification.estimate import ReducedProblem, condition_number
     from chewbot.identification.identifier import estimated_by_default, references
-    from chewbot.identification.motion import MIN_SPEED_EPS
-    from chewbot.dynamics.formulations.newton_euler import EPS_THETA_DOT
+    from chewbot.identification.log import RobotLog
+    from chewbot.identification.motion import log_motion
     from chewbot.identification.parameters import x_of
     from chewbot.kinematics.motion import solve_kinematics
 
     kin = solve_kinematics(model, task, ORIENTATION)
     tau = inverse_dynamics(model, kin, "newton-euler", friction=True).tau
-    used = np.abs(kin.dtheta).min(axis=1) > MIN_SPEED_EPS * EPS_THETA_DOT
+    log = RobotLog(task.name, kin.t, kin.theta, kin.dtheta, kin.ddtheta, tau, np.zeros((kin.n, 3)), np.arange(kin.n) + 2)
+    motion = log_motion(model, log, task.side)
     x0 = x_of(model)
-    start = ReducedProblem(model, kin, tau, used).evaluate_at(x0, jacobian=True)
+    start = ReducedProblem(model, motion.kin, tau, motion.moving()).evaluate_at(x0, jacobian=True)
     free = np.flatnonzero(estimated_by_default(model))
     return condition_number(start.J[:, free] * references(model, x0)[free])[0]

@@ -211,7 +211,10 @@ def local_fits(t: np.ndarray, y: np.ndarray, window_s: float = WINDOW_S, cuts: t
         chosen[take], undecided[take] = i, False
     chosen[near] = np.maximum(chosen[near], 1)
     rows = np.arange(n)
-    pick = lambda values: np.stack(values)[chosen, rows]  # noqa: E731
+
+    def pick(values):
+        return np.stack(values)[chosen, rows]
+
     value, rate, acc = (pick([sc[0][d] for sc in scales]) for d in range(3))
     if held is not None:
         avg = pick([sc[1] for sc in scales])
