@@ -56,16 +56,19 @@ def drawn_plant(seed: int, mass_factor: float = 1.05) -> dict[str, float]:
 def plant_log(task_path: Path, plant: dict[str, float], sigma_tau: float = 0.0, seed: int = 0, rates: bool = True):
     """The log of the excitation on the plant: the simulation's angles (and exact rates with ``rates``) and its
     applied torques with Gaussian noise of ``sigma_tau`` N*m (``seed``)."""
-    return noisy(_simulated(str(task_path), tuple(sorted(plant.items())), rates), sigma_tau, seed)
+    r = excited(str(task_path), tuple(sorted(plant.items())))
+    k, s = r.kinematics, r.simulation
+    log = RobotLog("excitation", s.t, k.theta, k.dtheta if rates else None, k.ddtheta if rates else None, s.tau,
+                   np.zeros((s.t.size, 3)), np.arange(s.t.size) + 2)
+    return noisy(log, sigma_tau, seed)
 
 
 @functools.cache
-def _simulated(task_path: str, plant: tuple, rates: bool) -> RobotLog:
-    r = compute(SimulateOptions(controller="computed-torque", task=task_path, method="newton-euler", friction="on",
-                                plant_overrides=dict(plant)))
-    k, s = r.kinematics, r.simulation
-    return RobotLog("excitation", s.t, k.theta, k.dtheta if rates else None, k.ddtheta if rates else None, s.tau,
-                    np.zeros((s.t.size, 3)), np.arange(s.t.size) + 2)
+def excited(task_path: str, plant: tuple = ()):
+    """chewbot simulate of the excitation task on the plant (``plant``: sorted overrides): computed torque with the
+    nominal model's Newton-Euler dynamics, friction in the plant and the controller."""
+    return compute(SimulateOptions(controller="computed-torque", task=task_path, method="newton-euler", friction="on",
+                                   plant_overrides=dict(plant)))
 
 
 def noisy(log: RobotLog, sigma_tau: float, seed: int) -> RobotLog:
