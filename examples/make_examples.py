@@ -163,6 +163,26 @@ def bite_file(model) -> None:
          [t, q[:, 0] / MM, q[:, 1] / MM, q[:, 2] / DEG, q[:, 3] / DEG, 0 * t, 0 * t, Fz], digits=10)
 
 
+# Peanuts chewed to the swallow point in four food matrices (Hutchings et al., J. Food Eng. 109 (2012) 736, and
+# Hutchings' thesis, Massey University, Table 7-5): mean chews (rounded) and the Rosin-Rammler X50 (mm) and b.
+PEANUT_SWALLOW = {"scone": (26, 1.22, 1.17), "gelatine gel": (24, 1.18, 1.22), "brownie": (20, 1.20, 1.28),
+                  "chocolate": (23, 1.26, 1.26)}
+
+
+def peanut_sieving() -> None:
+    """SIEVING.csv of the four published distributions: each the Rosin-Rammler law's mass on the sieves."""
+    from chewbot.food.sieving import SIEVING_MM, passing, rosin_rammler
+
+    lines = ["subject,chews [1],sieve [mm],mass_fraction [1]"]
+    for subject, (chews, x50, b) in PEANUT_SWALLOW.items():
+        q = np.concatenate([[1.0], rosin_rammler(np.array(SIEVING_MM[:-1]), x50, b), [0.0]])
+        fractions = np.round(q[:-1] - q[1:], 4)
+        fractions[-1] = round(1 - fractions[:-1].sum(), 4)  # rounded, still summing to 1
+        assert np.allclose(passing(fractions), rosin_rammler(np.array(SIEVING_MM[:-1]), x50, b), atol=1e-3)
+        lines += [f"{subject},{chews},{s:g},{f:.4f}" for s, f in zip(SIEVING_MM, fractions)]
+    (HERE / "peanut_sieving.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
 def main() -> None:
     model = load_model("target")
     task = default_task(model, "left", CYCLE)
@@ -171,6 +191,7 @@ def main() -> None:
     robot_log()
     incisor_path(model, task)
     bite_file(model)
+    peanut_sieving()
     (HERE / "sweep.toml").write_text(SWEEP, encoding="utf-8")
     shutil.copyfile(HERE.parent / "src" / "chewbot" / "simulation" / "gains.toml", HERE / "gains.toml")
 

@@ -118,3 +118,36 @@ def test_a_bad_parameter_file_in_a_run_names_the_key(tmp_path):
     result = invoke("run", "--model", str(bad), "--out", str(tmp_path / "out"), "--quiet")
     assert result.exit_code == EXIT_BAD_INPUT and "robot.toml" in result.output and "hkp.p1" in result.output
     _assert_nothing_written(tmp_path, "out")
+
+
+def test_progress_prints_a_line_per_stage_where_standard_error_is_not_a_terminal(capsys, monkeypatch):
+    """Under a pipe or in a log (pytest's captured standard error is not a terminal) the progress display prints one
+    line per stage with the seconds since the start, none for a step that goes on (same words before the colon: within
+    PROGRESS_LINE_S of its line) or for a count of samples; nothing with --quiet, nor before ``delay``."""
+    import re
+
+    from chewbot.commands import common
+    from chewbot.commands.common import progress
+
+    steps = [("compiling kernels: 0 of 2 done, building a", {}), ("compiling kernels: 1 of 2 done", {}),
+             ("kinematics", {"done": 0, "total": 10}), ("inverse dynamics (hessian)", {"done": 0}),
+             ("inverse dynamics (hessian)", {"done": 5}), ("writing results.csv", {"stage": None})]
+    for quiet, delay in ((False, 0.0), (True, 0.0), (False, 3600.0)):
+        with progress(quiet, "demo", delay=delay) as step:
+            for message, extra in steps:
+                step(message, **extra)
+        lines = capsys.readouterr().err.splitlines()
+        if quiet or delay:
+            assert lines == []
+            continue
+        assert all(re.search(r" \(\d+\.\d s\)$", line) for line in lines), lines
+        assert [re.sub(r" \(\d+\.\d s\)$", "", line) for line in lines] == [
+            "demo: compiling kernels: 0 of 2 done, building a", "demo: kinematics", "demo: inverse dynamics (hessian)",
+            "demo: writing results.csv"]
+    monkeypatch.setattr(common, "PROGRESS_LINE_S", 0.0)  # a stage that goes on: its new detail gets a line
+    with progress(False, "demo") as step:
+        for message, extra in steps:
+            step(message, **extra)
+    lines = [re.sub(r" \(\d+\.\d s\)$", "", line) for line in capsys.readouterr().err.splitlines()]
+    assert lines[:2] == ["demo: compiling kernels: 0 of 2 done, building a", "demo: compiling kernels: 1 of 2 done"]
+    assert lines[2:] == ["demo: kinematics", "demo: inverse dynamics (hessian)", "demo: writing results.csv"]

@@ -10,7 +10,9 @@ and the files in it, :func:`expected_outputs`).
 
 Commands that compute over the default task, draw figures or start a cluster take from seconds to minutes: they run
 under the ``slow`` mark (``.ci/slow``). The quick ones (reading and checking inputs, the short example files) run in
-the suite. :data:`NOT_RUN` names the few that cannot run on a single machine as written, with the reason.
+the suite. A sweep on an existing Dask cluster (``--scheduler tcp://HOST:PORT``, whatever address the docs write) runs
+in the suite on a scheduler and a worker the test starts on 127.0.0.1 (conftest.py's ``dask_cluster``), its address
+put in place of the documented one.
 """
 
 from __future__ import annotations
@@ -30,12 +32,9 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 SHELL_FENCES = ("", "sh", "bash", "shell", "console")
 
-# Commands that need what a single machine does not have, with the reason (matched on the command's text).
-NOT_RUN = {
-    "--scheduler tcp://": "needs a running Dask cluster at that address (docs/sweeps.md shows how to start one)",
-}
+SCHEDULER = "--scheduler"  # its documented address is a cluster elsewhere: the test's own cluster takes its place
 # Subcommands that finish in a few seconds on the shipped examples; the others are slow.
-QUICK = ("models", "check-model", "cache", "import-motion", "track-incisor")
+QUICK = ("models", "check-model", "cache", "import-motion", "track-incisor", "fit-comminution")
 
 
 @dataclass(frozen=True)
@@ -131,7 +130,7 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return [f"{out}/chewbot-export.json"]
     if sub == "export-controller":
         return [f"{out}/chewbot-export.json", f"{out}/include/chewbot_ctrl.h", f"{out}/Makefile"]
-    if sub in ("export-model", "estimate-force"):
+    if sub in ("export-model", "estimate-force", "fit-comminution"):
         return [out or "robot.xml"]
     if sub == "tpa":
         return [f"{out}/tpa.json"] + ([] if "--log" in args else [f"{out}/results.csv", f"{out}/task.csv"])
@@ -180,11 +179,14 @@ def _quick(command: Command) -> bool:
     return all(args[0] in QUICK for c in prerequisites(command, COMMANDS) + [command] for args in c.parts)
 
 
+def _on_a_cluster(command: Command) -> bool:
+    return any(SCHEDULER in args for args in command.parts)
+
+
 def _params():
     for c in COMMANDS:
-        skip = next((why for text, why in NOT_RUN.items() if text in c.text), None)
-        marks = [pytest.mark.skip(reason=skip)] if skip else ([] if _quick(c) else [pytest.mark.slow])
-        yield pytest.param(c, id=c.id, marks=marks)
+        if not _on_a_cluster(c):
+            yield pytest.param(c, id=c.id, marks=[] if _quick(c) else [pytest.mark.slow])
 
 
 def _run(args: tuple[str, ...], cwd: Path) -> subprocess.CompletedProcess:
@@ -203,20 +205,41 @@ def _workspace(tmp_path: Path) -> Path:
     return tmp_path
 
 
-@pytest.mark.parametrize("command", list(_params()))
-def test_the_documented_command_runs_as_written(command: Command, tmp_path):
-    where = _workspace(tmp_path)
+def _runs_as_written(command: Command, where: Path, address: str | None = None) -> None:
+    """``command`` after its prerequisites, each exiting 0 and writing what the docs say; ``address``: the scheduler
+    put in place of the one a ``--scheduler`` names."""
     for c in prerequisites(command, COMMANDS) + [command]:
         for args in c.parts:
+            if address is not None and SCHEDULER in args:
+                at = args.index(SCHEDULER) + 1
+                args = (*args[:at], address, *args[at + 1:])
             done = _run(args, where)
             assert done.returncode == 0, f"{c.id}: chewbot {shlex.join(args)} exited {done.returncode}\n{done.stderr[-3000:]}"
             missing = [p for p in expected_outputs(args) if not (where / p).exists()]
             assert not missing, f"{c.id}: chewbot {shlex.join(args)} did not write {missing}"
 
 
+@pytest.mark.parametrize("command", list(_params()))
+def test_the_documented_command_runs_as_written(command: Command, tmp_path):
+    _runs_as_written(command, _workspace(tmp_path))
+
+
+@pytest.mark.parametrize("command", [pytest.param(c, id=c.id) for c in COMMANDS if _on_a_cluster(c)])
+def test_the_documented_sweep_on_a_cluster_runs_on_a_local_scheduler(command: Command, dask_cluster, tmp_path):
+    """The docs write the address of a cluster elsewhere (tcp://10.0.0.5:8786, tcp://HOST:8786); the command runs as
+    written with that of a scheduler and worker started on this machine, and its run.json names that scheduler."""
+    import json
+
+    assert re.search(rf"{SCHEDULER} tcp://\S+:\d+", command.text), command.text
+    where = _workspace(tmp_path)
+    _runs_as_written(command, where, dask_cluster)
+    out = next(_option(args, "--out") for args in command.parts if SCHEDULER in args)
+    assert json.loads((where / out / "run.json").read_text())["cluster"]["scheduler"] == dask_cluster
+
+
 def test_the_commands_are_found_and_each_is_run_or_named():
-    """The parser finds the documented commands (the README's quick start; every subcommand shown exists), every one is run or
-    named in NOT_RUN, and a command runs after those whose outputs it reads, and every one is run, slow or quick, or named in NOT_RUN with a reason."""
+    """The parser finds the documented commands (the README's quick start; every subcommand shown exists, the sweeps
+    on a cluster among them), and a command runs after those whose outputs it reads."""
     from chewbot.cli import app
 
     subcommands = {args[0] for c in COMMANDS for args in c.parts}
@@ -227,6 +250,7 @@ def test_the_commands_are_found_and_each_is_run_or_named():
     assert subcommands <= shown, subcommands - shown
     assert {"run", "simulate", "identify", "import-motion", "track-incisor", "sweep", "report", "check-model"} <= subcommands
     assert len(COMMANDS) > 40
+    assert len([c for c in COMMANDS if _on_a_cluster(c)]) >= 2
     for c in COMMANDS:
         assert all(args and args[0] in shown for args in c.parts), c
     resumed = next(c for c in COMMANDS if any("--resume" in a for a in c.parts))
@@ -242,3 +266,23 @@ def test_the_parser_reads_continuations_chains_and_comments(tmp_path):
                    "```python\nchewbot run --out nothing\n```\n")
     found = documented_commands([doc])
     assert [c.parts for c in found] == [(("run", "--out", "runs/a", "--side", "right"),), (("models",), ("report", "runs/a"))]
+
+
+def test_the_readme_starts_with_two_commands_and_the_first_leaves_chewbot_found_by_the_next(tmp_path):
+    """The README starts with exactly two command lines; the first activates the virtual environment it creates in the
+    user's shell, so that the next command line finds ``chewbot``: its activation run as written, with the suite's own
+    environment as ``.venv``, then ``chewbot --version`` as a command line of its own, on a PATH without chewbot."""
+    from chewbot.files import VERSION
+
+    block = re.search(r"```sh\n(.*?)```", (ROOT / "README.md").read_text(encoding="utf-8"), re.S).group(1).strip().splitlines()
+    assert len(block) == 2, block
+    parts = [p.strip() for p in block[0].split("&&")]
+    assert parts[0] == "python3 -m venv .venv"
+    activation = next(p for p in parts if p.split()[0] in (".", "source"))
+    assert activation.split()[1] == ".venv/bin/activate"
+    assert all(Path(shlex.split(p)[0]).name != "chewbot" or shlex.split(p)[0] == "chewbot" for p in parts)
+    (tmp_path / ".venv").symlink_to(Path(sys.prefix), target_is_directory=True)
+    env = {**{k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"}, "PATH": "/usr/bin:/bin"}
+    assert subprocess.run(["sh", "-c", "command -v chewbot"], cwd=tmp_path, env=env, capture_output=True).returncode != 0
+    done = subprocess.run(["sh", "-c", f"{activation}\nchewbot --version"], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0 and VERSION in done.stdout, done.stderr

@@ -162,10 +162,10 @@ def test_applying_overrides_builds_no_graph(monkeypatch):
     ({"friction.hkp_coulomb[1]": 1.0}, r"friction.hkp_coulomb is a number: give 0 index"),
     ({"name": 1.0}, r"--set name=1: unknown key 'name'"),
     ({"hkp.T_R_mm[1]": -3.0}, r"hkp.T_R_mm mirrors hkp.T_L_mm"),
-    ({"chains.crank_length_mm[3]": -2.0}, r"\(with --set chains.crank_length_mm\[3\]=-2\): key 'chains.crank_length_mm': entry 3 \(chain 3\) is -2.0: must be positive"),
+    ({"chains.crank_length_mm[3]": -2.0}, r"\(with --set chains.crank_length_mm\[3\]=-2\): key 'chains.crank_length_mm\[3\]': must be greater than 0, not -2.0"),
     ({"mandible.mass_g": float("nan")}, r"key 'mandible.mass_g'"),
     ({"limits.theta_range_deg[1]": 100.0, "limits.theta_range_deg[2]": 90.0}, r"key 'limits.theta_range_deg'.*not an interval"),
-    ({"contact.preload_N": -1.0}, r"key 'contact.preload_N'.*greater than or equal to 0"),
+    ({"contact.preload_N": -1.0}, r"key 'contact.preload_N': must be at least 0, not -1.0"),
 ])
 def test_bad_override_names_its_argument_and_key(overrides, match):
     with pytest.raises(ParameterError, match=match):
@@ -183,7 +183,7 @@ def test_parse_override():
 def test_task_overrides():
     task = default_task(None, "left", parameters_with({"force_z_N": -100.0, "cycles": 2}))
     assert task.force[:, 2].min() == pytest.approx(-100.0) and task.t[-1] == pytest.approx(2.6)
-    for bad, match in (({"forcez_N": 1.0}, "did you mean task.force_z_N"), ({"cycles": 2.5}, "whole number"),
+    for bad, match in (({"forcez_N": 1.0}, "did you mean 'task.force_z_N'"), ({"force_z_kN": 1.0}, "the unit is part of the key, and force_z is given in N, not kN: 'task.force_z_N'"), ({"cycles": 2.5}, "whole number"),
                        ({"period_s": -1.0}, r"--set task.period_s=-1: default task: period_s must be positive")):
         with pytest.raises(TaskError, match=match):
             parameters_with(bad)

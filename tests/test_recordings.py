@@ -216,16 +216,22 @@ def test_where_the_motion_leaves_the_sockets_the_nearest_admissible_pose_is_on_t
     assert checked == 3
 
 
-def test_frames_with_no_admissible_pose_near_them_fail(tmp_path):
+def test_frames_far_outside_the_workspace_fail(tmp_path):
     """The motion 10 cm above the robot: the SQP finds no admissible pose from most frames' unconstrained optimum
-    (a pose that no chain reaches). Those frames fail and are named; their errors are not numbers."""
+    (a pose that no chain reaches); started again from its neighbours' answers it ends on the workspace's boundary,
+    far from the recorded pose: the robot's incisor rises at most 5.3 mm above home (docs/recordings.md), the
+    recorded one is 100 mm above the motion's, whose own incisor stays within 25 mm of home, so that every frame is
+    at least 60 mm off. Those frames fail and are named, with the constraints the motion breaks; where no admissible
+    pose was found the errors are not numbers."""
     m = model("target")
     t, q = chewing()
     p, R = pose(m, q)
     result = import_motion(write_csv(tmp_path / "rec.csv", t, seen(p + np.array([0.0, 0.0, 0.1]), R)), registration(tmp_path), EXACT)
-    none = ~result.fit.admissible
-    assert none.sum() > 10 and result.task is None and np.isnan(result.fit.position_error_mm[none]).all()
-    assert any("no admissible pose near it (the motion leaves the workspace: " in line and "reach" in line for line in result.failures())
+    assert result.task is None and not result.passed.any()
+    ok = result.fit.admissible
+    assert (result.fit.position_error_mm[ok] > 60.0).all() and np.isnan(result.fit.position_error_mm[~ok]).all()
+    assert all("position error" in line or "no admissible pose near it" in line for line in result.failures())
+    assert any("the motion leaves the workspace: " in line and "reach" in line for line in result.failures()) or ok.all()
     table = result.residuals()
     assert np.array_equal(table["admissible"], result.fit.admissible)
 
@@ -421,10 +427,10 @@ def test_registration_errors_name_the_file_and_key(tmp_path):
         ({"units": "mm"}, r"key 'markers': give either"),
         ({**good, "markers": {"A": [0, 0, 0], "B": [1, 0, 0], "C": [2, 0, 0]}}, r"key 'rest': give either"),
         ({"units": "mm", "markers": {"A": [0, 0, 0], "B": [1, 0, 0], "C": [2, 0, 0]}}, r"key 'markers': the markers lie on one line"),
-        ({"units": "mm", "markers": {"A": [0, 0], "B": [1, 0, 0], "C": [0, 1, 0]}}, r"key 'markers.A': List should have at least 3"),
+        ({"units": "mm", "markers": {"A": [0, 0], "B": [1, 0, 0], "C": [0, 1, 0]}}, r"key 'markers.A': must be a list of 3 numbers, not 2"),
         ({**good, "tracker": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, r"key 'tracker.rotation': not a rotation"),
-        ({**good, "fit": {"position_weight_per_mm": 0}}, r"key 'fit.position_weight_per_mm': Input should be greater than 0"),
-        ({**good, "scale": -1.0}, r"key 'scale': Input should be greater than 0"),
+        ({**good, "fit": {"position_weight_per_mm": 0}}, r"key 'fit.position_weight_per_mm': must be greater than 0"),
+        ({**good, "scale": -1.0}, r"key 'scale': must be greater than 0"),
     ]:
         with pytest.raises(RecordingError, match=r"^reg\.toml: " + pattern):
             registration_from_dict(raw, "reg.toml")
@@ -516,7 +522,8 @@ def test_command_force_file_scale_auto_and_failures(tmp_path):
     failed = runner.invoke(app, common)
     assert failed.exit_code == EXIT_UNREACHABLE and "frame(s) fail" in failed.output and "frame " in failed.output
     assert not out.exists() and (tmp_path / "task.residuals.csv").exists()
-    auto = runner.invoke(app, common + ["--scale", "auto", "--force-file", str(forces), "--rate", "recording", "--force"])
+    auto = runner.invoke(app, common + ["--scale", "auto", "--force-file", str(forces), "--rate", "recording", "--force",
+                                       "--timing", "recording"])  # the force at the recorded times
     assert auto.exit_code == 0, auto.output
     assert "--scale auto: factor 0." in auto.output
     task = read_task_csv(out)

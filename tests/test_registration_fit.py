@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from chewbot.cli import app
 from chewbot.errors import RecordingError
 from chewbot.files import read_sidecar
 from chewbot.recordings.importer import ImportOptions, import_motion
+from chewbot.recordings.register import MAX_TURN_DEG
 from chewbot.recordings.registration import load_registration
 from chewbot.task.default import ChewingParameters, default_task
 
@@ -52,12 +52,13 @@ def write_registration(path, rotation, origin, markers=True, landmarks=None):
     return str(path)
 
 
-def synthetic(tmp_path, seed=0):
-    """A known motion of the robot (two chewing cycles at 50 Hz, the rest frame moved off home by 1.1 mm and 2 deg)
-    seen through a tracker at a random rotation and offset; the file's tracker off by 10 deg and 5 mm."""
+def synthetic(tmp_path, seed=0, offset=(-1.0 * MM, 0.5 * MM, 0.0, 2.0 * DEG)):
+    """A known motion of the robot (two chewing cycles at 50 Hz, every frame moved off by ``offset``: by default
+    1.1 mm and 2 deg, so that its most closed frame is not at home) seen through a tracker at a random rotation and
+    offset; the file's tracker off by 10 deg and 5 mm."""
     m = model("target")
     task = default_task(m, params=ChewingParameters(rate_hz=50.0, cycles=2, rest_s=0.1))
-    q = task.q + np.array([-1.0 * MM, 0.5 * MM, 0.0, 2.0 * DEG])
+    q = task.q + np.array(offset)
     p, R = pose(m, q)
     rng = np.random.default_rng(seed)
     TR = Rotation.random(random_state=seed + 11).as_matrix()
@@ -85,14 +86,16 @@ def plane_components(m, rotation, origin, TR, TO):
 
 
 def test_fit_registration_recovers_what_a_recording_identifies(tmp_path):
-    """The file's tracker is 10 deg and 5 mm off: the search finds the share 1, every frame reproduced (incisor
-    error below 1e-3 mm), and the identified components of the tracker's placement (the HKP plane's tilt and its
-    height) to 0.1 deg and 0.1 mm (measured: 2e-4 deg, 1e-5 mm). The rotation about the plane's normal and the
-    shift along it are not identified (the HKP planes, every pose of the robot, are invariant under them): the
-    test shows it by moving the true motion so and finding it still a motion of the robot."""
-    m = model("target")
-    t, q, points, TR, TO, file_R, file_O = synthetic(tmp_path)
-    rec = write_csv(tmp_path / "rec.csv", t, points)
+    """A motion of the robot whose chewing cycles close at home (intercuspal contact), recorded from 2 deg into its
+    first opening (the first frame is not at home), with the lab's [markers] and the file's tracker 10 deg and
+    5 mm off: the prior (intercuspal contact at home, the markers where the lab put them) is the true
+    registration, the share is 1 there and nothing moves it: the tracker comes back to 0.05 deg and 0.05 mm
+    whatever the file's tracker said (measured 0.009 deg and 0.03 mm: intercuspal contact is the mean of the frames
+    within 0.3 deg of the most closed, which here close smoothly); every frame reproduced (incisor error below
+    1e-3 mm)."""
+    t, q, points, TR, TO, file_R, file_O = synthetic(tmp_path, offset=(0.0, 0.0, 0.0, 0.0))
+    start = np.flatnonzero(q[:, 3] > 2 * DEG)[0]  # the recording starts with the mandible 2 deg open
+    rec = write_csv(tmp_path / "rec.csv", t[start:] - t[start], points[start:])
     reg = write_registration(tmp_path / "reg.toml", file_R, file_O)
     out = tmp_path / "task.csv"
     result = runner.invoke(app, ["import-motion", rec, "--registration", reg, "--out", str(out), "--fit-registration",
@@ -100,19 +103,25 @@ def test_fit_registration_recovers_what_a_recording_identifies(tmp_path):
     assert result.exit_code == 0, result.output
     found = load_registration(tmp_path / "task.registration.toml")
     assert found.scale == 1.0 and found.angle_scale == 1.0  # the share
-    tilt, height, about, _ = plane_components(m, found.rotation, found.origin, TR, TO)
-    assert tilt < 0.1 and abs(height) < 0.1, (tilt, height)
-    assert about <= 10.0 + 0.1  # the unidentified turn stays within the file's error: the search does not wander
+    assert np.degrees(np.linalg.norm(Rotation.from_matrix(found.rotation @ TR.T).as_rotvec())) < 0.05
+    assert np.abs(found.origin - TO).max() < 0.05 * MM
     residuals = pd.read_csv(tmp_path / "task.residuals.csv", comment="#")
     assert residuals["incisor_error [mm]"].max() < 1e-3
     summary = read_sidecar(tmp_path / "task.residuals.csv")["summary"]  # the printed summary, in the sidecar
-    assert summary[0].startswith("share 1.0000"), summary
-    # not identified: a rotation about the plane's normal through a point of the plane and a shift along it map
-    # every pose of the robot to a pose of the robot (condyles on the plane, p1 R12 + R32 = 0)
+    assert any(line.startswith("share 1.0000") for line in summary), summary
+    assert any(line.startswith("registration: the prior") for line in summary), summary
+
+
+def test_the_robot_planes_leave_components_unidentified():
+    """On the target the HKPs keep both condyles on one plane: a rotation about the plane's normal through a point
+    of the plane and a shift along it map every pose of the robot to a pose of the robot (condyles on the plane,
+    p1 R12 + R32 = 0), so that no residual tells such registrations apart (docs/recordings.md)."""
+    m = model("target")
+    task = default_task(m, params=ChewingParameters(rate_hz=50.0, cycles=1, rest_s=0.1))
     n = np.array([m.hkp.p1, 0.0, 1.0]) / np.hypot(m.hkp.p1, 1.0)
     g = Rotation.from_rotvec(n * 3.0 * DEG).as_matrix()
     c = np.array([0.0, 0.0, -m.hkp.p2])
-    p, R = pose(m, q)
+    p, R = pose(m, task.q)
     p2, R2 = (p - c) @ g.T + c + np.cross(n, [0.0, 1.0, 0.0]) * 1.5 * MM, g @ R
     for T in (m.hkp.T_L, m.hkp.T_R):
         ball = p2 + R2 @ T
@@ -183,19 +192,16 @@ def test_written_registration_reads_back_to_the_same_task(tmp_path):
 def test_examples_reach_their_targets_in_step(tmp_path):
     """The examples (a human-like motion, not the robot's; docs/recordings.md): >= 90 % of the chewing
     recording's rotation and >= 60 % of the opening's incisal excursion, both in step (r >= 0.95), and of the
-    opening recorded as an incisal point (>= 60 % of its excursion, in step, within 60 s); the imported chewing
-    task runs with exit 0."""
+    opening recorded as an incisal point (>= 60 % of its excursion, in step); the imported chewing task runs with
+    exit 0. (Their times are in docs/recordings.md: no timing is asserted on a shared machine.)"""
     for name, measure, target in (("chewing", "rotation_share", 0.9), ("opening", "excursion_share", 0.6)):
         result = import_motion(EXAMPLES / f"{name}.csv", EXAMPLES / f"{name}.toml", ImportOptions(fit_registration=True))
         m = result.measures()
         assert getattr(m, measure) >= target and m.r_rotation >= 0.95 and m.r_excursion >= 0.95, (name, m.describe())
         if name == "opening":  # the same opening as an incisal point: the search turns and places its path
-            started = time.perf_counter()
             point = import_motion(EXAMPLES / "opening_incisor.csv", EXAMPLES / "opening_incisor.toml", ImportOptions(fit_registration=True))
-            seconds = time.perf_counter() - started
             mp = point.measures()
             assert point.task is not None and mp.excursion_share >= 0.6 and mp.r_excursion >= 0.95, mp.describe()
-            assert seconds <= 60.0, seconds  # measured 15 s on a shared 2-core machine
         if name == "chewing":
             out = tmp_path / "chewing.csv"
             assert runner.invoke(app, ["import-motion", str(EXAMPLES / "chewing.csv"), "--registration",
@@ -226,7 +232,7 @@ def test_clip_keeps_the_full_motion_where_the_robot_can_follow_it(tmp_path):
     reg = write_registration(tmp_path / "reg.toml", TR, TO)
     refused = import_motion(rec, reg, ImportOptions(cutoff_hz=None, rate_hz=None))
     assert refused.task is None
-    result = import_motion(rec, reg, ImportOptions(cutoff_hz=None, rate_hz=None, clip=True))
+    result = import_motion(rec, reg, ImportOptions(cutoff_hz=None, rate_hz=None, clip=True, timing="recording"))
     inside = ~result.fit.outside.any(axis=1)
     assert 0 < (~inside).sum() < len(inside) // 2
     assert np.nanmax(result.fit.position_error_mm[inside]) < 1e-9 and np.nanmax(result.fit.orientation_error_deg[inside]) < 1e-9
@@ -267,10 +273,12 @@ def test_retimed_motion_holds_every_limit_and_is_no_slower_than_needed(tmp_path)
     rec = write_csv(tmp_path / "rec.csv", fast, (np.einsum("nij,kj->nki", R, BODY) + p[:, None, :] - TO) @ TR)
     reg = write_registration(tmp_path / "reg.toml", TR, TO)
     base = ["import-motion", rec, "--registration", reg, "--cutoff", "none"]
-    assert runner.invoke(app, base + ["--out", str(tmp_path / "fast.csv")]).exit_code == 0
+    recorded = runner.invoke(app, base + ["--out", str(tmp_path / "fast.csv"), "--timing", "recording"])
+    assert recorded.exit_code == 0 and "--timing recording: crank speed up to" in recorded.output, recorded.output
+    assert "crank acceleration up to" in recorded.output  # which limit fails, and where
     assert runner.invoke(app, ["run", "--task", str(tmp_path / "fast.csv"), "--out", str(tmp_path / "run_fast")]).exit_code == 4
-    result = runner.invoke(app, base + ["--out", str(tmp_path / "slow.csv"), "--timing", "limits"])
-    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, base + ["--out", str(tmp_path / "slow.csv")])  # the default: --timing limits
+    assert result.exit_code == 0 and "re-timed from" in result.output, result.output
     assert runner.invoke(app, ["run", "--task", str(tmp_path / "slow.csv"), "--out", str(tmp_path / "run_slow")]).exit_code == 0
 
     def columns(folder):
@@ -307,7 +315,7 @@ def test_an_incisal_point_recording_is_registered_on_the_model_incisor(tmp_path)
     reproduced in step; the orientation is a guess (the hinge about the condylar axis), weighed
     little, and no tolerance. Checked against a hinge computed here: a rotation about the condyles' axis by the
     returned angle drops the incisor by the asked amount. --fit-registration refuses such a recording."""
-    from chewbot.recordings.importer import hinge_angle
+    from chewbot.recordings.robotfit import hinge_beta
 
     m = model("target")
     task = default_task(m, params=ChewingParameters(rate_hz=50.0, cycles=2, rest_s=0.1))
@@ -322,7 +330,7 @@ def test_an_incisal_point_recording_is_registered_on_the_model_incisor(tmp_path)
     measures = result.measures()
     assert measures.excursion_share > 0.999 and measures.r_excursion > 0.999
     drops = np.array([-1e-3, -10e-3, -30e-3])
-    beta = hinge_angle(m, drops)
+    beta = hinge_beta(m, m.incisor, drops)
     C = 0.5 * (m.hkp.T_L + m.hkp.T_R)
     turned = np.array([C + Rotation.from_euler("y", b).as_matrix() @ (m.incisor - C) for b in beta])
     assert np.allclose(turned[:, 2] - m.incisor[2], drops, atol=1e-12)
@@ -353,7 +361,7 @@ def test_fit_registration_of_an_incisal_point_reaches_a_reachable_motion(tmp_pat
     measures = result.measures()
     assert result.task is not None
     assert measures.excursion_share >= 0.9 and measures.r_excursion >= 0.95, (measures.describe(), plain.measures().describe())
-    assert result.found.tracker_change_deg <= 30.0 + 1e-6
+    assert result.found.turn_deg <= MAX_TURN_DEG + 1e-9  # the hard bound around the prior
     registered = incisor @ result.registration.rotation.T + result.registration.origin
     between = lambda a: np.linalg.norm(a[:, None] - a[None], axis=2)
     assert np.allclose(between(registered), between(incisor), atol=1e-12)
@@ -379,7 +387,8 @@ def test_import_writes_a_report_page_with_the_measures_and_figures_with_units(tm
     page = (tmp_path / "task.report.html").read_text()
     assert page.startswith("<!-- written by chewbot") and "<!DOCTYPE html>" in page and "<script" not in page
     residuals = pd.read_csv(tmp_path / "task.residuals.csv")
-    share = read_sidecar(tmp_path / "task.residuals.csv")["summary"][0].split()[1]  # "share 1.0000 ..."
+    summary = read_sidecar(tmp_path / "task.residuals.csv")["summary"]
+    share = next(line for line in summary if line.startswith("share ")).split()[1]  # "share 1.0000 ..."
     assert f"<td>{float(share):.4g}</td>" in page
     for column, unit in (("incisor_error", "mm"), ("mandible_error", "mm"), ("mandible_rotation_error", "deg")):
         values = residuals[f"{column} [{unit}]"].to_numpy()

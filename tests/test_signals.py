@@ -48,13 +48,19 @@ def _wait_for(proc: subprocess.Popen, reached) -> None:
         time.sleep(0.01)
 
 
+# A progress line, printed per stage where standard error is not a terminal: "LABEL: message (12.3 s)".
+PROGRESS_LINE = re.compile(r"^[\w -]+: .+ \(\d+\.\d s\)$")
+
+
 def _stop(proc: subprocess.Popen, signum: int, code: int) -> None:
-    """Send ``signum``; the process ends with ``code`` and exactly one line on standard error, no traceback."""
+    """Send ``signum``; the process ends with ``code`` and one line on standard error after the progress lines of
+    the stages it went through, no traceback."""
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=WAIT_S)
     assert proc.returncode == code, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"interrupted: {signal.Signals(signum).name}"), err
+    *stages, last = err.strip().splitlines()
+    assert last.startswith(f"interrupted: {signal.Signals(signum).name}"), err
+    assert all(PROGRESS_LINE.match(line) for line in stages), err
 
 
 def _leftovers(folder: Path) -> list[str]:

@@ -5,8 +5,8 @@ constrained search with a known optimum through the same machinery; a map's sing
 are rows of NaN with their reason, for both robots, several methods, the default task and a task file; bad SPEC
 files name the file and the key.
 
-The Dask scheduler and worker that the tests start are separate processes in their own sessions, killed in the
-fixture's teardown whatever the tests did.
+The Dask scheduler and worker that the tests start (conftest.py's ``dask_cluster``) are separate processes in their
+own sessions, killed in the fixture's teardown whatever the tests did.
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import math
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -92,52 +91,6 @@ def same_table(a: Path, b: Path) -> bool:
         if x.dtype.kind == "f" and not np.array_equal(x, y, equal_nan=True) or x.dtype.kind != "f" and list(x) != list(y):
             return False
     return True
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def dask_cluster():
-    """A Dask scheduler and one worker, separate processes on a free port; killed at teardown."""
-    from distributed import Client
-
-    address = f"tcp://127.0.0.1:{_free_port()}"
-    procs = []
-    try:
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
-                                       address.rsplit(":", 1)[1], "--no-dashboard", "--dashboard-address", ":0"], stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.DEVNULL, start_new_session=True))
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", "1", "--nthreads", "1",
-                                       "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                      start_new_session=True))
-        deadline = time.monotonic() + WAIT_S
-        while True:
-            try:
-                with Client(address, timeout="2s") as client:
-                    if client.nthreads():
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline or any(p.poll() is not None for p in procs):
-                pytest.fail("the Dask scheduler and worker did not start")
-            time.sleep(0.2)
-        yield address
-    finally:
-        for p in procs:
-            try:
-                os.killpg(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-        for p in procs:
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait()
 
 
 # ------------------------------------------------------------------------------------------- against run
@@ -496,16 +449,16 @@ GOOD = {"kind": "monte-carlo", "samples": 4, "outputs": ["peak_tau_Nm"],
     ({"model": "no_such_robot.toml"}, "model", "neither a built-in model"),
     ({"parameters": {"couplers.density_g_per_mm3": {"uniform": [1.0]}}}, 'parameters."couplers.density_g_per_mm3".uniform', "2 numbers"),
     ({"parameters": {"couplers.density_g_per_mm3": {"uniform": [2.0, 1.0]}}}, 'parameters."couplers.density_g_per_mm3".uniform', "low < high"),
-    ({"parameters": {"couplers.density_g_per_mm3": {"gauss": [2.0, 1.0]}}}, 'parameters."couplers.density_g_per_mm3"', "unknown entry 'gauss'"),
+    ({"parameters": {"couplers.density_g_per_mm3": {"gauss": [2.0, 1.0]}}}, 'parameters."couplers.density_g_per_mm3".gauss', "unknown key; the keys here are uniform, normal, lognormal"),
     ({"parameters": {"couplers.densty_g_per_mm3": {"uniform": [2.7e-3, 7.8e-3]}}}, 'parameters."couplers.densty_g_per_mm3"', "unknown key"),
     ({"parameters": {"chains.crank_length_mm[7]": {"uniform": [9.0, 11.0]}}}, 'parameters."chains.crank_length_mm[7]"', "out of range"),
-    ({"parameters": {"task.force_z": {"uniform": [-9.0, -1.0]}}}, 'parameters."task.force_z"', "did you mean task.force_z_N"),
+    ({"parameters": {"task.force_z": {"uniform": [-9.0, -1.0]}}}, 'parameters."task.force_z"', "the unit is part of the key: 'task.force_z_N'"),
     ({"set": {"friction.hkp_coulomb": "0.2"}}, 'set."friction.hkp_coulomb"', "must be a number"),
     ({"kind": "sobol", "samples": 12}, "samples", "power of 2"),
     ({"kind": "optimize", "parameters": {"couplers.density_g_per_mm3": {"bounds": [2.7e-3, 7.8e-3]}}}, "minimize", "missing key"),
     ({"kind": "optimize", "minimize": "peak_tau_Nm", "optimizer": {"generation": 3},
       "parameters": {"couplers.density_g_per_mm3": {"bounds": [2.7e-3, 7.8e-3]}}}, "optimizer.generation", "did you mean 'optimizer.generations'"),
-    ({"kind": "grid", "grid": {"Xmm": {"range": [0.0, 1.0], "steps": 3}}}, "grid.Xmm", "did you mean 'X_mm'"),
+    ({"kind": "grid", "grid": {"Xmm": {"range": [0.0, 1.0], "steps": 3}}}, "grid.Xmm", "did you mean 'grid.X_mm'"),
     ({"kind": "grid", "grid": {"X_mm": {"range": [0.0, 1.0], "steps": 1}}}, "grid.X_mm", "steps >= 2"),
     ({"kind": "grid", "grid": {"gamma_deg": {"values": [0.0, 1.0]}}}, "grid.gamma_deg", "follow from its HKPs"),
 ])

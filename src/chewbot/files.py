@@ -134,6 +134,13 @@ def marker_line(comment: str = "#", about: str = "") -> str:
     return text + " -->" if comment == "<!--" else text
 
 
+def without_marker(text: str) -> str:
+    """``text`` without its first line where that is chewbot's marker line (a file chewbot wrote, rewritten: its new
+    marker replaces the old one instead of repeating it)."""
+    first, _, rest = text.partition("\n")
+    return rest if _MARKER_LINE.match(first) else text
+
+
 SIDECAR_SUFFIX = ".chewbot.json"
 SIDECAR_KEY = "chewbot_file"
 _SIDECAR_FORMATS = (".csv",)  # tables whose readers take no comment line: their marker is a sidecar

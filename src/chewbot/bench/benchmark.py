@@ -34,6 +34,8 @@ from typing import Callable
 
 import numpy as np
 
+from chewbot.progress import SILENT, Progress
+
 SLSQP_SAMPLES = 50  # consecutive samples from t = 2 s (inside a bite); SLSQP costs milliseconds each
 BOTH = ("target", "6rss")
 EA, EP = "euler-angles", "euler-parameters"
@@ -70,18 +72,17 @@ class Timing:
 
 
 def interleaved(runs: dict[str, Callable[[], object]], repeats: int, samples: dict[str, int] | None = None,
-                scale: dict[str, float] | None = None, progress=None) -> dict[str, Timing]:
+                scale: dict[str, float] | None = None, progress: Progress = SILENT) -> dict[str, Timing]:
     """Time each of ``runs`` once (its first call), then ``repeats`` times in turn: one run of each, in an order
     rotated from turn to turn, so that the runs of one turn are paired. ``scale``: a factor on a case's times (a
     part of the task timed for the whole); ``samples``: what each case computes."""
-    step = progress or (lambda msg: None)
     first, times = {}, {label: [] for label in runs}
     for label, fn in runs.items():
-        step(f"{label}: first call")
+        progress(f"{label}: first call")
         first[label] = _seconds(fn) * (scale or {}).get(label, 1.0)
     labels = list(runs)
     for turn in range(repeats):
-        step(f"turn {turn + 1} of {repeats}")
+        progress(f"turn {turn + 1} of {repeats}")
         for label in labels[turn % len(labels):] + labels[:turn % len(labels)]:
             times[label].append(_seconds(runs[label]) * (scale or {}).get(label, 1.0))
     return {label: Timing(label, tuple(times[label]), first[label], (samples or {}).get(label, 1)) for label in labels}
@@ -233,7 +234,7 @@ RATIOS = (
 )
 
 
-def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: str = "left", progress=None) -> dict[str, Timing]:
+def bench_task(repeats: int = 11, cases: tuple[Case, ...] = TASK_CASES, side: str = "left", progress: Progress = SILENT) -> dict[str, Timing]:
     """Time every case on its mechanisms on the default task, interleaved (:func:`interleaved`); keys
     ``"MECHANISM: LABEL"``. Models are loaded fresh, so the first call of a case includes building its graph and
     loading (or compiling) its kernel."""
@@ -279,7 +280,7 @@ def _chewbot(*args: str) -> list[str]:
     return [str(script), *args] if script.is_file() else [sys.executable, "-m", "chewbot", *args]
 
 
-def bench_commands(repeats: int = 7, progress=None) -> dict[str, Timing]:
+def bench_commands(repeats: int = 7, progress: Progress = SILENT) -> dict[str, Timing]:
     """Wall time of ``chewbot run`` on the default task (Hessian; Newton–Euler G1 with friction), all outputs,
     warm kernel cache, and of ``chewbot --help``: separate processes, interleaved."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -291,6 +292,47 @@ def bench_commands(repeats: int = 7, progress=None) -> dict[str, Timing]:
 
 def _quiet(command: list[str]) -> None:
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+# --- reading inputs: a long task file, a long robot log -----------------------------------------------------
+
+CSV_ROWS = 400_000  # an hour's log at 1 kHz is 3.6 million rows; a task this long a minute's chewing at ~7 kHz
+
+
+def bench_csv(rows: int = CSV_ROWS, repeats: int = 7, progress: Progress = SILENT) -> dict[str, Timing]:
+    """Wall time of reading a task CSV (:func:`chewbot.task.csvio.read_task_csv`: the default task with more cycles,
+    its rates and bite force as ``track-incisor`` writes a task, 16 columns) and a robot log
+    (:func:`chewbot.identification.log.read_log`: t, theta1..6, tau1..6) of about ``rows`` rows each, every number
+    written in its shortest exact form (17 significant digits at most), interleaved."""
+    from chewbot.identification.log import ANGLES, TORQUES, read_log
+    from chewbot.model.params import load_model
+    from chewbot.table import Table
+    from chewbot.task.csvio import read_task_csv, task_table
+    from chewbot.task.default import default_task, parameters_with
+
+    with tempfile.TemporaryDirectory() as tmp:
+        progress(f"writing a task and a robot log of {rows:,} rows")
+        task = default_task(load_model("target"), "left", parameters_with({"cycles": long_cycles(rows)}))
+        task_path, log_path = Path(tmp) / "task.csv", Path(tmp) / "log.csv"
+        task_table(task).to_csv(task_path)
+        log = Table()
+        log.add("t", task.t, "s")
+        log.add_block(ANGLES, np.column_stack([task.q, task.dq[:, :2]]), "rad")  # numbers of a log's magnitudes
+        log.add_block(TORQUES, np.column_stack([task.dq, task.ddq[:, :2]]) * 1e-2, "N*m")
+        log.to_csv(log_path)
+        runs = {f"task CSV, {task.n:,} rows x 16 columns": partial(read_task_csv, task_path),
+                f"robot log CSV, {task.n:,} rows x 13 columns": partial(read_log, log_path)}
+        return interleaved(runs, repeats, {label: task.n for label in runs}, progress=progress)
+
+
+def csv_markdown(timings: dict[str, Timing]) -> str:
+    """The table of :func:`bench_csv`."""
+    lines = ["Reading inputs (pyarrow's CSV reader: columnar, memory-mapped, correctly rounded; every check of the file "
+             "included):", "", "| file | wall time (s) | per row (us) | runs |", "|---|---|---|---|"]
+    for t in timings.values():
+        q1, q3 = t.spread
+        lines.append(f"| {t.label} | {t.median:.3f} ({q1:.3f}–{q3:.3f}) | {t.per_sample()} | {len(t.times)} |")
+    return "\n".join(lines) + "\n"
 
 
 # --- one sample: the in-loop kernels and the exported C -----------------------------------------------------
@@ -398,7 +440,7 @@ class StepTiming:
     budget_us: float
 
 
-def bench_controller(passes: int = 20, core: int | None = None, progress=None) -> tuple[str, list[StepTiming]]:
+def bench_controller(passes: int = 20, core: int | None = None, progress: Progress = SILENT) -> tuple[str, list[StepTiming]]:
     """Export each of :data:`STEP_CASES` (``chewbot export-controller``, default task, its log from a simulation), build
     it with its Makefile (-std=c99 ... -O2) and run its example over the log ``passes`` times in a process pinned to
     one core (``os.sched_setaffinity``; ``core`` None: the last this process may use): (the compiler and flags, the
@@ -414,8 +456,7 @@ def bench_controller(passes: int = 20, core: int | None = None, progress=None) -
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for label, options, budget in STEP_CASES:
-            if progress is not None:
-                progress(f"exporting the controller step: {label}")
+            progress(f"exporting the controller step: {label}")
             opts = SimulateOptions(controller="computed-torque", sensor="measured", **options)
             controller = build(opts)[6]
             folder = export_controller(StepSpec.of(controller, 1000.0), Path(tmp) / options["method"],
@@ -468,7 +509,7 @@ def long_cycles(samples: int) -> int:
 LONG_PARQUET = "hessian, --format parquet --no-figures --no-report"
 
 
-def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]:
+def bench_long(sizes=LONG_SAMPLES, methods=None, progress: Progress = SILENT) -> list[LongRun]:
     """Each method (default: every formulation) on default tasks of ``sizes`` samples (more chewing cycles), figures
     and report included; and the Hessian method as a batch run (:data:`LONG_PARQUET`)."""
     import json
@@ -476,8 +517,6 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
     from chewbot.dynamics.registry import METHODS
 
     methods = METHODS if methods is None else methods
-
-    step = progress or (lambda msg: None)
     out = []
     # each method with all outputs, and the Hessian method as a batch run writes it: results.parquet, no drawings
     cases = [(method, method, ()) for method in methods] + [
@@ -485,7 +524,7 @@ def bench_long(sizes=LONG_SAMPLES, methods=None, progress=None) -> list[LongRun]
     with tempfile.TemporaryDirectory() as tmp:
         for samples in sizes:
             for label, method, extra in cases:
-                step(f"{label}, {samples} samples")
+                progress(f"{label}, {samples} samples")
                 folder = Path(tmp) / "run"
                 command = _chewbot("run", "--method", method, "--set", f"task.cycles={long_cycles(samples)}", "--out", str(folder),
                                    "--force", "-q", "--allow-violations", *extra)
@@ -536,7 +575,7 @@ class SweepTiming:
 
 
 def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk: int = 8,
-                progress=None) -> tuple[list[SweepTiming], int]:
+                progress: Progress = SILENT) -> tuple[list[SweepTiming], int]:
     """Throughput of the scale study (:data:`SCALE_SPEC`: a Sobol' study of 8 parameters on the default task,
     Hessian method, peak torque and mean MCI) with ``base_samples`` base samples instead of 1,024 (N (D + 2)
     evaluations) in chunks of ``chunk``: in this process without Dask, then by the sweep's chunk runner on a local
@@ -551,12 +590,11 @@ def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk
     from chewbot.sweep.spec import read_spec
     from chewbot.task.default import default_task
 
-    step = progress or (lambda msg: None)
     full = read_spec(SCALE_SPEC)
     spec = replace(full, samples=base_samples, chunk=chunk)
     design = sobol_design(spec)
     prepare(spec)
-    step(f"{SCALE_SPEC}, {design.n} evaluations, in this process")
+    progress(f"{SCALE_SPEC}, {design.n} evaluations, in this process")
     t0 = time.perf_counter()
     evaluate_chunk(spec, design.rows(0, 1))  # the kernels loaded, the task built
     warm = time.perf_counter() - t0
@@ -569,7 +607,7 @@ def bench_sweep(base_samples: int = 32, workers: tuple[int, ...] = (1, 2), chunk
     single_ms = tuple(float(x) * 1e3 for x in (np.median(single), np.percentile(single, 99), np.max(single)))
     out = [SweepTiming(0, design.n, float(np.sum(single)), warm, samples, single_ms)]
     for w in workers:
-        step(f"{SCALE_SPEC}, {design.n} evaluations, {w} worker(s)")
+        progress(f"{SCALE_SPEC}, {design.n} evaluations, {w} worker(s)")
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
             with dask_client(workers=w) as client:
@@ -621,27 +659,28 @@ def load() -> str:
         return "unknown"
 
 
-def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progress=None) -> str:
+def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progress: Progress = SILENT) -> str:
     """Run every table of the benchmark and return them as Markdown, with the machine and its load."""
-    step = progress or (lambda msg: None)
     started = load()
     t0 = time.perf_counter()
-    step("chewbot run and --help")
+    progress("chewbot run and --help")
     commands = bench_commands(max(3, repeats // 2), progress)
-    step("the formulations on the whole task")
+    progress("the formulations on the whole task")
     task = bench_task(repeats, progress=progress)
-    step("the in-loop kernels")
+    progress("reading a long task and a long robot log")
+    inputs = bench_csv(repeats=max(3, repeats // 2), progress=progress)
+    progress("the in-loop kernels")
     loop = bench_loop(calls, repeats)
-    step("the exported C")
+    progress("the exported C")
     compiler, c_timings = bench_export()
-    step("the exported controller step")
+    progress("the exported controller step")
     step_compiler, step_timings = bench_controller(progress=progress)
     runs = bench_long(progress=progress) if long else []
     minutes = (time.perf_counter() - t0) / 60
     lines = [f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end "
              f"({minutes:.1f} min). Medians with the interquartile range of the runs in brackets; the variants of a "
              "table ran interleaved; a ratio whose two spreads overlap is printed as \"within noise\".", ""]
-    lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + _loop_table(loop)
+    lines += _commands_table(commands) + _task_table(task) + _ratio_lines(ratios(task)) + [csv_markdown(inputs)] + _loop_table(loop)
     lines += _export_table(compiler, c_timings)
     lines += [step_markdown(step_compiler, step_timings)]
     if runs:

@@ -22,6 +22,8 @@ def bench(
                            "computed torque with minimum-norm and with G1 and friction): median, p99 and maximum per step "
                            "over --passes runs of its log, pinned to one core."),
     passes: int = typer.Option(20, "--passes", min=1, help="Runs of the exported step's log (5001 steps each) for its timing."),
+    csv_only: bool = flag("--csv-only", help="Time only reading a task CSV and a robot log of 400,000 rows each "
+                          "(seconds per file, microseconds per row), --repeats runs interleaved."),
     out: Path | None = typer.Option(None, "--out", help="Also write the tables as Markdown to this file (replaces a "
                                     "file written by chewbot bench with --force)."),
     force: bool = flag("--force", help=FORCE_HELP),
@@ -42,6 +44,8 @@ def bench(
       chewbot bench --sweep 32 --out bench.md
 
       chewbot bench --step-only --passes 50
+
+      chewbot bench --csv-only --repeats 7
     """
     from chewbot.bench.benchmark import bench_sweep, benchmark, sweep_markdown
     from chewbot.files import WRITTEN_FILE, atomic_file, check_output, marker_line
@@ -52,11 +56,12 @@ def bench(
         if out is not None:
             check_output(out, force, WRITTEN_FILE)  # before the timings, not after them
         with progress(False, "timing") as step:
-            if step_only:
-                from chewbot.bench.benchmark import bench_controller, load, machine, step_markdown
+            if step_only or csv_only:
+                from chewbot.bench.benchmark import bench_controller, bench_csv, csv_markdown, load, machine, step_markdown
 
                 started = load()
-                table = step_markdown(*bench_controller(passes, progress=step))
+                table = step_markdown(*bench_controller(passes, progress=step)) if step_only else ""
+                table += csv_markdown(bench_csv(repeats=repeats, progress=step)) if csv_only else ""
                 text = f"Machine: {machine()}; load average (1, 5, 15 min) {started} at the start, {load()} at the end.\n\n" + table
             else:
                 text = benchmark(repeats=repeats, calls=calls, long=long, progress=step)

@@ -120,6 +120,7 @@ def interrupted_message(signum: int) -> str:
 # --- what a command prints and how it ends ----------------------------------------------------------------------
 
 PROGRESS_DELAY_S = 1.0  # a run shows its progress bar once it has taken this long
+PROGRESS_LINE_S = 10.0  # in a log, a stage that goes on this long gets a line with its latest detail
 FORCE_HELP = "Replace the output if it exists and chewbot wrote it (anything else is never replaced)."
 SET_HELP = ("Override one number of the model (a parameter-file key in the file's units, 1-based indices: "
             "friction.hkp_coulomb=0.2, chains.crank_length_mm[3]=12, chains.G_mm[2][1]=24) or of the default task "
@@ -254,46 +255,67 @@ def set_overrides(arguments: list[str], option: str = "--set") -> dict[str, floa
         return dict(parse_override(a, option) for a in arguments)
 
 
+def _checked(stage: str | None) -> None:
+    """What every step of a progress display does first: stop if a signal arrived, pause at a named stage for tests."""
+    check_interrupted()
+    if stage:
+        pause_for_tests(stage)
+
+
 @contextmanager
 def progress(quiet: bool, label: str, total: int | None = None, delay: float = 0.0):
-    """A progress bar that names the current step (nothing with --quiet, nor where standard error is not a
-    terminal: a log gets no bar). The yielded callback ``step(message, done=None, total=None, stage=None)`` starts
-    a step: with ``done`` the bar shows that many units of ``total`` done (samples of a run), else it advances by
-    one step of ``total`` (the number of steps, if known; otherwise it pulses), except where the message begins with
-    the same words before its first colon as the one before (``least squares: evaluation 12, cost ...`` after
-    ``least squares: 11 parameters``): that updates the step's description, the step goes on. ``delay``: the bar appears only once
-    the command has run that many seconds (a short run shows none). Each step also stops the command if a signal
-    arrived that a library swallowed (:func:`check_interrupted`), and a step that names its ``stage`` is where
-    the test hook may pause (:func:`pause_for_tests`)."""
-    if quiet or not _console().is_terminal:
+    """The command's progress display, a :class:`chewbot.progress.Progress`: on a terminal a bar that names the
+    current step; where standard error is not a terminal (a pipe, a log) one line per stage, ``LABEL: message (12.3
+    s)``, the seconds since the command started (and, in a stage that goes on, its latest detail every
+    :data:`PROGRESS_LINE_S` at most); nothing with --quiet.
+
+    The yielded callback ``step(message, done=None, total=None, stage=None)`` starts a step: with ``done`` the bar
+    shows that many units of ``total`` done (samples of a run; from then on a step without ``done``, such as the
+    kernels compiled or the report, leaves the count as it is), else it advances by one step of ``total`` (the number
+    of steps, if known; otherwise it pulses), except where the message begins with the same words before its first
+    colon as the one before (``least squares: evaluation 12, cost ...`` after ``least squares: 11 parameters``): that
+    updates the step's description, the step goes on, and no new line is printed. ``delay``: the bar (or the first
+    line) appears only once the command has run that many seconds (a short run shows none). Each step also stops the
+    command if a signal arrived that a library swallowed (:func:`check_interrupted`), and a step that names its
+    ``stage`` is where the test hook may pause (:func:`pause_for_tests`)."""
+    import time
+
+    start, shown, started, previous, printed, counting = time.monotonic(), False, False, None, 0.0, False
+    if quiet:
         def quiet_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
-            check_interrupted()
-            if stage:
-                pause_for_tests(stage)
+            _checked(stage)
 
         yield quiet_step
         return
-    import time
+    if not _console().is_terminal:
+        def line_step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
+            nonlocal shown, previous, printed
+            _checked(stage)
+            head, elapsed = msg.split(":", 1)[0], time.monotonic() - start
+            if elapsed >= delay and (head != previous or not shown or (elapsed - printed >= PROGRESS_LINE_S and head != msg)):
+                _console().print(f"{label}: {msg} ({elapsed:.1f} s)", markup=False, highlight=False)
+                shown, printed = True, elapsed
+            previous = head
 
+        yield line_step
+        return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                    console=_console(), transient=True)
     task = bar.add_task(label, total=total)
-    start, shown, started, previous = time.monotonic(), False, False, None
 
     def step(msg: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
-        nonlocal shown, started, previous
-        check_interrupted()
-        if stage:
-            pause_for_tests(stage)
+        nonlocal shown, started, previous, counting
+        _checked(stage)
         if total is not None:
             bar.update(task, total=total)
         head = msg.split(":", 1)[0]
+        counting = counting or done is not None
         if done is not None:
             bar.update(task, description=f"{label}: {msg}", completed=done)
         else:
-            bar.update(task, description=f"{label}: {msg}", advance=1 if started and head != previous else 0)
+            bar.update(task, description=f"{label}: {msg}", advance=1 if started and head != previous and not counting else 0)
         started, previous = True, head
         if not shown and time.monotonic() - start >= delay:
             bar.start()

@@ -37,7 +37,7 @@ def _number_or(word: str, what: str):
 
 def import_motion(
     recording: Path = typer.Argument(..., help="The recording: CSV (.csv: t, NAME_x, NAME_y, NAME_z, ...), C3D (.c3d) or ArtiSynth numeric probe text (any other suffix)."),
-    registration: Path = typer.Option(..., "--registration", help="TOML file: units, the markers in {M} (or rest = \"first\"), the tracker's placement, scales and fit weights (docs/recordings.md)."),
+    registration: Path = typer.Option(..., "--registration", help="TOML file: units, the markers in {M} (or rest = \"first\"), what the recording tracks (tracked = \"rigid\", \"incisor\" or another landmark; detected from the data when absent), the tracker's placement, scales and fit weights (docs/recordings.md)."),
     out: Path = typer.Option(..., "--out", help="Task CSV to write (chewbot run --task reads it); beside it the per-frame residuals (*.residuals.csv), the incisor paths (*.incisor.svg) and the report of what the robot reproduces (*.report.html: errors in mm and deg, share, r)."),
     model: str = typer.Option("target", "--model", help="The robot: a built-in model (target, 6rss, ...) or a TOML parameter file."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the bite force acts: recorded in the task's header; run the task with the same --side."),
@@ -50,8 +50,8 @@ def import_motion(
     max_rigid: float = typer.Option(1.0, "--max-rigid", min=0.0, help="A frame fails when a marker is farther than this (mm) from the rigid body fitted to all of them."),
     min_transmission: float = typer.Option(10.0, "--min-transmission", min=0.0, max=90.0, help="Smallest transmission angle (deg) of every chain in an admissible pose: a margin from the chains' dead points (the run's near-singular threshold by default)."),
     force_file: Path | None = typer.Option(None, "--force-file", help="Bite force CSV: t, Fx, Fy, Fz (on the mandible, in {S}; units in brackets), interpolated to the task's times."),
-    fit_registration: bool = typer.Option(False, "--fit-registration", help="Search the registration (tracker placement, rest pose, markers' placement for rest = \"first\") from the file's as a start, for the largest share of the recording the robot reproduces within --max-residual; writes it beside the task, *.registration.toml, and uses the share as the scale."),
-    timing: str = typer.Option("recording", "--timing", help="'recording': the task keeps the recording's times; 'limits': re-timed as fast as the model's crank speed, acceleration and torque limits allow and never faster than recorded (time-optimal, TOPP-RA), starting and ending at rest; the time stretch per 0.5 s segment is printed."),
+    fit_registration: bool = typer.Option(False, "--fit-registration", help="Find the registration (tracker placement, markers' placement for rest = \"first\") from anatomy: the opening axis on the condylar axis, the condyles' glide on the robot's condylar path (a point path: the face-bow triangle or its opening direction), intercuspal contact at home; refined within 10 deg and 5 mm of that only where frames are beyond --max-residual, for the largest share of the recording the robot reproduces; writes it beside the task, *.registration.toml, and uses the share as the scale."),
+    timing: str = typer.Option("limits", "--timing", help="'limits' (default): where the recorded times break the model's crank speed (rad/s), acceleration (rad/s^2) or torque (N*m) limits, the task is re-timed as fast as they allow and never faster than recorded (time-optimal, TOPP-RA), starting and ending at rest, and the time stretch per 0.5 s segment is printed; otherwise it keeps the recorded times. 'recording': the recorded times always, and which limit fails where is printed. Example: --timing recording."),
     clip: bool = typer.Option(False, "--clip", help="Write the task even where frames are beyond --max-residual: those are clipped to the nearest admissible pose (named in the residuals), and the task starts and ends at rest at home (0.2 s hold, 1 s quintic ramp)."),
     keep_spikes: bool = typer.Option(False, "--keep-spikes", help="Keep the frames of tracker spikes (by default frames whose rigid-body error or speed jump is an outlier are dropped and filled like gaps, and listed)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if they exist."),
@@ -94,7 +94,7 @@ def import_motion(
                             max_position_mm=max_residual[0], max_orientation_deg=max_residual[1], max_rigid_mm=max_rigid,
                             min_transmission_deg=min_transmission, force_file=None if force_file is None else str(force_file),
                             fit_registration=fit_registration, keep_spikes=keep_spikes, clip=clip,
-                            timing=None if timing == "recording" else timing)
+                            timing=timing)
     with errors_reported():
         inputs = [recording, registration, force_file, Path(model) if Path(model).suffix.lower() == ".toml" else None]
         for target in (out, residuals, figure, page) + ((found_toml,) if fit_registration else ()):  # before the work, not after it
@@ -109,13 +109,15 @@ def import_motion(
         if result.found is not None:
             from chewbot.recordings.registration import registration_toml
 
-            text = registration_toml(result.registration, f"registration found by {about}\n" + "\n".join(summary[:2]))
+            found_lines = [line for line in summary if line.startswith(("detected:", "share ", "prior:", "registration:"))]
+            text = registration_toml(result.registration, f"registration found by {about}\n" + "\n".join(found_lines))
             files.append((found_toml, text, "a registration, chewbot import-motion --registration reads it; found by " + about))
         from chewbot.report.recording_figures import incisor_paths_svg
 
         m = result.measures()
+        tracker = (result.registration.rotation, result.registration.origin)
         files.append((figure, incisor_paths_svg(result.recording.t, m.recorded_incisor, m.reproduced_incisor,
-                                                f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path"),
+                                                f"{recording.name}: recorded (registered, scale 1) and reproduced incisor path", tracker),
                       "the incisor path of " + about))
         from chewbot.report.recording_figures import recording_report_html
 
@@ -123,7 +125,8 @@ def import_motion(
         limiting_t = result.recording.t[f.limiting_frames] if f is not None else result.recording.t[:0]
         files.append((page, recording_report_html(f"{recording.name}: what the robot reproduces", result.recording.t, m,
                                                   f.share if f is not None else result.factor, f.limiting if f is not None else "",
-                                                  limiting_t, options.max_position_mm, summary, result.notes),
+                                                  limiting_t, options.max_position_mm, summary, result.notes, tracker,
+                                                  result.registration_rows()),
                       "the report of " + about))
         with atomic_files([path for path, _, _ in files], force, inputs, about={path: what for path, _, what in files}) as temporaries:
             for (path, content, what), tmp in zip(files, temporaries):
@@ -168,8 +171,7 @@ def _arguments(recording, registration, out, options, force: bool) -> list[str]:
         args.append("--keep-spikes")
     if o.clip:
         args.append("--clip")
-    if o.timing is not None:
-        args += ["--timing", o.timing]
+    args += ["--timing", o.timing]
     return args + (["--force"] if force else [])
 
 
@@ -191,7 +193,7 @@ def _print_maxima(stdout, result) -> None:
         lines.append(f"the recorded motion leaves the workspace in {outside.sum()} frame(s) ({', '.join(names)}); there the "
                      "nearest pose on its boundary is used")
     if result.factor is not None:
-        angle = "" if result.registration.tracked else f", angle_scale {result.angle_scale:.4g}"  # a point has no rotation to scale
+        angle = "" if result.registration.point_path else f", angle_scale {result.angle_scale:.4g}"  # a point has no rotation to scale
         what = "--scale auto" if result.options.scale == "auto" else "the task's factor of the share"
         lines.append(f"{what}: factor {result.factor:.4f} (scale {result.scale:.4g}{angle})")
     for line in lines:

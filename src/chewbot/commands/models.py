@@ -103,34 +103,36 @@ def _model_report(m, home: dict):
     from rich.table import Table as RichTable
 
     from chewbot.report.summary import assumed_values
+    from chewbot.units import factor
 
+    mm, g, g_mm2 = factor("mm"), factor("g"), factor("g*mm^2")
     theta = np.degrees(home["theta"])
     chains = RichTable(title=escape(f"{m.name}: {m.mechanism}, {m.dof} DOF, {m.source}"), title_justify="left")
     for col in ("chain", "crank [mm]", "coupler [mm]", "coupler mass [g]", "crank mass [g]", "crank inertia [g·mm²]",
                 "θ home [deg]", "μ home [deg]"):
         chains.add_column(escape(col), justify="right")  # escaped: rich would take "[mm]" for markup
     for i in range(6):
-        chains.add_row(str(i + 1), f"{m.crank_length[i] * 1e3:.4g}", f"{m.coupler_length[i] * 1e3:.4g}", f"{m.coupler_mass[i] * 1e3:.4g}",
-                       f"{m.crank_mass[i] * 1e3:.5g}", f"{m.crank_inertia[i] * 1e9:.6g}", f"{theta[i]:.4f}", f"{home['mu_deg'][i]:.2f}")
-    couplers, cranks = m.coupler_mass.sum() * 1e3, m.crank_mass.sum() * 1e3
+        chains.add_row(str(i + 1), f"{m.crank_length[i] / mm:.4g}", f"{m.coupler_length[i] / mm:.4g}", f"{m.coupler_mass[i] / g:.4g}",
+                       f"{m.crank_mass[i] / g:.5g}", f"{m.crank_inertia[i] / g_mm2:.6g}", f"{theta[i]:.4f}", f"{home['mu_deg'][i]:.2f}")
+    couplers, cranks = m.coupler_mass.sum() / g, m.crank_mass.sum() / g
     facts = RichTable(show_header=False, box=None)
     facts.add_column(style="bold")
     facts.add_column()
-    facts.add_row("masses", f"couplers {couplers:.4g} g, cranks {cranks:.5g} g, mandible {m.mandible_mass * 1e3:.5g} g; "
-                            f"total moving {couplers + cranks + m.mandible_mass * 1e3:.5g} g")
+    facts.add_row("masses", f"couplers {couplers:.4g} g, cranks {cranks:.5g} g, mandible {m.mandible_mass / g:.5g} g; "
+                            f"total moving {couplers + cranks + m.mandible_mass / g:.5g} g")
     facts.add_row("home pose", f"max |theta_i| = {np.abs(theta).max():.4f} deg (0 where the printed geometry closes exactly at home); "
                                f"μ_i: transmission angles (90 deg best, 0 at the dead point); kappa of the chains' Jacobian "
                                f"{home['kappa']:.3g} [-] (1 best, 0 singular)")
     h = m.hkp
     for label, T, y_range in (("left condyle T_L", h.T_L, h.y_left), ("right condyle T_R", h.T_R, h.y_right)):
-        text = f"({', '.join(f'{v * 1e3:.4g}' for v in T)}) mm in {{S}} at home"
+        text = f"({', '.join(f'{v / mm:.4g}' for v in T)}) mm in {{S}} at home"
         if m.has_hkp:
             inside = h.x_range[0] <= T[0] <= h.x_range[1] and y_range[0] <= T[1] <= y_range[1]
-            text += (f"; plane residual p1 x + z + p2 = {(h.p1 * T[0] + T[2] + h.p2) * 1e3:.3g} mm; "
+            text += (f"; plane residual p1 x + z + p2 = {(h.p1 * T[0] + T[2] + h.p2) / mm:.3g} mm; "
                      f"{'inside' if inside else 'OUTSIDE'} its socket")
         facts.add_row(label, text)
     for label, p in (("incisor I", m.incisor), ("molars B_L, B_R", np.hstack([m.molar_left, m.molar_right]))):
-        facts.add_row(label, ", ".join(f"({', '.join(f'{v * 1e3:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
+        facts.add_row(label, ", ".join(f"({', '.join(f'{v / mm:.4g}' for v in q)}) mm" for q in p.reshape(-1, 3)) + " in {M}")
     assumed = assumed_values(m)
     facts.add_row("assumed", escape("\n".join(f"{k} = {v}" for k, v in assumed.items())) or "none")
     if m.identified:

@@ -67,20 +67,23 @@ def run(
 
       chewbot run --task long_recording.csv --format parquet --no-figures --out runs/batch-parquet
     """
-    from chewbot.files import RESULTS_FOLDER, check_output
+    from chewbot.report.figures import drawing_process
     from chewbot.run.options import resolve
-    from chewbot.run.pipeline import input_files
-    from chewbot.outputs.writer import write_run
 
     overrides = set_overrides(set_)
     with resolved():
         options = resolve(model=model, task=task, side=side, orientation=orientation, method=method, goal=goal,
                           friction=friction, contact=contact, overrides=overrides)
-    with errors_reported():
+    # the drawing process loads matplotlib while this one loads the rest of chewbot and computes
+    with drawing_process(not no_figures) as drawer, errors_reported():
+        from chewbot.files import RESULTS_FOLDER, check_output
+        from chewbot.outputs.writer import write_run
+        from chewbot.run.pipeline import input_files
+
         check_output(out, force, RESULTS_FOLDER, inputs=input_files(options))  # before the work, not after it
         with progress(quiet, "run", delay=PROGRESS_DELAY_S) as step:
             done = write_run(options, out, force=force, progress=step, figures=not no_figures, report=not no_report,
-                                 check=check_interrupted, format=format_.value)
+                             check=check_interrupted, format=format_.value, drawer=drawer)
     if not quiet:
         _print_run_summary(done, out)
     exit_after_checks(done.checks, allow_violations, quiet)

@@ -55,25 +55,21 @@ def sweep(
     again = ["chewbot", "sweep", str(spec), "--out", str(out), "--resume"] + (["--scheduler", scheduler] if scheduler else [])
     keep_on_interrupt(f"the chunks finished so far are kept in {out} (nothing half-written): {shlex.join(again)} continues")
     with errors_reported():
-        with progress(quiet, "sweep") as step, _bar(quiet) as bar:
+        with progress(quiet, "sweep") as step, _evaluations(quiet, step) as told:
             result = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume, force=force,
-                               progress=bar, step=step, check=check_interrupted)
+                               progress=told, check=check_interrupted)
     if not quiet:
         _print_summary(stdout, result)
 
 
 @contextmanager
-def _bar(quiet: bool):
-    """A progress bar of the evaluations: done/total, the rate and the time left (on a terminal only)."""
+def _evaluations(quiet: bool, step):
+    """The sweep's progress: its stages as ``step`` (the command's progress display) shows them, and on a terminal the
+    evaluations done (``done`` given) on a bar of their own with the rate and the time left."""
     from chewbot.commands.common import check_interrupted, console, pause_for_tests
 
     if quiet or not console.is_terminal:
-        def quiet_update(done: int, total: int, stage: str | None = None) -> None:
-            check_interrupted()
-            if stage:
-                pause_for_tests(stage)
-
-        yield quiet_update
+        yield step
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -82,14 +78,17 @@ def _bar(quiet: bool):
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True) as p:
         task = p.add_task("evaluations", total=None, rate="")
 
-        def update(done: int, total: int, stage: str | None = None) -> None:
+        def told(message: str, done: int | None = None, total: int | None = None, stage: str | None = None) -> None:
+            if done is None:
+                step(message, total=total, stage=stage)
+                return
             check_interrupted()
             if stage:
                 pause_for_tests(stage)
             speed = p.tasks[0].speed
             p.update(task, completed=done, total=total, rate=f"{speed:.1f}/s" if speed else "")
 
-        yield update
+        yield told
 
 
 def _print_summary(stdout, result) -> None:

@@ -31,6 +31,7 @@ from chewbot.compiled.cache import KERNELS, LibraryKey, builder_modules, c_compi
 from chewbot.model import Model
 from chewbot.model.symbolic import SymbolicModel
 from chewbot.model.vector import vector_digest
+from chewbot.progress import SILENT, Progress
 
 # Compiler flags of every kernel library. The kernels are long straight-line code: -O1 runs them as fast as -O2
 # and -O3 (within 3 %) and compiles them about 35 % faster (docs/realtime.md).
@@ -180,9 +181,10 @@ def compile_library(kernel: KernelSpec | ca.Function, flags: tuple[str, ...] = F
     return prepare([kernel], flags)[0]
 
 
-def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FLAGS) -> list[Path]:
+def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FLAGS, progress: Progress = SILENT) -> list[Path]:
     """The libraries of several kernels, compiling the missing ones side by side: while the compiler works on
-    one, the next graph is built (the C compilers run in parallel, one per available core)."""
+    one, the next graph is built (the C compilers run in parallel, one per available core). ``progress`` is told
+    each graph built and each library compiled (``compiling kernels: 1 of 4 done, building NAME``)."""
     if c_compiler() is None:
         raise RuntimeError("no C compiler found (set $CC, or install cc/gcc/clang)")
     specs = [as_spec(k) for k in kernels]
@@ -192,13 +194,23 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
         KERNELS.remove_stale_temporaries(libs[0].parent)
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         running: list[_Build] = []
+        todo = list(dict((lib, (spec, lib)) for spec, lib in missing).values())
+        done = 0
+
+        def finish() -> None:
+            nonlocal done
+            running.pop(0).finish()
+            done += 1
+            progress(f"compiling kernels: {done} of {len(todo)} done (kept in the kernel cache for the next runs)")
+
         try:
-            for spec, lib in dict((lib, (spec, lib)) for spec, lib in missing).values():
+            for spec, lib in todo:
                 if len(running) >= cores:
-                    running.pop(0).finish()
+                    finish()
+                progress(f"compiling kernels: {done} of {len(todo)} done, building {spec.name}")
                 running.append(_Build(spec, lib, flags))
             while running:
-                running.pop(0).finish()
+                finish()
         finally:
             for build in running:
                 build.cleanup()
@@ -211,13 +223,14 @@ def prepare(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FL
     return libs
 
 
-def prepare_kernels(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FLAGS) -> None:
-    """Compile the kernels missing from the cache side by side (:func:`prepare`), before they are loaded one
-    by one; nothing where they run in CasADi's virtual machine (no compiler, or the cache is unusable)."""
+def prepare_kernels(kernels: list[KernelSpec | ca.Function], flags: tuple[str, ...] = FLAGS, progress: Progress = SILENT) -> None:
+    """Compile the kernels missing from the cache side by side (:func:`prepare`, telling ``progress``), before they
+    are loaded one by one; nothing where they run in CasADi's virtual machine (no compiler, or the cache is
+    unusable)."""
     if c_compiler() is None or os.environ.get("CHEWBOT_NO_COMPILE"):
         return
     try:
-        prepare(kernels, flags)
+        prepare(kernels, flags, progress)
     except OSError as exc:
         _cache_unusable(exc)
 

@@ -27,6 +27,7 @@ from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.kinematics.task import TARGET_COORDS, Task
 from chewbot.model import Model
+from chewbot.units import factor
 
 ORIENTATION = "euler-angles"
 # Newton's tolerance on the bite point's position (m) for the point path.
@@ -122,7 +123,7 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
     bad = np.flatnonzero(~(err <= 1e-9))
     if bad.size:
         k = int(bad[0])
-        raise KinematicsError(f"the bite point cannot be moved to a gap of {g[k] * 1e3:.4g} mm along z with alpha pinned "
+        raise KinematicsError(f"the bite point cannot be moved to a gap of {g[k] / factor('mm'):.4g} mm along z with alpha pinned "
                               f"(position error {err[k]:.3g} m)", sample=k, time=float(t[k]))
     # rates: J du = v - (pinned angle's share), J ddu = a - J_dot du - (pinned share), from the exact derivatives
     J = evaluate(levels, u, np.zeros((n, 3)), np.zeros((n, 3)), pins)[3]

@@ -32,6 +32,7 @@ from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, p
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 
 # Newton on the normal forces stops when every step is below this (N) times 1 + abs(N): 1e-10 N on forces of a few
 # newtons, above the rounding of N (the torques' rounding over the smallest singular value of d tau / d N).
@@ -198,7 +199,7 @@ class Fit:
 
 
 def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarray, lags: int,
-        rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE, progress=None) -> Fit:
+        rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE, progress: Progress = SILENT) -> Fit:
     """Bounded nonlinear least squares from x0 over the entries ``free`` (boolean (N_X,)), holding at x0 what the
     log does not identify. ``ref``: the parameters' reference magnitudes (SI), the scale of the identifiability
     tests; ``lags``: the residuals' correlation length in samples (the smoothing window).
@@ -246,14 +247,12 @@ def fit(problem: ReducedProblem, x0: np.ndarray, free: np.ndarray, ref: np.ndarr
                 full[idx] = phi_free
                 x, dx = x_of_phi(full)
                 cache[key] = (full, x, dx[:, idx], problem.evaluate_at(x, jacobian=True))
-                if progress:
-                    cost = 0.5 * float(np.sum(cache[key][3].r ** 2))
-                    progress(f"least squares: {idx.size} of {free_idx.size} parameters, evaluation {problem.evaluations}, "
-                             f"cost {cost:.6g} (N*m)^2")
+                cost = 0.5 * float(np.sum(cache[key][3].r ** 2))
+                progress(f"least squares: {idx.size} of {free_idx.size} parameters, evaluation {problem.evaluations}, "
+                         f"cost {cost:.6g} (N*m)^2")
             return cache[key]
 
-        if progress:  # the first: the stage "fit"
-            progress(f"least squares: {idx.size} of {free_idx.size} parameters", stage="fit" if solver is None else None)
+        progress(f"least squares: {idx.size} of {free_idx.size} parameters", stage="fit" if solver is None else None)  # the first fit: the stage
         solver = least_squares(lambda z: evaluated(z)[3].r.ravel(), np.clip(phi[idx], lo[idx], hi[idx]),
                                lambda z: evaluated(z)[3].J @ evaluated(z)[2], bounds=(lo[idx], hi[idx]),
                                x_scale=scale[idx], ftol=FTOL, xtol=XTOL, gtol=None,

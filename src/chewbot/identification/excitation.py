@@ -46,6 +46,8 @@ from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 from chewbot.model import Model
 from chewbot.model.symbolic import SymbolicModel, c_name
 from chewbot.model.vector import N_P
+from chewbot.progress import SILENT, Progress
+from chewbot.units import factor
 
 HARMONICS = 5  # L: the highest frequency is L / T
 PERIOD_S = 2.0  # T: harmonics at 0.5, 1, ... 2.5 Hz, the chewing band's
@@ -57,7 +59,8 @@ MIN_TRANSMISSION_DEG = NEAR_SINGULAR_DEG + 2.0  # ... and each transmission angl
 START_USE = 0.5  # the start: the seed's random coefficients scaled until the constraints use half of what they allow
 MAX_ITERATIONS = 200
 # The motion's unit of each coordinate for the optimiser (m for lengths, rad for angles): 1 mm and 1 deg.
-COORDINATE_SCALE = {"X": 1e-3, "Y": 1e-3, "Z": 1e-3, "alpha": np.pi / 180, "beta": np.pi / 180, "gamma": np.pi / 180}
+COORDINATE_SCALE = {**dict.fromkeys(("X", "Y", "Z"), factor("mm")),
+                    **dict.fromkeys(("alpha", "beta", "gamma"), factor("deg"))}
 # The kernel's outputs that the constraints read (per sample) and the regressor: named, each with its Jacobian
 # with respect to the sample's motion m = (q, q_dot, q_ddot), "d_" + name.
 QUANTITIES = ("dtheta", "ddtheta", "tau", "T", "reach", "transmission")
@@ -326,7 +329,7 @@ class DesignProblem:
         return report
 
 
-def design(model: Model, seed: int = 0, side: str = "left", progress=None, check=None) -> Design:
+def design(model: Model, seed: int = 0, side: str = "left", progress: Progress = SILENT, check=None) -> Design:
     """The excitation's Fourier series for ``model`` (module docstring), from the start the ``seed`` draws (``side``
     right: its mirror image in Y and alpha, the robot being symmetric). ``progress(message, stage=None)`` is told
     the solver's iterations; ``check()`` is called at each evaluation and raises to stop."""
@@ -347,7 +350,6 @@ def design(model: Model, seed: int = 0, side: str = "left", progress=None, check
                 y0[j] *= -1
         y0 = y0.ravel()
     y0 = _feasible_start(problem, y0)
-    step = progress or (lambda msg, stage=None: None)
     start_logdet = problem.information(y0)[0]
     state = {"it": 0}
 
@@ -359,9 +361,9 @@ def design(model: Model, seed: int = 0, side: str = "left", progress=None, check
 
     def callback(y):
         state["it"] += 1
-        step(f"design: iteration {state['it']}, log det {problem.information(y)[0]:.5g}")
+        progress(f"design: iteration {state['it']}, log det {problem.information(y)[0]:.5g}")
 
-    step("design of the excitation", stage="fit")
+    progress("design of the excitation", stage="fit")
     result = minimize(objective, y0, jac=True, method="SLSQP", callback=callback,
                       constraints=[{"type": "ineq", "fun": problem.constraints,
                                     "jac": lambda y: problem.constraints(y, jacobian=True)[1]}],

@@ -25,7 +25,6 @@ from chewbot.identification.log import RobotLog
 from chewbot.identification.motion import log_motion
 from chewbot.model import Model
 from chewbot.task import WINDOW_S
-from chewbot.task.smoothing import noise_level
 
 # The event detector: one-sided fits this long (s) before and after each sample, of this degree; a step of the
 # force between two samples larger than EVENT_FRACTION of the largest force and EVENT_SCALES times the steps'

@@ -19,7 +19,9 @@ from chewbot.identification.log import RobotLog
 from chewbot.identification.motion import LogMotion, log_motion
 from chewbot.identification.parameters import CRANKS, GROUPS, HKP, INDEX, INERTIA, N_X, PARAMETERS, group_entries, x_of
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.task import smoothing
+from chewbot.units import factor
 
 # Reference magnitudes of the friction parameters where the start model has 0 (the built-in models' values).
 TYPICAL_FRICTION = {"mu_H": 0.1, "c_H": 0.5, "R*mu_c": 2.5e-4, "c_A": 0.01}
@@ -60,20 +62,20 @@ class Identification:
     def rows(self) -> list[dict]:
         """The table of estimates in the file's units (one dict per parameter, keys of
         :data:`chewbot.identification.output.TABLE_COLUMNS`), with the derived actuator Coulomb coefficient."""
-        def se(j, factor):  # empty where the parameter was not estimated
-            return _g(self.se[j] * factor) if self.status[j].startswith("estimated") else ""
+        def se(j, convert):  # empty where the parameter was not estimated
+            return _g(convert(self.se[j])) if self.status[j].startswith("estimated") else ""
 
         rows = []
         for j, p in enumerate(PARAMETERS):
-            rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(self.x0[j] * p.to_file),
-                         "estimate": _g(self.x[j] * p.to_file), "standard_error": se(j, p.to_file),
+            rows.append({"parameter": p.name, "key": p.key, "unit": p.file_unit, "start": _g(p.in_file_units(self.x0[j])),
+                         "estimate": _g(p.in_file_units(self.x[j])), "standard_error": se(j, p.in_file_units),
                          "status": self.status[j]})
         arm = self.model.friction.actuator_arm
         if arm > 0:
             j = NAMES_INDEX["R*mu_c"]
             rows.append({"parameter": "mu_c", "key": "friction.actuator_coulomb", "unit": "1",
-                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": se(j, 1 / arm),
-                         "status": f"R*mu_c / R, R = {arm * 1e3:g} mm as in the file"})
+                         "start": _g(self.x0[j] / arm), "estimate": _g(self.x[j] / arm), "standard_error": se(j, lambda v: v / arm),
+                         "status": f"R*mu_c / R, R = {arm / factor('mm'):g} mm as in the file"})
         return rows
 
     def values(self) -> dict[str, object]:
@@ -82,12 +84,12 @@ class Identification:
         x = self.x
         for key in self.identified:
             if key == "mandible.mass_g":
-                out[key] = float(x[0] * 1e3)
+                out[key] = float(PARAMETERS[0].in_file_units(x[0]))
             elif key == "mandible.inertia_g_mm2":
-                xx, yy, zz, xy, xz, yz = (float(v * 1e9) for v in x[INERTIA])
+                xx, yy, zz, xy, xz, yz = (float(p.in_file_units(v)) for p, v in zip(PARAMETERS[INERTIA], x[INERTIA]))
                 out[key] = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
             elif key == "cranks.inertia_g_mm2":
-                out[key] = [float(v * PARAMETERS[CRANKS.start].to_file) for v in x[CRANKS]]
+                out[key] = [float(p.in_file_units(v)) for p, v in zip(PARAMETERS[CRANKS], x[CRANKS])]
             elif key == "friction.actuator_coulomb":
                 out[key] = float(x[NAMES_INDEX["R*mu_c"]] / self.model.friction.actuator_arm)
             else:
@@ -103,9 +105,9 @@ class Identification:
         if not est:
             return {}
         arm = self.model.friction.actuator_arm
-        factor = np.array([1 / arm if PARAMETERS[j].name == "R*mu_c" else PARAMETERS[j].to_file for j in est])
+        scale = np.array([1 / arm if PARAMETERS[j].name == "R*mu_c" else PARAMETERS[j].in_file_units(1.0) for j in est])
         keys = ["friction.actuator_coulomb" if PARAMETERS[j].name == "R*mu_c" else PARAMETERS[j].key for j in est]
-        cov = self.fit.cov[np.ix_(est, est)] * factor[:, None] * factor
+        cov = self.fit.cov[np.ix_(est, est)] * scale[:, None] * scale
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
         torque = torque_error(self.fit)
         tsd = np.sqrt(np.maximum(np.diag(torque), 0.0))
@@ -129,10 +131,10 @@ class Identification:
         for j, p in enumerate(PARAMETERS):
             if self.status[j].startswith("estimated") and (j not in range(N_X)[INERTIA] or j == INERTIA.start):
                 what = p.combination if j not in range(N_X)[INERTIA] else p.combination + " (the six entries in the table)"
-                lines.append(f"identified: {p.name} = {self.x[j] * p.to_file:.6g} +/- {self.se[j] * p.to_file:.3g} "
+                lines.append(f"identified: {p.name} = {p.in_file_units(self.x[j]):.6g} +/- {p.in_file_units(self.se[j]):.3g} "
                              f"{p.file_unit} (standard error): {what}")
             elif self.status[j] == "given":
-                lines.append(f"given, not estimated: {p.name} = {self.x[j] * p.to_file:.6g} {p.file_unit} ({p.given}; "
+                lines.append(f"given, not estimated: {p.name} = {p.in_file_units(self.x[j]):.6g} {p.file_unit} ({p.given}; "
                              f"--free {p.group} estimates it)")
         for d in self.held_directions:
             lines.append("the torques do not change along: " + " ".join(f"{c:+.4g} {name}" for name, c in d.items())
@@ -208,7 +210,7 @@ def estimated_by_default(model: Model) -> np.ndarray:
 
 def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
              fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
-             progress=None, check=None, free: tuple[str, ...] = ()) -> Identification:
+             progress: Progress = SILENT, check=None, free: tuple[str, ...] = ()) -> Identification:
     """Estimate the friction, the crank inertias and the mandible's inertia of ``model`` from ``log`` (see the
     module docstring).
 
@@ -218,7 +220,6 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     thresholds (:mod:`chewbot.identification.estimate`); ``progress(message, stage=None)`` is told each stage (the
     least squares as the stage ``fit``); ``check()`` is called at each evaluation of the residual and raises to stop.
     """
-    step = progress or (lambda msg, stage=None: None)
     for key in fix:
         if key not in GROUPS:
             raise ChewbotError(f"--fix {key}: not an identified key; choose among {', '.join(GROUPS)}")
@@ -229,7 +230,7 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
                                "file's value by default; the others are estimated unless --fix)")
         if key in fix:
             raise ChewbotError(f"--free {key} and --fix {key}: choose one")
-    step("motion from the crank angles")
+    progress("motion from the crank angles")
     motion = log_motion(model, log, side, window_s)
     x0 = x_of(model)
     status = default_status(model, fix, free)
@@ -244,14 +245,14 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
                            f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
     problem = ReducedProblem(model, motion.kin, log.tau, used, check)
-    step("the start model")
-    result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, step)
-    step("results")
+    progress("the start model")
+    result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, progress)
+    progress("results")
     for j in np.flatnonzero(free):
         status[j] = "held" if result.held[j] else "estimated"
     for j in np.flatnonzero(result.at_bound):
         status[j] += " (at its bound)"
-    held_directions = [{PARAMETERS[j].name: float(c * PARAMETERS[j].to_file) for j, c in enumerate(d)
+    held_directions = [{PARAMETERS[j].name: float(PARAMETERS[j].in_file_units(c)) for j, c in enumerate(d)
                         if abs(c) > 1e-3 * result.ref[j]} for d in result.null]
     identified = [g for g in GROUPS if any(status[j].startswith("estimated") for j, p in enumerate(PARAMETERS)
                                            if p.group == g)]

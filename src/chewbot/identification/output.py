@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import csv
 import io
-import re
 
 import tomlkit
 
+from chewbot.files import without_marker
+
 TABLE_COLUMNS = ("parameter", "key", "unit", "start", "estimate", "standard_error", "status")
-_MARKER = re.compile(r"^\ufeff?\s*#\s*written by chewbot\b")
 
 
 def _format(value: float) -> float:
@@ -33,10 +33,7 @@ def model_text(source_text: str, values: dict[str, object], identified: list[str
     ``identified`` and out of ``assumed``, ``comments`` (file key -> text) beside them, ``header`` lines on top
     (the marker line first) and ``uncertainty`` as its ``[uncertainty]`` section (the start file's replaced;
     none where it is empty)."""
-    lines = source_text.splitlines(keepends=True)
-    if lines and _MARKER.match(lines[0]):
-        lines = lines[1:]
-    doc = tomlkit.parse("".join(lines))
+    doc = tomlkit.parse(without_marker(source_text))
     for key, value in values.items():
         section, leaf = key.split(".")
         nested = isinstance(value, list) and isinstance(value[0], list)

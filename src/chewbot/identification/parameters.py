@@ -26,6 +26,7 @@ import numpy as np
 
 from chewbot.model import Model
 from chewbot.model.vector import parameter_index
+from chewbot.units import factor
 
 INERTIA_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -33,7 +34,7 @@ INERTIA_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 @dataclass(frozen=True)
 class Parameter:
     """One entry of x: its name, the parameter-file key it is written to (with 1-based entries for arrays), its SI
-    unit, the file's unit with the factor from SI, the file key it belongs to (``group``, what ``--fix`` names),
+    unit, the file's unit, the file key it belongs to (``group``, what ``--fix`` names),
     the entry of p it sets (``p_key``, a name of :func:`chewbot.model.vector.parameter_index`), what combination of
     the robot's properties the torques identify (``combination``), its lower bound in phi as a fraction of its start
     (``floor``: None where it may be any real, 0 for a coefficient that may vanish), and ``given``: why it is held
@@ -43,33 +44,36 @@ class Parameter:
     key: str
     unit: str
     file_unit: str
-    to_file: float
     group: str
     p_key: str
     combination: str
     floor: float | None = 0.0
     given: str = ""
 
+    def in_file_units(self, value):
+        """``value`` (SI) in the file's unit."""
+        return value / factor(self.file_unit)
+
 
 _INERTIA_COMBINATION = "the mandible's inertia about its mass centre O_M, in {M}"
 _CRANK_COMBINATION = ("everything that turns with shaft {i}: the crank's axial inertia (cranks.inertia_g_mm2[{i}]) "
                       "plus, with a drive, its rotor's J_r N^2; the torques identify the sum only")
 PARAMETERS: tuple[Parameter, ...] = (
-    Parameter("m", "mandible.mass_g", "kg", "g", 1e3, "mandible.mass_g", "mandible_mass", "the mandible's mass",
+    Parameter("m", "mandible.mass_g", "kg", "g", "mandible.mass_g", "mandible_mass", "the mandible's mass",
               floor=1e-4, given="the weighed mass: the model file's"),
-    *(Parameter(f"I_{'xyz'[a]}{'xyz'[b]}", f"mandible.inertia_g_mm2[{a + 1}][{b + 1}]", "kg*m^2", "g*mm^2", 1e9,
+    *(Parameter(f"I_{'xyz'[a]}{'xyz'[b]}", f"mandible.inertia_g_mm2[{a + 1}][{b + 1}]", "kg*m^2", "g*mm^2",
                 "mandible.inertia_g_mm2", f"mandible_inertia[{a + 1}][{b + 1}]", _INERTIA_COMBINATION, floor=None)
       for a, b in INERTIA_ENTRIES),
-    *(Parameter(f"J_{i}", f"cranks.inertia_g_mm2[{i}]", "kg*m^2", "g*mm^2", 1e9, "cranks.inertia_g_mm2",
+    *(Parameter(f"J_{i}", f"cranks.inertia_g_mm2[{i}]", "kg*m^2", "g*mm^2", "cranks.inertia_g_mm2",
                 f"crank_inertia[{i}]", _CRANK_COMBINATION.format(i=i), floor=1e-4) for i in range(1, 7)),
-    Parameter("mu_H", "friction.hkp_coulomb", "1", "1", 1.0, "friction.hkp_coulomb", "friction.hkp_coulomb",
+    Parameter("mu_H", "friction.hkp_coulomb", "1", "1", "friction.hkp_coulomb", "friction.hkp_coulomb",
               "the HKPs' Coulomb coefficient (both condyles)"),
-    Parameter("c_H", "friction.hkp_viscous_Ns_per_m", "N*s/m", "N*s/m", 1.0, "friction.hkp_viscous_Ns_per_m",
+    Parameter("c_H", "friction.hkp_viscous_Ns_per_m", "N*s/m", "N*s/m", "friction.hkp_viscous_Ns_per_m",
               "friction.hkp_viscous", "the HKPs' viscous coefficient (both condyles)"),
-    Parameter("R*mu_c", "friction.actuator_arm_mm*friction.actuator_coulomb", "m", "mm", 1e3, "friction.actuator_coulomb",
+    Parameter("R*mu_c", "friction.actuator_arm_mm*friction.actuator_coulomb", "m", "mm", "friction.actuator_coulomb",
               "friction.actuator_arm", "the actuators' friction arm times their Coulomb coefficient (the six actuators); "
               "written back as mu_c with the file's arm"),
-    Parameter("c_A", "friction.actuator_viscous_Nms_per_rad", "N*m*s/rad", "N*m*s/rad", 1.0,
+    Parameter("c_A", "friction.actuator_viscous_Nms_per_rad", "N*m*s/rad", "N*m*s/rad",
               "friction.actuator_viscous_Nms_per_rad", "friction.actuator_viscous",
               "the actuators' viscous coefficient (the six actuators)"),
 )

@@ -25,6 +25,7 @@ from chewbot.kinematics.symbolic import COORDINATES
 from chewbot.model import Model
 from chewbot.rotation import euler_parameters_to_angles
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.units import factor
 
 # A 6-coordinate task given to the target must already satisfy its HKPs: Z and gamma may differ from the
 # parasitic values by no more than this (m and rad; 1 micrometre / 1 microradian).
@@ -179,7 +180,7 @@ def euler_angle_motion(model: Model, orientation: str, q: np.ndarray, dq: np.nda
 
 def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarray) -> None:
     """Both condyles inside their sockets (x and y bounds of docs/conventions.md); raises naming the first bad sample."""
-    h = model.hkp
+    h, mm = model.hkp, factor("mm")
     slack = 1e-12
     for label, T, yr in (("left", T_L, h.y_left), ("right", T_R, h.y_right)):
         out_x = (T[:, 0] < h.x_range[0] - slack) | (T[:, 0] > h.x_range[1] + slack)
@@ -188,8 +189,8 @@ def check_workspace(model: Model, T_L: np.ndarray, T_R: np.ndarray, t: np.ndarra
         if bad.size:
             i = int(bad[0])
             raise KinematicsError(
-                f"the {label} condyle leaves its socket: T = ({T[i, 0] * 1e3:.3f}, {T[i, 1] * 1e3:.3f}) mm, socket "
-                f"x in [{h.x_range[0] * 1e3:g}, {h.x_range[1] * 1e3:g}] mm, y in [{yr[0] * 1e3:g}, {yr[1] * 1e3:g}] mm "
+                f"the {label} condyle leaves its socket: T = ({T[i, 0] / mm:.3f}, {T[i, 1] / mm:.3f}) mm, socket "
+                f"x in [{h.x_range[0] / mm:g}, {h.x_range[1] / mm:g}] mm, y in [{yr[0] / mm:g}, {yr[1] / mm:g}] mm "
                 f"({bad.size} sample(s) outside)",
                 sample=i, time=float(t[i]))
 

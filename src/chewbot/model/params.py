@@ -13,21 +13,19 @@ docs/models.md (:func:`apply_overrides`).
 from __future__ import annotations
 
 import copy
-import difflib
-import hashlib
 import math
 import re
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, Field, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, Field, field_validator
 
-from chewbot.config import Strict, format_validation_error
+from chewbot.config import Plausible, Strict, key_error, read_text, unknown_key, validate
 from chewbot.errors import ParameterError
 from chewbot.model.model import Contact, Friction, HKPGeometry, Limits, Model, Uncertainty
+from chewbot.units import factor
 
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
 
@@ -41,9 +39,16 @@ ROTATION_TOLERANCE = 2e-3
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
-Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 Six3 = Annotated[list[Vec3], Field(min_length=6, max_length=6)]
+Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 Range = Annotated[list[float], Field(min_length=2, max_length=2)]
+PositiveSix = Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=6, max_length=6)]  # one per chain
+
+# Plausible ranges (config.Plausible): wide enough for any robot of a head's size, narrow enough that a value in
+# another unit (m for mm, kg for g, kg m^2 for g mm^2) falls outside.
+POSITION = Plausible(-1000.0, 1000.0, "mm", "points of a head-sized robot (within a metre of {S})")
+LINK = Plausible(1.0, 1000.0, "mm", "links of a head-sized robot")
+COEFFICIENT = Plausible(0.0, 2.0, "1", "Coulomb coefficients of machine contacts")
 
 
 def _not_nan(value: float) -> float:
@@ -57,54 +62,39 @@ MaybeInfinite = Annotated[float, Field(allow_inf_nan=True), AfterValidator(_not_
 
 
 class ChainsSection(Strict):
-    G_mm: Six3
-    S0_mm: Six3
-    M_mm: Six3
-    crank_length_mm: Six
-    coupler_length_mm: Six
+    G_mm: Annotated[Six3, POSITION]
+    S0_mm: Annotated[Six3, POSITION]
+    M_mm: Annotated[Six3, POSITION]
+    crank_length_mm: Annotated[PositiveSix, LINK]
+    coupler_length_mm: Annotated[PositiveSix, LINK]
     R_C0: Annotated[list[Mat3], Field(min_length=6, max_length=6)]
-
-    @field_validator("crank_length_mm", "coupler_length_mm")
-    @classmethod
-    def _positive(cls, v: list[float]) -> list[float]:
-        return _all_positive(v)
-
-
-def _all_positive(v: list[float]) -> list[float]:
-    for i, x in enumerate(v):
-        if not x > 0:
-            raise ValueError(f"entry {i + 1} (chain {i + 1}) is {x}: must be positive")
-    return v
 
 
 class CranksSection(Strict):
-    inertia_g_mm2: Six
-    mass_g: Six
-
-    @field_validator("inertia_g_mm2", "mass_g")
-    @classmethod
-    def _positive(cls, v: list[float]) -> list[float]:
-        return _all_positive(v)
+    inertia_g_mm2: Annotated[PositiveSix, Plausible(1.0, 1e9, "g*mm^2", "axial inertias of cranks")]
+    mass_g: Annotated[PositiveSix, Plausible(0.5, 1e4, "g", "masses of cranks")]
 
 
 class CouplersSection(Strict):
-    density_g_per_mm3: float = Field(gt=0)
-    area_mm2: float = Field(gt=0)
+    # up to 10, not 0.025 (tungsten): the papers' printed 7.8 g/mm^3 (the as-printed models) is kept loadable
+    density_g_per_mm3: Annotated[float, Field(gt=0), Plausible(1e-4, 10.0, "g/mm^3", "densities of solids (and the papers' printed 7.8)")]
+    area_mm2: Annotated[float, Field(gt=0), Plausible(0.1, 1e4, "mm^2", "cross-sections of couplers")]
 
 
 class MandibleSection(Strict):
-    mass_g: float = Field(gt=0)
-    inertia_g_mm2: Mat3
+    mass_g: Annotated[float, Field(gt=0), Plausible(10.0, 1e4, "g", "masses of a mandible")]
+    # the diagonal's magnitude: a negative moment is left to the positive-definiteness check, which names it better
+    inertia_g_mm2: Annotated[Mat3, Plausible(100.0, 1e10, "g*mm^2", "moments of inertia of a mandible", diagonal=True)]
 
 
 class HKPSection(Strict):
     p1: float
-    p2_mm: float
-    x_range_mm: Range
-    y_left_mm: Range
-    y_right_mm: Range
-    T_L_mm: Vec3
-    T_R_mm: Vec3
+    p2_mm: Annotated[float, POSITION]
+    x_range_mm: Annotated[Range, POSITION]
+    y_left_mm: Annotated[Range, POSITION]
+    y_right_mm: Annotated[Range, POSITION]
+    T_L_mm: Annotated[Vec3, POSITION]
+    T_R_mm: Annotated[Vec3, POSITION]
 
     @field_validator("x_range_mm", "y_left_mm", "y_right_mm")
     @classmethod
@@ -119,28 +109,28 @@ def _interval(v: list[float]) -> list[float]:
 
 
 class PointsSection(Strict):
-    incisor_mm: Vec3
-    molar_left_mm: Vec3
-    molar_right_mm: Vec3
+    incisor_mm: Annotated[Vec3, POSITION]
+    molar_left_mm: Annotated[Vec3, POSITION]
+    molar_right_mm: Annotated[Vec3, POSITION]
 
 
 class FrictionSection(Strict):
-    hkp_coulomb: float = Field(ge=0)
-    hkp_viscous_Ns_per_m: float = Field(ge=0)
-    actuator_arm_mm: float = Field(ge=0)
-    actuator_coulomb: float = Field(ge=0)
-    actuator_viscous_Nms_per_rad: float = Field(ge=0)
+    hkp_coulomb: Annotated[float, Field(ge=0), COEFFICIENT]
+    hkp_viscous_Ns_per_m: Annotated[float, Field(ge=0), Plausible(0.0, 1e4, "N*s/m", "viscous coefficients of a condyle's joint")]
+    actuator_arm_mm: Annotated[float, Field(ge=0), Plausible(0.0, 100.0, "mm", "friction arms of bearings")]
+    actuator_coulomb: Annotated[float, Field(ge=0), COEFFICIENT]
+    actuator_viscous_Nms_per_rad: Annotated[float, Field(ge=0), Plausible(0.0, 100.0, "N*m*s/rad", "viscous coefficients of actuators")]
 
 
 class LimitsSection(Strict):
-    torque_Nm: float = Field(gt=0)
-    power_W: float = Field(gt=0)
-    axial_load_N: float = Field(gt=0)
-    radial_load_N: float = Field(gt=0)
+    torque_Nm: Annotated[float, Field(gt=0), Plausible(1e-4, 1000.0, "N*m", "actuator torques (micro motors to a head-sized robot's)")]
+    power_W: Annotated[float, Field(gt=0), Plausible(1e-3, 1e5, "W", "actuator powers")]
+    axial_load_N: Annotated[float, Field(gt=0), Plausible(0.1, 1e5, "N", "bearing loads")]
+    radial_load_N: Annotated[float, Field(gt=0), Plausible(0.1, 1e5, "N", "bearing loads")]
     # optional: the crank angle range, speed and acceleration limits; unbounded when absent
     theta_range_deg: Annotated[list[MaybeInfinite], Field(min_length=2, max_length=2)] = [-math.inf, math.inf]
-    speed_rad_per_s: MaybeInfinite = Field(default=math.inf, gt=0)
-    acceleration_rad_per_s2: MaybeInfinite = Field(default=math.inf, gt=0)
+    speed_rad_per_s: Annotated[MaybeInfinite, Field(gt=0), Plausible(0.01, 1e4, "rad/s", "crank speeds")] = math.inf
+    acceleration_rad_per_s2: Annotated[MaybeInfinite, Field(gt=0), Plausible(0.1, 1e6, "rad/s^2", "crank accelerations")] = math.inf
 
     @field_validator("theta_range_deg")
     @classmethod
@@ -149,7 +139,7 @@ class LimitsSection(Strict):
 
 
 class ContactSection(Strict):
-    preload_N: float = Field(default=0.0, ge=0)
+    preload_N: Annotated[float, Field(ge=0), Plausible(0.0, 1000.0, "N", "condyle preloads")] = 0.0
 
 
 class UncertaintySection(Strict):
@@ -168,11 +158,13 @@ class UncertaintySection(Strict):
 class ParameterFile(Strict):
     """The whole TOML file, as written (papers' units)."""
 
+    DOCS = "docs/models.md"
+
     schema_: Literal[1] = Field(alias="schema")
     name: str = Field(min_length=1)
     mechanism: Literal["target", "6rss"]
     description: str = ""
-    gravity_m_per_s2: float = Field(gt=0)
+    gravity_m_per_s2: Annotated[float, Field(gt=0), Plausible(0.1, 100.0, "m/s^2", "gravities a robot works in")]
     assumed: list[str] = []
     identified: list[str] = []  # keys estimated from robot logs (chewbot identify); none of them is also assumed
     chains: ChainsSection
@@ -222,18 +214,8 @@ def load_model(name_or_path: str | Path = "target", overrides: dict[str, float] 
 
 def read_parameter_file(path: Path) -> dict:
     """The parsed TOML of a parameter file (not validated), with its SHA-256 under ``"__sha256__"``."""
-    try:
-        raw_bytes = path.read_bytes()
-    except FileNotFoundError:
-        raise ParameterError(f"{path}: no such parameter file") from None
-    except OSError as exc:
-        raise ParameterError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        raw = tomllib.loads(raw_bytes.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"{path}: not valid TOML ({exc})") from None
-    raw["__sha256__"] = hashlib.sha256(raw_bytes).hexdigest()
-    return raw
+    text = read_text(path, "parameter file", ParameterError)
+    return {**text.data, "__sha256__": text.sha256}
 
 
 def _nearest_rotation(a: np.ndarray) -> np.ndarray:
@@ -258,15 +240,12 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
     ``label`` names the input in error messages (default ``source``); ``overrides`` are recorded on the model.
     """
     label = label or source
-    try:
-        f = ParameterFile.model_validate(raw)
-    except ValidationError as exc:
-        raise ParameterError(format_validation_error(label, exc)) from None
+    f = validate(ParameterFile, raw, label, ParameterError)
 
     def fail(key: str, reason: str) -> None:
-        raise ParameterError(f"{label}: key '{key}': {reason}")
+        raise key_error(label, key, reason, ParameterError)
 
-    mm = 1e-3
+    mm, g_mm2 = factor("mm"), factor("g*mm^2")
     ch = f.chains
     R_C0 = np.array(ch.R_C0, dtype=float)
     for i, r in enumerate(R_C0):
@@ -291,12 +270,12 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
         if abs(printed - Lr[i]) > LENGTH_TOLERANCE * Lr[i]:
             fail(f"chains.coupler_length_mm[{i + 1}]", f"{Lr[i] / mm:g} mm disagrees with |S0 M| = {printed / mm:.4g} mm at home from chains.S0_mm and chains.M_mm")
 
-    I_EE = np.array(f.mandible.inertia_g_mm2) * 1e-9  # g mm^2 -> kg m^2
+    I_EE = np.array(f.mandible.inertia_g_mm2) * g_mm2
     if np.abs(I_EE - I_EE.T).max() > 1e-12 * np.abs(I_EE).max():
         fail("mandible.inertia_g_mm2", "not symmetric")
     eig = np.linalg.eigvalsh(I_EE)
     if eig.min() <= 0:
-        fail("mandible.inertia_g_mm2", f"not positive definite (eigenvalues {np.round(eig * 1e9, 3).tolist()} g mm^2)")
+        fail("mandible.inertia_g_mm2", f"not positive definite (eigenvalues {np.round(eig / g_mm2, 3).tolist()} g mm^2)")
     if eig.max() > eig.sum() - eig.max() + 1e-12 * eig.max():
         fail("mandible.inertia_g_mm2", "principal moments violate the triangle inequality: no rigid body has them")
 
@@ -326,8 +305,8 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
         fail("identified", f"{key!r} is listed twice")
 
     uncertainty = None if f.uncertainty is None else _uncertainty(f.uncertainty, fail)
-    density = f.couplers.density_g_per_mm3 * 1e-3 / mm**3  # g/mm^3 -> kg/m^3
-    area = f.couplers.area_mm2 * mm**2
+    density = f.couplers.density_g_per_mm3 * factor("g/mm^3")
+    area = f.couplers.area_mm2 * factor("mm^2")
     fr, lim = f.friction, f.limits
     return Model(
         name=f.name,
@@ -344,12 +323,12 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
         crank_length=Lc,
         coupler_length=Lr,
         R_C0=R_C0,
-        crank_inertia=np.array(f.cranks.inertia_g_mm2) * 1e-9,
-        crank_mass=np.array(f.cranks.mass_g) * 1e-3,
+        crank_inertia=np.array(f.cranks.inertia_g_mm2) * g_mm2,
+        crank_mass=np.array(f.cranks.mass_g) * factor("g"),
         coupler_density=density,
         coupler_area=area,
         coupler_mass=density * area * Lr,
-        mandible_mass=f.mandible.mass_g * 1e-3,
+        mandible_mass=f.mandible.mass_g * factor("g"),
         mandible_inertia=I_EE,
         hkp=HKPGeometry(
             p1=h.p1,
@@ -371,7 +350,7 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
             actuator_viscous=fr.actuator_viscous_Nms_per_rad,
         ),
         limits=Limits(torque=lim.torque_Nm, power=lim.power_W, axial_load=lim.axial_load_N, radial_load=lim.radial_load_N,
-                      theta_range=np.radians(lim.theta_range_deg), speed=lim.speed_rad_per_s,
+                      theta_range=np.array(lim.theta_range_deg) * factor("deg"), speed=lim.speed_rad_per_s,
                       acceleration=lim.acceleration_rad_per_s2),
         contact=Contact(preload=f.contact.preload_N),
         overrides=dict(overrides or {}),
@@ -491,9 +470,8 @@ def _locate(raw: dict, key: str, argument: str):
         raise ParameterError(f"{argument}: {key!r} is not a key (write section.key, with 1-based [i] for array entries)")
     path = m.group("path")
     if path not in known:
-        close = difflib.get_close_matches(path, list(known), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise ParameterError(f"{argument}: unknown key {path!r}{hint} (numeric keys of the parameter file, see docs/models.md)")
+        reason = unknown_key(path, known, docs="docs/models.md").removeprefix("unknown key")
+        raise ParameterError(f"{argument}: unknown key {path!r}{reason}; --set takes the numeric keys of the parameter file")
     indices = [int(i) for i in re.findall(r"-?\d+", m.group("index"))]
     *sections, leaf = path.split(".")
     container = raw

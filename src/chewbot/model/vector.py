@@ -23,63 +23,67 @@ from functools import cache
 import numpy as np
 
 from chewbot.model.chains import working_branches
-
-MM, G_MM2 = 1e-3, 1e-9  # mm -> m, g mm^2 -> kg m^2
+from chewbot.units import factor, key_unit
 
 
 @dataclass(frozen=True)
 class Block:
     """One named part of ``p``: the model attribute ``name`` (dotted for sub-objects), its shape and SI unit,
-    the parameter-file key it comes from and the factor to SI (file value * ``scale``), or ``key = None`` for
-    a derived block."""
+    the parameter-file key it comes from, or ``key = None`` for a derived block."""
 
     name: str
     shape: tuple[int, ...]
     unit: str
     key: str | None
-    scale: float
     description: str
 
     @property
     def size(self) -> int:
         return int(np.prod(self.shape, dtype=int))
 
+    @property
+    def scale(self) -> float:
+        """The factor to SI of the unit the block's key ends with (file value * ``scale``; 1 for a derived block
+        or a key without a unit)."""
+        unit = key_unit(self.key.rsplit(".", 1)[-1])[1] if self.key else None
+        return factor(unit) if unit else 1.0
+
 
 BLOCKS: tuple[Block, ...] = (
-    Block("g", (), "m/s^2", "gravity_m_per_s2", 1.0, "gravity, along -Z_S"),
-    Block("G", (6, 3), "m", "chains.G_mm", MM, "crank pivots G_i in {S}"),
-    Block("M", (6, 3), "m", "chains.M_mm", MM, "coupler ends M_i in {M}"),
-    Block("R_C0", (6, 3, 3), "1", "chains.R_C0", 1.0, "actuator frames at theta = 0 (nearest rotation to the file's)"),
-    Block("crank_length", (6,), "m", "chains.crank_length_mm", MM, "abs(G_i S_i)"),
-    Block("coupler_length", (6,), "m", "chains.coupler_length_mm", MM, "abs(S_i M_i)"),
-    Block("branch", (6,), "1", None, 1.0, "working branch of the closed-form inverse kinematics (+1/-1), from the home pose"),
-    Block("crank_inertia", (6,), "kg*m^2", "cranks.inertia_g_mm2", G_MM2, "axial inertia of crank i about its shaft"),
-    Block("crank_mass", (6,), "kg", "cranks.mass_g", 1e-3, "mass of crank i (centre at G_i)"),
-    Block("coupler_mass", (6,), "kg", None, 1.0, "rho A L_i: couplers.density_g_per_mm3 x couplers.area_mm2 x coupler length"),
-    Block("mandible_mass", (), "kg", "mandible.mass_g", 1e-3, "m_EE"),
-    Block("mandible_inertia", (3, 3), "kg*m^2", "mandible.inertia_g_mm2", G_MM2, "inertia about O_M in {M}"),
-    Block("hkp.p1", (), "1", "hkp.p1", 1.0, "plane p1 x + z + p2 = 0 of the condyles"),
-    Block("hkp.p2", (), "m", "hkp.p2_mm", MM, "plane p1 x + z + p2 = 0 of the condyles"),
-    Block("hkp.T_L", (3,), "m", "hkp.T_L_mm", MM, "left condyle centre in {M} (T_R is its mirror in y)"),
-    Block("hkp.x_range", (2,), "m", "hkp.x_range_mm", MM, "sockets' x bounds in {S}"),
-    Block("hkp.y_left", (2,), "m", "hkp.y_left_mm", MM, "left socket's y bounds in {S}"),
-    Block("hkp.y_right", (2,), "m", "hkp.y_right_mm", MM, "right socket's y bounds in {S}"),
-    Block("incisor", (3,), "m", "points.incisor_mm", MM, "incisor point I in {M}"),
-    Block("molar_left", (3,), "m", "points.molar_left_mm", MM, "left bite point B_L in {M}"),
-    Block("molar_right", (3,), "m", "points.molar_right_mm", MM, "right bite point B_R in {M}"),
-    Block("friction.hkp_coulomb", (), "1", "friction.hkp_coulomb", 1.0, "Coulomb coefficient at the HKPs"),
-    Block("friction.hkp_viscous", (), "N*s/m", "friction.hkp_viscous_Ns_per_m", 1.0, "viscous coefficient at the HKPs"),
-    Block("friction.actuator_arm", (), "m", "friction.actuator_arm_mm", MM, "friction arm R_i of the actuators"),
-    Block("friction.actuator_coulomb", (), "1", "friction.actuator_coulomb", 1.0, "Coulomb coefficient of the actuators"),
-    Block("friction.actuator_viscous", (), "N*m*s/rad", "friction.actuator_viscous_Nms_per_rad", 1.0, "viscous coefficient of the actuators"),
-    Block("limits.torque", (), "N*m", "limits.torque_Nm", 1.0, "actuator torque limit"),
-    Block("limits.power", (), "W", "limits.power_W", 1.0, "actuator power limit"),
-    Block("limits.axial_load", (), "N", "limits.axial_load_N", 1.0, "bearing load along the shaft at G_i"),
-    Block("limits.radial_load", (), "N", "limits.radial_load_N", 1.0, "bearing load across the shaft at G_i"),
-    Block("limits.theta_range", (2,), "rad", "limits.theta_range_deg", np.pi / 180, "crank angle range [low, high] (default unbounded)"),
-    Block("limits.speed", (), "rad/s", "limits.speed_rad_per_s", 1.0, "crank speed limit"),
-    Block("limits.acceleration", (), "rad/s^2", "limits.acceleration_rad_per_s2", 1.0, "crank acceleration limit"),
-    Block("contact.preload", (), "N", "contact.preload_N", 1.0, "smallest normal force of a unilateral HKP contact"),
+    Block("g", (), "m/s^2", "gravity_m_per_s2", "gravity, along -Z_S"),
+    Block("G", (6, 3), "m", "chains.G_mm", "crank pivots G_i in {S}"),
+    Block("M", (6, 3), "m", "chains.M_mm", "coupler ends M_i in {M}"),
+    Block("R_C0", (6, 3, 3), "1", "chains.R_C0", "actuator frames at theta = 0 (nearest rotation to the file's)"),
+    Block("crank_length", (6,), "m", "chains.crank_length_mm", "abs(G_i S_i)"),
+    Block("coupler_length", (6,), "m", "chains.coupler_length_mm", "abs(S_i M_i)"),
+    Block("branch", (6,), "1", None, "working branch of the closed-form inverse kinematics (+1/-1), from the home pose"),
+    Block("crank_inertia", (6,), "kg*m^2", "cranks.inertia_g_mm2", "axial inertia of crank i about its shaft"),
+    Block("crank_mass", (6,), "kg", "cranks.mass_g", "mass of crank i (centre at G_i)"),
+    Block("coupler_mass", (6,), "kg", None, "rho A L_i: couplers.density_g_per_mm3 x couplers.area_mm2 x coupler length"),
+    Block("mandible_mass", (), "kg", "mandible.mass_g", "m_EE"),
+    Block("mandible_inertia", (3, 3), "kg*m^2", "mandible.inertia_g_mm2", "inertia about O_M in {M}"),
+    Block("hkp.p1", (), "1", "hkp.p1", "plane p1 x + z + p2 = 0 of the condyles"),
+    Block("hkp.p2", (), "m", "hkp.p2_mm", "plane p1 x + z + p2 = 0 of the condyles"),
+    Block("hkp.T_L", (3,), "m", "hkp.T_L_mm", "left condyle centre in {M} (T_R is its mirror in y)"),
+    Block("hkp.x_range", (2,), "m", "hkp.x_range_mm", "sockets' x bounds in {S}"),
+    Block("hkp.y_left", (2,), "m", "hkp.y_left_mm", "left socket's y bounds in {S}"),
+    Block("hkp.y_right", (2,), "m", "hkp.y_right_mm", "right socket's y bounds in {S}"),
+    Block("incisor", (3,), "m", "points.incisor_mm", "incisor point I in {M}"),
+    Block("molar_left", (3,), "m", "points.molar_left_mm", "left bite point B_L in {M}"),
+    Block("molar_right", (3,), "m", "points.molar_right_mm", "right bite point B_R in {M}"),
+    Block("friction.hkp_coulomb", (), "1", "friction.hkp_coulomb", "Coulomb coefficient at the HKPs"),
+    Block("friction.hkp_viscous", (), "N*s/m", "friction.hkp_viscous_Ns_per_m", "viscous coefficient at the HKPs"),
+    Block("friction.actuator_arm", (), "m", "friction.actuator_arm_mm", "friction arm R_i of the actuators"),
+    Block("friction.actuator_coulomb", (), "1", "friction.actuator_coulomb", "Coulomb coefficient of the actuators"),
+    Block("friction.actuator_viscous", (), "N*m*s/rad", "friction.actuator_viscous_Nms_per_rad", "viscous coefficient of the actuators"),
+    Block("limits.torque", (), "N*m", "limits.torque_Nm", "actuator torque limit"),
+    Block("limits.power", (), "W", "limits.power_W", "actuator power limit"),
+    Block("limits.axial_load", (), "N", "limits.axial_load_N", "bearing load along the shaft at G_i"),
+    Block("limits.radial_load", (), "N", "limits.radial_load_N", "bearing load across the shaft at G_i"),
+    Block("limits.theta_range", (2,), "rad", "limits.theta_range_deg", "crank angle range [low, high] (default unbounded)"),
+    Block("limits.speed", (), "rad/s", "limits.speed_rad_per_s", "crank speed limit"),
+    Block("limits.acceleration", (), "rad/s^2", "limits.acceleration_rad_per_s2", "crank acceleration limit"),
+    Block("contact.preload", (), "N", "contact.preload_N", "smallest normal force of a unilateral HKP contact"),
 )
 
 _OFFSETS = np.cumsum([0] + [b.size for b in BLOCKS])

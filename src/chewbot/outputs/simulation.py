@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 from chewbot.files import Marker, atomic_folder, to_json
 from chewbot.outputs.writer import RECORD_FILE, RESULTS_FILE, write_table
+from chewbot.progress import SILENT, Progress
 from chewbot.simulation.run import SimulateResult, comparison_table, input_files
 
 SIMULATION_FORMAT = 1
@@ -34,7 +34,7 @@ def simulation_json(result: SimulateResult) -> dict:
     }
 
 
-def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path]:
+def write_into(result: SimulateResult, folder: Path, progress: Progress = SILENT) -> list[Path]:
     """Write the files of a simulation into an existing (temporary) folder: results.csv and run.json by the writer
     of every results folder (:class:`chewbot.outputs.writer.ResultsWriter`), then the figures and report.html drawn
     from what it wrote; the files written."""
@@ -43,13 +43,12 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path
 
     from chewbot.outputs.record import copy_inputs, with_copies
 
-    step = progress or (lambda msg, stage=None: None)
     copies = copy_inputs(folder, {"model": result.model, "plant": result.plant}, result.task)
-    record, view = write_table(folder, result.table, with_copies(simulation_json(result), copies), progress=step)
+    record, view = write_table(folder, result.table, with_copies(simulation_json(result), copies), progress=progress)
     for name, text in result.files.items():  # the MuJoCo plant's model file
         (folder / name).write_text(text, encoding="utf-8")
     series = view.series
-    step("drawing figures")
+    progress("drawing figures")
     drawn = [
         simulation_figures.tracking_error(series, folder / "tracking_error.png", controller_label(result)),
         dynamics_figures.torques(series, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
@@ -57,12 +56,12 @@ def write_into(result: SimulateResult, folder: Path, progress=None) -> list[Path
         figures.task_space(series, folder / "task_space.png"),
         figures.joint_space(series, folder / "joint_space.png"),
     ]
-    step("writing report.html")
+    progress("writing report.html")
     report = write_simulation_report(result, record, view, folder / "report.html", files=sorted(p.name for p in folder.iterdir()))
     return [folder / RESULTS_FILE, folder / RECORD_FILE, *(folder / n for n in result.files), *drawn, report]
 
 
-def write(result: SimulateResult, out: Path, force: bool = False, progress=None) -> Path:
+def write(result: SimulateResult, out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """Write the results folder ``out`` atomically (see :func:`chewbot.outputs.writer.write`)."""
     out = Path(out)
     with atomic_folder(out, force, SIMULATION_FOLDER, inputs=input_files(result.options)) as tmp:
@@ -72,7 +71,7 @@ def write(result: SimulateResult, out: Path, force: bool = False, progress=None)
 
 
 
-def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool = False, progress=None) -> Path:
+def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """The comparison folder: one simulation folder per controller (or per engine), comparison.csv, the figure, run.json
     and the report."""
     from chewbot.report.simulation_figures import comparison

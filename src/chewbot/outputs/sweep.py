@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.outputs.record import environment_record
+from chewbot.progress import SILENT, Progress
 from chewbot.sweep.quantities import OUTPUTS
 from chewbot.sweep.evaluate import evaluate_chunk, output_descriptions, output_units
 from chewbot.sweep.record import CONVERGENCE_FILE, INDICES_FILE, OPTIMUM_FILE, REPORT_FILE, SAMPLES_FILE, SweepFolder
@@ -56,8 +57,9 @@ def input_files(spec: Spec) -> dict[str, str]:
     return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}
 
 
-def prepare(spec: Spec) -> None:
-    """Compile the kernels the evaluations use (missing ones, side by side), so that the workers only load them."""
+def prepare(spec: Spec, progress: Progress = SILENT) -> None:
+    """Compile the kernels the evaluations use (missing ones, side by side, telling ``progress``), so that the workers
+    only load them."""
     from chewbot.compiled.kernels import prepare_kernels
     from chewbot.model.params import load_model
     from chewbot.run.pipeline import run_kernels
@@ -75,7 +77,7 @@ def prepare(spec: Spec) -> None:
         from chewbot.sweep.evaluate import Evaluator
 
         kernels += Evaluator(spec).kernels(load_model(spec.model))
-    prepare_kernels(kernels)
+    prepare_kernels(kernels, progress=progress)
 
 
 def _now() -> str:
@@ -83,17 +85,16 @@ def _now() -> str:
 
 
 def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = None, workers: int | None = None,
-              resume: bool = False, force: bool = False, progress=None, step=None, processes: bool = True,
+              resume: bool = False, force: bool = False, progress: Progress = SILENT, processes: bool = True,
               check=None) -> SweepResult:
     """Run the sweep of ``spec_source`` (a SPEC file or a built-in SPEC's name) into the folder ``out``.
 
     ``scheduler``: address of an existing Dask scheduler (default: a LocalCluster of ``workers`` processes, the
     cores by default; ``processes=False``: threads in this process, for tests). ``resume``: continue the
-    interrupted sweep in ``out``; ``force``: replace an existing sweep folder. ``progress(done, total)``: the
-    evaluations done (a chunk written as the stage ``chunk``); ``step(message)``: the stage; ``check()``: raises
-    to stop (:class:`~chewbot.sweep.runner.ChunkRunner`).
+    interrupted sweep in ``out``; ``force``: replace an existing sweep folder. ``progress``: told each stage, and
+    the evaluations done (``progress("evaluations", done, total)``, a chunk written as the stage ``chunk``);
+    ``check()``: raises to stop (:class:`~chewbot.sweep.runner.ChunkRunner`).
     """
-    step = step or (lambda msg: None)
     spec = read_spec(spec_source)
     text = spec_path(spec_source).read_bytes()
     files = input_files(spec)
@@ -103,8 +104,8 @@ def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = Non
         folder = SweepFolder.resume(out, digest, spec.as_dict(), inputs)
     else:
         SweepFolder.check(out, force, inputs)  # before the work, not after it
-    step("compiling kernels")
-    prepare(spec)
+    progress("compiling kernels")
+    prepare(spec, progress)
     if not resume:
         record = {"spec": spec.as_dict(), "spec_file": spec.source, "spec_sha256": digest, "inputs": files,
                   "outputs": output_descriptions(spec), "started": _now(), "command": sys.argv,
@@ -112,20 +113,20 @@ def run_sweep(spec_source: str | Path, out: Path, *, scheduler: str | None = Non
         folder = SweepFolder.start(out, record, text, force, inputs)
     result = SweepResult(folder.path, spec)
     started = time.perf_counter()
-    step("starting the Dask cluster" if scheduler is None else f"connecting to {scheduler}")
+    progress("starting the Dask cluster" if scheduler is None else f"connecting to {scheduler}")
     with dask_client(scheduler, workers, processes) as client:
         cluster = cluster_description(client)
         folder.save(cluster=cluster, resumed=_now() if resume else None)
-        step(f"evaluating on {cluster['workers']} worker(s)")
+        progress(f"evaluating on {cluster['workers']} worker(s)")
         runner = ChunkRunner(client, folder, evaluate_chunk, spec, spec.chunk, output_units(spec), progress, check)
         _evaluate(spec, runner, result)
     result.elapsed_s = time.perf_counter() - started
     result.reused_chunks, result.computed_chunks, result.computed = runner.reused, runner.computed, runner.evaluations
-    step("writing samples.parquet")
+    progress("writing samples.parquet")
     result.evaluations = merge_chunks(folder, folder.path / SAMPLES_FILE)
     result.failed = _failed(folder.path / SAMPLES_FILE)
     written = _write_results(result, folder)
-    step("writing report.html")
+    progress("writing report.html")
     from chewbot.report.sweep import write_report
 
     write_report(result, folder.path / REPORT_FILE)

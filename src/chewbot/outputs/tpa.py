@@ -13,13 +13,14 @@ from pathlib import Path
 
 from chewbot.files import Marker, atomic_folder, to_json
 from chewbot.food.tpa import MEASURES
+from chewbot.progress import SILENT, Progress
 
 TPA_FOLDER = Marker("texture test folder", "tpa.json", "chewbot_tpa")
 TPA_FILE = "tpa.json"
 TASK_FILE = "task.csv"  # the test's point path, a task for chewbot simulate --food
 
 
-def write_tpa(result, out: Path, force: bool = False, progress=None) -> Path:
+def write_tpa(result, out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """Write the folder of a simulated texture test (:class:`chewbot.simulation.texture.TpaResult`)."""
     from chewbot.outputs.simulation import write_into
     from chewbot.simulation.run import input_files

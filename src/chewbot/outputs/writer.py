@@ -1,8 +1,9 @@
 """The one writer of a results folder's data, and the folders written with it.
 
-:class:`ResultsWriter` writes results.csv chunk after chunk and then run.json, and builds, from the rows as it writes
-them, the view that the figures and report.html are drawn from (:mod:`chewbot.report.folder`): the data are complete
-before anything is drawn, and a folder drawn later (``chewbot report DIR``, :func:`redraw`) is drawn from the same
+:class:`ResultsWriter` writes results.csv chunk after chunk and then run.json, and builds, from the rows it is given,
+the view that the figures and report.html are drawn from (:mod:`chewbot.report.folder`): the figures are drawn from
+the rows as they are written (the last chunk's rows are written while the figures of the whole are drawn), the report
+from run.json as written, and a folder drawn later (``chewbot report DIR``, :func:`redraw`) is drawn from the same
 inputs read back. It is the one place where the data of a run or a simulation are written: a new format of the rows
 goes here.
 
@@ -26,8 +27,9 @@ from chewbot.errors import ChewbotError
 from chewbot.files import RESULTS_FOLDER, OutputError, atomic_folder, atomic_members, to_json
 from chewbot.model import Model
 from chewbot.outputs.record import RunRecord, copy_inputs, read_record, run_record, with_copies
-from chewbot.report.figures import drawing_process
-from chewbot.report.folder import draw, drawing_names
+from chewbot.progress import SILENT, Progress
+from chewbot.report.figures import Drawer, drawing_process
+from chewbot.report.folder import draw, drawing_names, figures_drawn, write_page
 from chewbot.report.view import RunView, ViewBuilder, report_columns
 from chewbot.run.options import RunOptions
 from chewbot.run.pipeline import CHUNK_SAMPLES, RunResult, Totals, chunks, input_files, inputs
@@ -87,7 +89,10 @@ def _version() -> str:
 
 class ResultsWriter:
     """Writes the data of a results folder into ``folder``: :meth:`rows` for each chunk of rows in order
-    (results.csv), then :meth:`record` (run.json), and keeps the view of the rows written (:meth:`view`).
+    (results.csv), then :meth:`record` (run.json), and keeps the view of the rows given (:meth:`view`).
+
+    A chunk's rows go into the view at once and into the file when the next chunk comes or at :meth:`flush`, so that
+    the view is whole before the last rows are written: a run draws its figures from it meanwhile.
 
     ``t``: the times of every row to come (the view chooses its animation's frames from them); ``derived``: further
     columns of a block of rows whose statistics the view keeps (:func:`chewbot.report.view.report_columns`);
@@ -102,25 +107,36 @@ class ResultsWriter:
         path = self.folder / RESULTS_FILES[format]
         self._csv = CsvWriter(path) if format == "csv" else ParquetWriter(path)
         self._view = ViewBuilder(t, derived=derived)
+        self._pending: Table | None = None
         self.seconds = 0.0
 
     def rows(self, table: Table) -> None:
-        """Append the rows of ``table`` (every chunk with the same columns)."""
-        t0 = time.perf_counter()
-        self._csv.write(table)
-        self.seconds += time.perf_counter() - t0
+        """Append the rows of ``table`` (every chunk with the same columns): into the view now, into the file with
+        the next chunk or at :meth:`flush`."""
         self._view.update(table)
+        self.flush()
+        self._pending = table
+
+    def flush(self) -> None:
+        """Write the rows given and not yet written."""
+        if self._pending is not None:
+            t0 = time.perf_counter()
+            self._csv.write(self._pending)
+            self.seconds += time.perf_counter() - t0
+            self._pending = None
 
     def record(self, record: dict) -> dict:
-        """Close the rows' file and write run.json holding ``record`` and ``results_file``, the name of the rows' file;
-        the record as it reads back (NaN as null), what the report is drawn from."""
+        """Write the rows not yet written, close the rows' file and write run.json holding ``record`` and
+        ``results_file``, the name of the rows' file; the record as it reads back (NaN as null), what the report is
+        drawn from."""
+        self.flush()
         self._csv.close()
         text = to_json({**record, "results_file": RESULTS_FILES[self.format]})
         (self.folder / RECORD_FILE).write_text(text)
         return json.loads(text)
 
     def view(self) -> RunView:
-        """The view of the rows written (their decimated series and statistics, the animation's frames)."""
+        """The view of the rows given (their decimated series and statistics, the animation's frames)."""
         return self._view.result()
 
     def close(self) -> None:
@@ -133,66 +149,74 @@ def run_view_columns(model: Model, contact: str) -> Callable:
     return lambda columns: report_columns(model, columns, contact)
 
 
-def write_run(options: RunOptions, out: Path, force: bool = False, progress=None, figures: bool = True, report: bool = True,
-              chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None, format: str = "csv") -> RunRecord:
+def write_run(options: RunOptions, out: Path, force: bool = False, progress: Progress = SILENT, figures: bool = True,
+              report: bool = True, chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None,
+              format: str = "csv", drawer: Drawer | None = None) -> RunRecord:
     """Compute a run chunk by chunk and write its folder ``out`` as it goes (what ``chewbot run`` does): each chunk's
-    rows go to results.csv (``format`` parquet: results.parquet) as they are computed, then run.json, then the figures
-    and report.html are drawn from what was written. ``progress(message, done=samples, total=samples, stage=None)`` is
-    told each stage (run.json's writing as the stage ``writing``); ``check()``: see :func:`chewbot.run.pipeline.chunks`."""
-    step = _stepper(progress)
-    step("task")
+    rows go to results.csv (``format`` parquet: results.parquet) as they are computed; once the last chunk is
+    computed, the figures are drawn from the view of every row (by a second process where there is a second core)
+    while the last rows and run.json are written and report.html is drawn from run.json as written.
+    ``progress(message, done=samples, total=samples, stage=None)`` is told each stage (run.json's writing as the stage
+    ``writing``); ``check()``: see :func:`chewbot.run.pipeline.chunks`; ``drawer``: a drawing process forked before
+    (:func:`chewbot.report.figures.drawing_process`; None: one is forked here)."""
+    progress("task")
     options, model, task = inputs(options)
-    step("kinematics", done=0, total=task.n)
+    progress("kinematics", done=0, total=task.n)
     out = Path(out)
-    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp, drawing_process(figures) as drawer:
+    with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(options)) as tmp, \
+            drawing_process(figures and drawer is None) as forked:
+        drawer = drawer or forked
         totals = Totals(model, options)
         writer = ResultsWriter(tmp, task.t, run_view_columns(model, options.contact), format)
         name = RESULTS_FILES[format]
         try:
             columns = None
-            for part in chunks(model, task, options, chunk, step, check):
+            for part in chunks(model, task, options, chunk, progress, check):
                 totals.add(part)
-                step(f"writing {name}", done=part.offset)
+                progress(f"writing {name}", done=part.offset)
                 writer.rows(part.table)
                 columns = part.table.rows(0, 0)
-            totals.timings[f"results_{format}_s"] = writer.seconds
-            checks = totals.checks.results()
-            step("writing run.json", done=task.n, stage="writing")
-            copies = copy_inputs(tmp, {"model": model}, task)
-            record = writer.record(with_copies(run_record(options, model, task, columns, checks, totals.info()), copies))
+            view = writer.view()
+            progress("figures, the last rows and the report", done=task.n)
+            with figures_drawn(tmp, view, options.method, options.contact, figures, progress, drawer) as pictures:
+                writer.flush()
+                totals.timings[f"results_{format}_s"] = writer.seconds
+                checks = totals.checks.results()
+                progress("writing run.json", done=task.n, stage="writing")
+                copies = copy_inputs(tmp, {"model": model}, task)
+                record = writer.record(with_copies(run_record(options, model, task, columns, checks, totals.info()), copies))
+                page = [write_page(tmp, record, model, view, pictures, progress)] if report else []
         finally:
             writer.close()
-        view = writer.view()
-        step("figures and report", done=task.n)
-        written = draw(tmp, record, model, view, figures, report, step, drawer=drawer)
-    return RunRecord(record, model, checks, view, [out / name, out / RECORD_FILE, *(out / p.name for p in written)])
+    return RunRecord(record, model, checks, view, [out / name, out / RECORD_FILE, *(out / p.name for p in [*pictures, *page])])
 
 
-def write_table(folder: Path, table: Table, record: dict, derived: Callable | None = None, progress=None) -> tuple[dict, RunView]:
+def write_table(folder: Path, table: Table, record: dict, derived: Callable | None = None,
+                progress: Progress = SILENT) -> tuple[dict, RunView]:
     """results.csv of a table computed whole and run.json of its ``record``, by :class:`ResultsWriter`; the record as
     it reads back and the view of the rows written, what the figures and report are drawn from."""
-    step = _stepper(progress)
     writer = ResultsWriter(folder, table["t"], derived)
     try:
-        step("writing results.csv")
+        progress("writing results.csv")
         writer.rows(table)
-        step("writing run.json", stage="writing")
+        writer.flush()
+        progress("writing run.json", stage="writing")
         written = writer.record(record)
     finally:
         writer.close()
     return written, writer.view()
 
 
-def write(result: RunResult, out: Path, force: bool = False, progress=None, figures: bool = True, report: bool = True) -> Path:
+def write(result: RunResult, out: Path, force: bool = False, progress: Progress = SILENT, figures: bool = True,
+          report: bool = True) -> Path:
     """Write the results folder ``out`` (results.csv, run.json, figures, report.html) of a run computed in memory
     (:func:`chewbot.run.pipeline.compute`), atomically as :func:`write_run`."""
-    step = _stepper(progress)
     out = Path(out)
     with atomic_folder(out, force, RESULTS_FOLDER, inputs=input_files(result.options)) as tmp, drawing_process(figures) as drawer:
         copies = copy_inputs(tmp, {"model": result.model}, result.task)
         record, view = write_table(tmp, result.table, with_copies(run_json(result), copies),
-                                   run_view_columns(result.model, result.options.contact), step)
-        draw(tmp, record, result.model, view, figures, report, step, drawer=drawer)
+                                   run_view_columns(result.model, result.options.contact), progress)
+        draw(tmp, record, result.model, view, figures, report, progress, drawer=drawer)
     return out
 
 
@@ -204,7 +228,7 @@ def run_json(result: RunResult) -> dict:
 # --- figures and report of a results folder ----------------------------------------------------------------
 
 
-def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool = True, progress=None,
+def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool = True, progress: Progress = SILENT,
            chunk: int = CHUNK_SAMPLES) -> list[Path]:
     """Draw the figures and write report.html of the results folder ``folder`` from its run.json and results.csv
     (read ``chunk`` rows at a time: constant memory), as the run did (``chewbot report DIR``).
@@ -217,7 +241,6 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
     from chewbot.model.params import BUILTIN_MODELS, load_model, split_overrides
     from chewbot.model.vector import vector_digest
 
-    step = _stepper(progress)
     folder = Path(folder)
     if not folder.is_dir():
         raise ChewbotError(f"{folder}: no such results folder")
@@ -238,7 +261,7 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
         columns = record.get("columns", {})
         name = record.get("results_file", RESULTS_FILE)
         rows_path = folder / name
-        step(f"reading {name}")
+        progress(f"reading {name}")
         units = {name: c.get("unit", "") for name, c in columns.items()}
         if name == RESULTS_FILES["parquet"]:
             t = read_parquet_column(rows_path, "t")
@@ -251,14 +274,14 @@ def redraw(folder: Path, force: bool = False, figures: bool = True, report: bool
         view = ViewBuilder(t, derived=run_view_columns(model, record["options"].get("contact", "bilateral")))
         done = 0
         for part in parts:
-            step(f"reading {name}", done=done, total=t.size)
+            progress(f"reading {name}", done=done, total=t.size)
             part.descriptions = {name: c["description"] for name, c in columns.items() if c.get("description") and name in part.columns}
             view.update(part)
             done += part.n
         view = view.result()
         names = drawing_names(record, view, figures, report)
         with atomic_members(folder, names, force) as tmp:
-            draw(tmp, record, model, view, figures, report, step, beside=folder, drawer=drawer)
+            draw(tmp, record, model, view, figures, report, progress, beside=folder, drawer=drawer)
         return [folder / name for name in names]
 
 
@@ -307,7 +330,3 @@ def _data_lines(path: Path):
             yield from lines
     except OSError as exc:
         raise ChewbotError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-
-
-def _stepper(progress):
-    return progress or (lambda msg, done=None, total=None, stage=None: None)

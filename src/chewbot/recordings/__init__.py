@@ -5,7 +5,10 @@ The stages, one module each, in the order the data takes (docs/recordings.md):
 :mod:`~chewbot.recordings.prepare` (gaps, low-pass), :mod:`~chewbot.recordings.rigid` (pose per frame, scaling),
 :mod:`~chewbot.recordings.fit` (nearest admissible robot pose; its CasADi graphs in
 :mod:`~chewbot.recordings.robotfit`), :mod:`~chewbot.recordings.resample` (spline rates, bite force) and
-:mod:`~chewbot.recordings.importer` (all of them: :func:`import_motion`). The command line is
+:mod:`~chewbot.recordings.importer` (all of them: :func:`import_motion`). What a recording tracks and its
+anatomical registration: :mod:`~chewbot.recordings.anatomy`; the search around it:
+:mod:`~chewbot.recordings.register` (rigid bodies) and :mod:`~chewbot.recordings.register_point` (point paths);
+re-timing within the limits: :mod:`~chewbot.recordings.retime`. The command line is
 :mod:`~chewbot.commands.import_motion`. The names below load on first use, so that the command line starts fast.
 """
 

@@ -160,14 +160,43 @@ def _converge(fns: FitFunctions, z, last, target, settings):
 
 
 def _constrained(fns: FitFunctions, z0, target, settings):
-    """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found."""
+    """The constrained problem on some frames; (z, admissible) with NaN rows where no admissible pose was found.
+
+    A frame whose SQP does not end at a stationary admissible point from its own start (an unconstrained optimum far
+    outside the workspace, where the SQP's steps leave the chains' closure, or a stall on the boundary) is tried
+    again from the solutions of the frames before and after it (the rows are in time order), then from the home
+    pose (an interior one), keeping the
+    admissible answer of smaller error; one that ends admissible but not stationary keeps that pose (its errors are
+    then an upper bound of the nearest pose's); one that never ends admissible has no admissible pose near it."""
     z, lam = fns.constrained(z0, target, settings)
+    feasible, stationary = _status(fns, z, lam, target, settings)
+    for neighbour in (-1, 1, None):
+        again = np.flatnonzero(~stationary)
+        if again.size == 0:
+            break
+        if neighbour is None:
+            start = np.zeros((again.size, fns.n))
+        elif stationary.any():
+            solved = np.flatnonzero(stationary)
+            start = z[solved[np.clip(np.searchsorted(solved, again) - (neighbour < 0), 0, solved.size - 1)]]
+        else:
+            continue
+        z2, lam2 = fns.constrained(start, target[again], settings)
+        f2, s2 = _status(fns, z2, lam2, target[again], settings)
+        better = f2 & (~feasible[again] | s2 | (_cost(fns, z2, target[again], settings) < _cost(fns, z[again], target[again], settings)))
+        rows = again[better]
+        z[rows], feasible[rows], stationary[rows] = z2[better], True, s2[better]
+    z[~feasible] = np.nan
+    return z, feasible
+
+
+def _status(fns: FitFunctions, z, lam, target, settings):
+    """Whether each SQP answer is admissible (sockets to BOUND_TOL) and whether it is also stationary."""
     g = fns.constraints(z)
-    feasible = ((g >= fns.lbg - BOUND_TOL) & (g <= fns.ubg + BOUND_TOL)).all(axis=1)
-    grad = fns.stationarity(z, lam, target, settings)
-    ok = feasible & (np.abs(grad).max(axis=1) <= STATIONARITY_TOL) & np.isfinite(z).all(axis=1)
-    z[~ok] = np.nan
-    return z, ok
+    with np.errstate(invalid="ignore"):
+        feasible = ((g >= fns.lbg - BOUND_TOL) & (g <= fns.ubg + BOUND_TOL)).all(axis=1) & np.isfinite(z).all(axis=1)
+        grad = fns.stationarity(z, lam, target, settings)
+        return feasible, feasible & (np.abs(grad).max(axis=1) <= STATIONARITY_TOL)
 
 
 def _result(fns: FitFunctions, z, admissible, outside, target, settings) -> RobotFit:

@@ -18,17 +18,20 @@ from chewbot.errors import KinematicsError, RecordingError
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model import Model
 from chewbot.model.params import load_model
+from chewbot.progress import SILENT, Progress
 from chewbot.recordings.fit import RobotFit, fit_to_robot, fitted_pose, nearest_admissible
 from chewbot.recordings.measures import Measures, measure
+from chewbot.recordings.anatomy import Detected, detect
 from chewbot.recordings.register import FoundRegistration, fit_registration
 from chewbot.recordings.register_point import fit_point_registration
-from chewbot.recordings.retime import Retiming, retime
+from chewbot.recordings.retime import Retiming, limit_report, retime
 from chewbot.recordings.formats import Recording, read_recording
 from chewbot.recordings.prepare import fill_gaps, low_pass, spikes, trim
-from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG
+from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG, hinge_beta
 from chewbot.recordings.registration import Registration, collinear, load_registration
 from chewbot.recordings.resample import force_at, output_times, read_force_file, spline_motion
 from chewbot.recordings.rigid import RigidFit, kabsch, rigid_fit, scale_motion, to_base
+from chewbot import units
 from chewbot.table import Table
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
 
@@ -73,7 +76,7 @@ class ImportOptions:
     fit_registration: bool = False
     keep_spikes: bool = False
     clip: bool = False
-    timing: str | None = None  # None: the recording's times; "limits": re-timed within the motors' limits
+    timing: str = "limits"  # "limits": re-timed within the motors' limits where it needs; "recording": the recording's times
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,10 +103,16 @@ class MotionImport:
     notes: list[str] = field(default_factory=list)
     found: FoundRegistration | None = None
     retiming: Retiming | None = None
+    detected: Detected | None = None
 
     def measures(self) -> Measures:
         """What the robot reproduces of the recording (registered, at scale 1): :func:`measure`."""
-        return measure(self.model, self.rigid.p, self.rigid.R, self.fit, self.recording.t)
+        return measure(self.model, self.rigid.p, self.rigid.R, self.fit, self.recording.t, self.tracked_point)
+
+    @property
+    def tracked_point(self) -> np.ndarray:
+        """The point of {M} (m) whose path a point-path recording gives; the incisal point for a rigid body."""
+        return tracked_point(self.model, self.registration.tracked)
 
     def residuals(self) -> Table:
         """One row per frame: its number in the file, time, the markers' rigid-fit residual (RMS and largest),
@@ -136,11 +145,15 @@ class MotionImport:
         """The import's measures in lines: the share (with the registration search), what the robot reproduces of
         the recorded rotation and incisal excursion, whether it is in step, what limits it."""
         m, lines = self.measures(), []
+        if self.detected is not None:
+            lines.append(self.detected.describe())
         if self.found is not None:
             f = self.found
             lines.append(f"share {f.share:.4f} (the largest uniform scale <= 1 of the registered recording at which every frame "
-                         f"is reached within --max-residual); weighted residual RMS {f.residual:.3g}; tracker turned "
-                         f"{f.tracker_change_deg:.3g} deg from the file's; {f.evaluations} evaluations, {f.seconds:.3g} s")
+                         f"is reached within --max-residual); weighted residual RMS {f.residual:.3g}; {f.evaluations} "
+                         f"evaluations, {f.seconds:.3g} s")
+            lines.extend(note for note in f.notes if note.startswith("prior:"))
+            lines.append(f.describe())
             if f.share < 1:
                 times = self.recording.t[f.limiting_frames]
                 shown = ", ".join(f"{t:.3f}" for t in times[:8]) + (" ..." if times.size > 8 else "")
@@ -154,6 +167,20 @@ class MotionImport:
         return lines
 
 
+    def registration_rows(self) -> list[tuple[str, str]]:
+        """What the recording tracks and how it was registered, as (what, value) rows: what was detected (or the
+        file's ``tracked``), the prior and the registration found with how far it moved from the prior (with
+        ``--fit-registration``), and the tracker used (p_S = rotation p_T + origin)."""
+        reg, f = self.registration, self.found
+        rows = [("what the recording tracks", self.detected.describe() if self.detected is not None
+                 else f"tracked = \"{reg.tracked}\" ({'the file' if reg.markers is None or f is not None else 'its [markers]'})")]
+        if f is not None:
+            rows += [("prior", "; ".join(n for n in f.notes if n.startswith("prior:"))),
+                     ("tracker of the prior", _tracker_text(f.prior_rotation, f.prior_origin)),
+                     ("registration found", f.describe())]
+        rows.append(("tracker used", _tracker_text(reg.rotation, reg.origin)))
+        return rows
+
     def failures(self) -> list[str]:
         """The failing frames, as stretches of consecutive frames with the reasons."""
         return _failure_messages(self)
@@ -163,13 +190,12 @@ STEPS = 5  # reading and preparing, registration, rigid fit, fit to the robot, t
 
 
 def import_motion(recording: str | Path, registration: str | Path | Registration, options: ImportOptions = ImportOptions(),
-                  progress=None) -> MotionImport:
+                  progress: Progress = SILENT) -> MotionImport:
     """Import a recording as a robot task (see the module docstring). Raises
     :class:`~chewbot.errors.RecordingError` for bad files and :class:`~chewbot.errors.KinematicsError` when the
     resampled task breaks the kinematics; failing frames are reported in the result (``passed``,
     :meth:`MotionImport.failures`), with ``task`` None. ``progress(message)`` is told each of :data:`STEPS` steps."""
-    step = progress or (lambda message: None)
-    step("reading and preparing the markers")
+    progress("reading and preparing the markers")
     reg = registration if isinstance(registration, Registration) else load_registration(registration)
     model = load_model(options.model)
     notes: list[str] = []
@@ -177,33 +203,38 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     if reg.landmarks is not None:
         reg = _placed_by_landmarks(model, reg, rec)
         notes.append(f"the markers placed on the mandible by the landmarks ({', '.join(reg.landmarks)})")
-    found = None
-    tracked = reg.tracked == "incisor"
+    found, detected = None, None
+    if reg.tracked is None:
+        detected = detect(model, rec.positions)
+        reg = replace(reg, tracked="rigid" if detected.kind == "rigid" else "incisor")
+    tracked = reg.point_path
+    b = tracked_point(model, reg.tracked)
+    point = b if tracked else reg.point
     weights = (reg.position_weight_per_mm, POINT_ORIENTATION_WEIGHT if tracked else reg.orientation_weight_per_deg)
     max_orientation = np.inf if tracked else options.max_orientation_deg
     if tracked and (options.angle_scale not in (None, 1.0) or reg.angle_scale != 1.0):
-        raise RecordingError(f"{reg.source}: an incisal-point recording (tracked = \"incisor\") has no rotation to scale: "
+        raise RecordingError(f"{reg.source}: a point path (tracked = \"{reg.tracked}\") has no rotation to scale: "
                              "its scale applies to the point's displacement, and the hinge guess follows it; leave out "
                              "angle_scale and --angle-scale")
     if options.fit_registration and tracked:
-        step("searching the registration of the incisal point")
-        found = fit_point_registration(model, rec.positions, reg.rotation, reg.origin, *weights, options.max_position_mm,
+        progress(f"searching the registration of the {reg.tracked} path")
+        found = fit_point_registration(model, rec.positions, b, reg.rotation, *weights, options.max_position_mm,
                                        options.min_transmission_deg)
-        notes.extend(found.notes)
+        notes.extend(n for n in found.notes if not n.startswith("prior:"))
         reg = replace(reg, rotation=found.rotation, origin=found.origin, scale=found.share, angle_scale=1.0)
     elif options.fit_registration:
-        step("searching the registration")
-        found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.origin, reg.markers, reg.point,
+        progress("searching the registration")
+        found = fit_registration(model, rec.positions, rec.markers, reg.rotation, reg.markers, reg.point,
                                  weights, (options.max_position_mm, max_orientation), options.min_transmission_deg)
-        notes.extend(found.notes)
+        notes.extend(n for n in found.notes if not n.startswith("prior:"))
         reg = replace(reg, markers=found.markers or None, rotation=found.rotation, origin=found.origin, scale=found.share,
                       angle_scale=found.share, landmarks=None)
     else:
-        step("registration as the file gives it")
-    step("rigid fit")
+        progress("registration as the file gives it")
+    progress("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if tracked:
-        rigid = _tracked_point(model, points, rec.markers)
+        rigid = _tracked_point(model, b, points, rec.markers)
     elif reg.markers is None:
         if collinear(points[0]):
             raise RecordingError(f"{rec.source}: {rec.where(0)}: the markers lie on one line (or nearly) and do not "
@@ -221,20 +252,20 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         """The registered motion at ``factor`` times the scales: an incisal point's displacement, with the hinge
         guess of the scaled point; a rigid body's displacement and rotation angle (:func:`scale_motion`)."""
         if tracked:
-            moved = _tracked_point(model, points, rec.markers, factor * scale)
+            moved = _tracked_point(model, b, points, rec.markers, factor * scale)
             return moved.p, moved.R
         return scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
 
     def attempt(factor: float):
         p, R = scaled(factor)
-        fit = fit_to_robot(model, p, R, reg.point, *weights, options.min_transmission_deg)
+        fit = (None if found is None else found.fit_of(p, R)) or fit_to_robot(model, p, R, point, *weights, options.min_transmission_deg)
         within = fit.admissible & (fit.position_error_mm <= options.max_position_mm) & (fit.orientation_error_deg <= max_orientation)
         return fit, within & rigid_ok
 
     # an incisal point's search ends with frames on the workspace's boundary, where the task's spline between them
     # may leave it: the largest factor of the share at which the task builds, as --scale auto finds it
     auto = options.scale == "auto" or (found is not None and tracked)
-    step("fit to the robot" + (" (searching the scale)" if auto else ""))
+    progress("fit to the robot" + (" (searching the scale)" if auto else ""))
     factor = None
     fit, passed = attempt(1.0)
     if auto and not rigid_ok.all():
@@ -242,7 +273,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     elif auto:
         def builds(fit_f) -> bool:
             try:
-                _task(model, rec, reg, fit_f, options, Path(recording), [])
+                _task(model, rec, reg, fit_f, options, Path(recording), [], point, weights)
                 return True
             except (RecordingError, KinematicsError):
                 return False
@@ -251,55 +282,68 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         scale, angle_scale = factor * scale, factor * angle_scale
         if found is not None:  # the registration written plays the task as imported
             reg = replace(reg, scale=scale)
-    step("resampling and checking the task")
+    progress("resampling and checking the task")
     task = None
     if passed.all() or (options.clip and fit.admissible.all() and rigid_ok.all()):
         if options.clip and not passed.all():
             p, R = scaled(1.0)
             _check_jumps(model, rec, p, R, fit)
             notes.append(_clip_note(rec, fit, passed))
-        task = _task(model, rec, reg, fit, options, Path(recording), notes)
+        task = _task(model, rec, reg, fit, options, Path(recording), notes, point, weights)
     retiming = None
-    if task is not None and options.timing == "limits":
+    broken = limit_report(model, task) if task is not None else []
+    if broken and options.timing == "limits":
+        progress("re-timing within the limits")
         retiming = retime(model, task)
-        moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, reg.point, reg.position_weight_per_mm,
-                                                reg.orientation_weight_per_deg, options.min_transmission_deg)
+        moved, rows, ok, _ = nearest_admissible(model, retiming.task.q, point, *weights, options.min_transmission_deg)
         # the path between its samples, evaluated at the new times, may cross a boundary it runs along by
         # rounding (nanometres): those samples are put back on it, their rates kept
         task = replace(retiming.task, q=moved) if ok.all() else retiming.task
         slow = retiming.stretch > 1 + 1e-3
-        notes.append(f"--timing limits: {retiming.original_s:.4g} s re-timed to {retiming.duration_s:.4g} s; stretched segments "
+        notes.append(f"--timing limits: at the recorded times {'; '.join(broken)}; re-timed from {retiming.original_s:.4g} s to "
+                     f"{retiming.duration_s:.4g} s, stretched segments "
                      + (", ".join(f"{a:.3g}-{b:.3g} s x{k:.3g}" for (a, b), k in zip(retiming.segments[slow], retiming.stretch[slow]))
                         or "none") + " (of the task's own time before re-timing)")
         try:
             solve_kinematics(model, task)
         except KinematicsError as exc:
             raise exc.located(f"{recording}: the re-timed task") from None
-    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming)
+    elif broken:
+        notes.append("--timing recording: " + "; ".join(broken) + " (chewbot run fails these checks; --timing limits, the "
+                     "default, re-times the task within them)")
+    elif task is not None:
+        notes.append("the recorded times hold the crank speed, acceleration and torque limits: the task keeps them")
+    return MotionImport(options, model, reg, rec, rigid, fit, scale, angle_scale, factor, passed, task, notes, found, retiming,
+                        detected)
 
 
-def hinge_angle(model: Model, drop):
-    """The rotation about the condylar axis (+y of {M} through the condyles' midpoint C) that moves the incisor I
-    by ``drop`` (N,) along z (m; negative: down), the condyles held: -|r| sin(beta - psi) = drop + r_z, r = I - C,
-    psi = atan2(r_z, r_x); beta = 0 at drop = 0 (the argument of arcsin clipped to [-1, 1])."""
-    r = model.incisor - 0.5 * (model.hkp.T_L + model.hkp.T_R)
-    size, psi = float(np.hypot(r[0], r[2])), float(np.arctan2(r[2], r[0]))
-    return psi + np.arcsin(np.clip(-(drop + r[2]) / size, -1.0, 1.0))
+def _tracker_text(rotation: np.ndarray, origin: np.ndarray) -> str:
+    """A tracker placement in a line: its rotation as a rotation vector (deg) and its origin (mm) in {S}."""
+    turn = np.degrees(Rotation.from_matrix(rotation).as_rotvec())
+    return (f"rotation vector {np.round(turn, 2).tolist()} deg (angle {np.linalg.norm(turn):.4g} deg), origin "
+            f"{np.round(origin / 1e-3, 2).tolist()} mm")
 
 
-def _tracked_point(model: Model, points: np.ndarray, names: tuple[str, ...], scale: float = 1.0) -> RigidFit:
-    """An incisal-point recording: the markers' mean (in {S}) is the incisor, its displacement from the first
-    frame times ``scale``; the mandible's orientation per frame is a guess, the rotation about the condylar axis
-    that lowers the incisor as far as it dropped below the first frame (:func:`hinge_angle`), weighed little in
-    the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts the model's incisor on the point. The markers'
-    distances from moving in parallel with their mean are the rigid-fit residual."""
+def tracked_point(model: Model, name: str | None) -> np.ndarray:
+    """The point of {M} (m) a point path is registered as: the model's landmark of that name (``incisor``,
+    ``molar_left``, ``molar_right``, ``condyle_left``, ``condyle_right``); the incisal point otherwise."""
+    return {"molar_left": model.molar_left, "molar_right": model.molar_right, "condyle_left": model.hkp.T_L,
+            "condyle_right": model.hkp.T_R}.get(name, model.incisor)
+
+
+def _tracked_point(model: Model, b: np.ndarray, points: np.ndarray, names: tuple[str, ...], scale: float = 1.0) -> RigidFit:
+    """A point path: the markers' mean (in {S}) is the point b of {M}, its displacement from the first frame times
+    ``scale``; the mandible's orientation per frame is a guess, the rotation about the condylar axis that lowers b
+    as far as it dropped below the first frame (:func:`~chewbot.recordings.robotfit.hinge_beta`), weighed little in
+    the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts b on the point. The markers' distances from moving in
+    parallel with their mean are the rigid-fit residual."""
     mean = points.mean(axis=1)
     offsets = points - mean[:, None]
     distances = np.linalg.norm(offsets - offsets[:1], axis=2)
     mean = mean[0] + scale * (mean - mean[0])
-    beta = hinge_angle(model, mean[:, 2] - mean[0, 2])
+    beta = hinge_beta(model, b, mean[:, 2] - mean[0, 2])
     R = Rotation.from_euler("y", beta[:, None]).as_matrix()
-    return RigidFit(mean - R @ model.incisor, R, distances, names)
+    return RigidFit(mean - R @ b, R, distances, names)
 
 
 def _placed_by_landmarks(model: Model, reg: Registration, rec: Recording) -> Registration:
@@ -381,9 +425,9 @@ def _check_jumps(model: Model, rec: Recording, p: np.ndarray, R: np.ndarray, fit
     bound = JUMP_FACTOR * recorded.max()
     if (clipped > bound).any():
         i = int(np.argmax(clipped))
-        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / 1e-3:.3g} mm between {rec.where(i)} "
+        raise RecordingError(f"{rec.source}: --clip: the clipped motion jumps {clipped[i] / units.factor('mm'):.3g} mm between {rec.where(i)} "
                              f"and the next frame, more than {JUMP_FACTOR:g} x the recording's largest step "
-                             f"({recorded.max() / 1e-3:.3g} mm): the nearest admissible poses switch branches there")
+                             f"({recorded.max() / units.factor('mm'):.3g} mm): the nearest admissible poses switch branches there")
 
 
 def _clip_note(rec: Recording, fit: RobotFit, passed: np.ndarray) -> str:
@@ -412,7 +456,7 @@ def _ramped(rec: Recording, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, floa
 
 
 def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, options: ImportOptions, source: Path,
-          notes: list[str]) -> Task:
+          notes: list[str], point, weights: tuple[float, float]) -> Task:
     """The task: the fitted coordinates resampled (spline rates), samples between frames that a spline carries
     out of the workspace moved back onto it, the bite force, and a check by the kinematics. With --clip it starts
     and ends at rest at home (:func:`_ramped`)."""
@@ -424,8 +468,7 @@ def _task(model: Model, rec: Recording, reg: Registration, fit: RobotFit, option
                      f"plays it from t = {start:.4g} s, and returns the same way")
     t = output_times(frames_t, options.rate_hz)
     q, dq, ddq = spline_motion(frames_t, frames_q, t, at_rest=options.clip)
-    moved, rows, ok, worst = nearest_admissible(model, q, reg.point, reg.position_weight_per_mm, reg.orientation_weight_per_deg,
-                                                options.min_transmission_deg)
+    moved, rows, ok, worst = nearest_admissible(model, q, point, *weights, options.min_transmission_deg)
     if not ok.all():
         i = int(rows[~ok][0])
         raise RecordingError(f"{rec.source}: between the fitted frames, at t = {t[i]:.6g} s, the spline leaves the "
@@ -458,7 +501,7 @@ def _failure_messages(result: MotionImport) -> list[str]:
     kinds = np.column_stack([np.where(rigid_bad, worst_marker, -1), ~fit.admissible,
                              fit.admissible & (fit.position_error_mm > o.max_position_mm),
                              fit.admissible & (fit.orientation_error_deg > o.max_orientation_deg)
-                             & (result.registration.tracked is None)])
+                             & (not result.registration.point_path)])
     failing = rigid_bad | kinds[:, 1:].any(axis=1)
     change = np.flatnonzero(np.any(np.diff(kinds, axis=0) != 0, axis=1) | np.diff(failing.astype(int)) != 0) + 1
     out = []

@@ -19,9 +19,10 @@ import numpy as np
 
 from chewbot.model import Model
 from chewbot.recordings.fit import RobotFit, fitted_pose
+from chewbot.units import factor
 
 IN_STEP_R = 0.95
-MM = 1e-3
+MM = factor("mm")
 
 
 def _angle_deg(R: np.ndarray) -> np.ndarray:
@@ -91,11 +92,13 @@ class Measures:
                 f"mandible up to {np.nanmax(self.mandible_error):.3g} mm and {np.nanmax(self.mandible_rotation_error):.3g} deg")
 
 
-def measure(model: Model, p_rec: np.ndarray, R_rec: np.ndarray, fit: RobotFit, t: np.ndarray) -> Measures:
+def measure(model: Model, p_rec: np.ndarray, R_rec: np.ndarray, fit: RobotFit, t: np.ndarray, point=None) -> Measures:
     """The :class:`Measures` of the recorded poses (``p_rec`` (N, 3) m, ``R_rec`` (N, 3, 3), registered, scale 1)
-    against the fitted ones."""
+    against the fitted ones; ``point``: the point of {M} measured as the incisor (a point path's tracked point;
+    default the incisal point)."""
     p_fit, R_fit = fitted_pose(model, fit.q)
-    points = np.array([model.incisor, model.molar_left, model.molar_right, model.hkp.T_L, model.hkp.T_R])
+    points = np.array([model.incisor if point is None else point, model.molar_left, model.molar_right, model.hkp.T_L,
+                       model.hkp.T_R])
     rec_pts = np.einsum("nij,kj->nki", R_rec, points) + p_rec[:, None]
     fit_pts = np.einsum("nij,kj->nki", R_fit, points) + p_fit[:, None]
     dist = np.linalg.norm(rec_pts - fit_pts, axis=2) / MM

@@ -9,7 +9,8 @@ In this order (:func:`chewbot.recordings.importer.import_motion`):
    :data:`SPIKE_MIN_MM` and the median plus :data:`SPIKE_MADS` robust standard deviations, 1.4826 x the median
    absolute deviation), and stretches of at most ``max_gap`` between two jumps of the markers' speed that are
    outliers the same way (above :data:`SPIKE_MIN_SPEED_MM_S` and the median plus :data:`SPEED_MADS` robust
-   standard deviations) and cancel (a jump out and back: their sum below :data:`CANCEL` of the smaller; the steps
+   standard deviations), or of the rigid body's angular speed (above :data:`SPIKE_MIN_TURN_DEG_S`: a marker that
+   jumps off the plane of three keeps their distances but turns their body), and cancel (a jump out and back: their sum below :data:`CANCEL` of the smaller; the steps
    of a fast stroke add up instead). Their frames are dropped and filled like gaps.
 3. :func:`fill_gaps` fills each gap of each marker (frames where it was not seen) by a cubic spline through all
    the frames where that marker was seen (``scipy.interpolate.CubicSpline``, not-a-knot ends), if the gap lasts
@@ -33,6 +34,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from chewbot.errors import RecordingError
 from chewbot.recordings.formats import Recording
+from chewbot.units import factor
 
 FILTER_ORDER = 2
 # (sqrt(2) - 1)^(1 / (2 n)) for n = FILTER_ORDER: the forward-backward response 1 / (1 + (f / f0)^(2n)) is
@@ -47,6 +49,9 @@ UNIFORM_TOLERANCE = 1e-3
 SPIKE_MIN_MM = 0.5
 SPIKE_MADS = 10.0
 SPIKE_MIN_SPEED_MM_S = 200.0
+# The markers' rigid body turns in chewing at up to about 120 deg/s; a marker of a cluster 40 mm wide jumping 3 mm
+# off its plane turns it by 4 deg within a frame, 200 deg/s at 50 Hz.
+SPIKE_MIN_TURN_DEG_S = 150.0
 SPEED_MADS = 5.0
 # A jump out and a jump back: their sum is less than this share of the smaller (a fast stroke's steps add up).
 CANCEL = 0.5
@@ -78,30 +83,52 @@ def _outliers(x: np.ndarray, floor: float, mads: float) -> np.ndarray:
     return x > max(floor, med + mads * sigma)
 
 
+def _jumps(step: np.ndarray, rate: np.ndarray, floor: float, t: np.ndarray, max_gap: float) -> np.ndarray:
+    """(N,) the frames between two jumps of ``rate`` (N-1,), outliers above ``floor`` (:data:`SPEED_MADS`), that
+    cancel (the sum of their ``step`` (N-1, 3) below :data:`CANCEL` of the smaller: a jump out and back; the steps
+    of a fast stroke add up instead) within ``max_gap`` seconds."""
+    bad = np.zeros(len(t), dtype=bool)
+    with np.errstate(invalid="ignore"):
+        jumps = np.flatnonzero(_outliers(rate, floor, SPEED_MADS))  # a jump between frame j and j + 1
+    for a, b in zip(jumps[:-1], jumps[1:]):
+        out, back = step[a], step[b]
+        cancels = np.linalg.norm(out + back) < CANCEL * min(np.linalg.norm(out), np.linalg.norm(back))
+        if cancels and t[b + 1] - t[a + 1] <= max_gap * (1 + 1e-9):
+            bad[a + 1 : b + 1] = True
+    return bad
+
+
 def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Recording, list[tuple[int, int, str]]]:
     """The recording with the frames of tracker spikes dropped (NaN, to be filled like gaps) and the spikes:
     (first frame, last frame, why) each. ``body`` (K, 3) m: the markers in {M} (None: their first frame)."""
     from chewbot.recordings.rigid import rigid_fit
 
+    from scipy.spatial.transform import Rotation
+
     P = rec.positions
     found: list[tuple[int, int, str]] = []
     bad = np.zeros(rec.n, dtype=bool)
+    dt = np.diff(rec.t)
+    turn = np.full(rec.n - 1, np.nan)
     if P.shape[1] >= 3:
         seen = ~missing(P).any(axis=1)  # gaps are not spikes: they are filled next
         d = np.full(rec.n, np.nan)
-        d[seen] = rigid_fit(P[0] if body is None else body, P[seen], rec.markers).max_mm
+        fitted = rigid_fit(P[0] if body is None else body, P[seen], rec.markers)
+        d[seen] = fitted.max_mm
         with np.errstate(invalid="ignore"):
             rigid = _outliers(d, SPIKE_MIN_MM, SPIKE_MADS)
         bad |= rigid
+        # a marker that jumps off the plane of three barely breaks their rigid body: their fitted rotation jumps
+        R = np.full((rec.n, 3, 3), np.nan)
+        R[seen] = fitted.R
+        both = seen[:-1] & seen[1:]
+        steps = np.full((rec.n - 1, 3), np.nan)
+        steps[both] = Rotation.from_matrix(np.einsum("nij,nkj->nik", R[1:][both], R[:-1][both])).as_rotvec()
+        turn = np.degrees(np.linalg.norm(steps, axis=1)) / dt
+        bad |= _jumps(steps, turn, SPIKE_MIN_TURN_DEG_S, rec.t, max_gap)
     step = np.diff(P, axis=0)
-    speed = np.linalg.norm(step, axis=2).max(axis=1) / np.diff(rec.t) / 1e-3  # mm/s, (n-1,)
-    with np.errstate(invalid="ignore"):
-        jumps = np.flatnonzero(_outliers(speed, SPIKE_MIN_SPEED_MM_S, SPEED_MADS))  # jump between frame j and j + 1
-    for a, b in zip(jumps[:-1], jumps[1:]):
-        out, back = step[a].sum(axis=0), step[b].sum(axis=0)  # a jump out and back cancels; a fast stroke adds up
-        cancels = np.linalg.norm(out + back) < CANCEL * min(np.linalg.norm(out), np.linalg.norm(back))
-        if cancels and rec.t[b + 1] - rec.t[a + 1] <= max_gap * (1 + 1e-9):
-            bad[a + 1 : b + 1] = True
+    speed = np.linalg.norm(step, axis=2).max(axis=1) / dt / factor("mm")  # mm/s, (n-1,)
+    bad |= _jumps(step.sum(axis=1), speed, SPIKE_MIN_SPEED_MM_S, rec.t, max_gap)
     edges = np.diff(np.r_[0, bad.astype(int), 0])
     for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
         if i0 == 0 or i1 == rec.n - 1:
@@ -110,7 +137,9 @@ def spikes(rec: Recording, body: np.ndarray | None, max_gap: float) -> tuple[Rec
         if P.shape[1] >= 3 and rigid[i0 : i1 + 1].any():
             why.append(f"the markers break the rigid body by up to {d[i0:i1 + 1].max():.3g} mm")
         if not why:
-            why.append(f"the markers jump at up to {speed[max(i0 - 1, 0):i1 + 1].max():.4g} mm/s")
+            around = slice(max(i0 - 1, 0), i1 + 1)
+            why.append(f"the markers jump at up to {np.nanmax(speed[around]):.4g} mm/s and turn at up to "
+                       f"{np.nanmax(np.r_[turn[around], 0.0]):.4g} deg/s")
         found.append((int(i0), int(i1), "; ".join(why)))
     if not found:
         return rec, found

@@ -20,6 +20,7 @@ import numpy as np
 
 from chewbot.model import Model
 from chewbot.recordings.robotfit import MIN_TRANSMISSION_DEG, fit_functions
+from chewbot.units import factor
 
 # Searched span per side of home: mm for lengths, deg for angles (the fit's units), beyond any pose of the robot.
 SPAN = 60.0
@@ -87,7 +88,7 @@ def reach(model: Model, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> R
             z_edge[j] = sign * hi
             limiting[f"{name} {'high' if sign > 0 else 'low'}"] = _limiting(fns, z_edge)
         coords[name] = (ends[0], ends[1])
-        units[name] = "mm" if fns.scale[j] == 1e-3 else "deg"
+        units[name] = "mm" if fns.scale[j] == factor("mm") else "deg"
     incisor, poses = {}, {}
     home = fns.pose(np.zeros((1, n)))
     start = home[0][0] + home[1][0] @ model.incisor
@@ -99,6 +100,6 @@ def reach(model: Model, min_transmission_deg: float = MIN_TRANSMISSION_DEG) -> R
             continue
         p, R = fns.pose(z[None])
         poses[label] = z * fns.scale
-        incisor[label] = float(d @ (p[0] + R[0] @ model.incisor - start) / 1e-3)
+        incisor[label] = float(d @ (p[0] + R[0] @ model.incisor - start) / factor("mm"))
         limiting[f"incisor {label}"] = _limiting(fns, z)
     return Reach(coords, units, incisor, poses, limiting, min_transmission_deg)

@@ -1,46 +1,40 @@
 """The search for a registration (``chewbot import-motion --fit-registration``): where the tracker sits and where
-the markers sit on the mandible, so that the robot reproduces as much of the recording as it can.
+the markers sit on the mandible, so that the robot reproduces as much of the recording as it can, starting from
+anatomy and never far from it.
 
 The recording, seen by the tracker, is a motion Y_k of the markers (Y_0 = I: the first frame is the rest frame).
-A registration places it on the robot: B = (R_B, t_B), the pose of {M} in the tracker's frame at rest (the
-markers' placement on the mandible), and X_0 = (R_0, p_0), the rest pose of {M} in {S}; frame k is then
-X_k = X_0 B^-1 Y_k B and the tracker sits at T = X_0 B^-1 (what the registration file's ``[tracker]`` holds, with
-the markers at R_B^T (c - t_B) in {M}, c their rest positions).
+A registration places it on the robot: B = (R_B, t_B), the pose of {M} in the tracker's frame at the first frame
+(the markers' placement on the mandible), and the tracker T = (A, o), p_S = A p_T + o; frame k is then
+X_k = T Y_k B (what the registration file's ``[tracker]`` holds, with the markers at R_B^T (c - t_B) in {M}, c their
+first positions).
+
+**Prior** (:mod:`chewbot.recordings.anatomy`): the opening axis on the condylar axis, the condyles' glide on the
+robot's condylar path, the most closed frame at home; with a ``[markers]`` table the placement is the lab's.
 
 **Share.** The largest uniform scale s <= 1 of the registered motion (displacement of O_M and rotation angle
-relative to the rest frame, :func:`chewbot.recordings.rigid.scale_motion`) at which every frame is reached within
+relative to the first frame, :func:`chewbot.recordings.rigid.scale_motion`) at which every frame is reached within
 ``--max-residual`` by an admissible pose (:func:`chewbot.recordings.fit.fit_to_robot`: condyles in their sockets,
 every transmission angle at least ``--min-transmission``). Found by bisection (:data:`BISECTIONS`).
 
-**Search.**
+**Search** (:func:`search`, shared with the point paths' :mod:`chewbot.recordings.register_point`). The share at
+the prior comes first: where it is 1 the prior is the registration, nothing the data say moves it. Otherwise the
+registration is refined around the prior, within hard bounds (box bounds of L-BFGS-B, SciPy): the tracker turned by
+at most :data:`MAX_TURN_DEG` (each component of its rotation vector within MAX_TURN_DEG / sqrt(3)) and shifted by
+at most :data:`MAX_SHIFT_MM` along each axis about the prior's rest position of O_M; the markers' placement
+likewise (rest = "first" only). The refinement minimises the mean over :data:`SEARCH_FRAMES` frames of
+0.5 max(0, e_k - :data:`MARGIN`)^2, e_k the fit's residual in tolerances (position over ``--max-residual``'s MM,
+orientation over its DEG), plus :data:`PULL` |x|^2 toward the prior: frames within the tolerance do not pull,
+and what the data do not fix stays where the prior put it. Its gradient is exact: the derivative of the fit's
+optimal value by the recorded pose is that of the residual at the fitted pose (the constraints do not depend on
+the recording: Danskin's theorem), chained with the Jacobian of the registered poses by the unknowns (CasADi,
+:class:`~chewbot.recordings.robotfit.RegistrationFunctions`). It runs at s = 1; if not every frame then passes,
+the share is bisected (:data:`SCALE_BISECTIONS` refinements) between the prior's and 1.
 
-1. Physics start (``rest = "first"``: the placement is unknown). The recording's dominant rotation axis (the
-   principal direction of the frames' rotation vectors, signed like the largest rotation, which is the opening)
-   is put on the model's condylar axis (the line through T_L and T_R, +y of {M}: a positive rotation about it
-   opens the mouth), at the point that the frames' rotations leave fixed (least squares over the frames
-   rotating more than :data:`AXIS_MIN_DEG`), moved along the axis to the markers' middle. The rotation about the
-   axis is the file's, turned by the smallest rotation that aligns the axes. With a ``[markers]`` table the
-   placement is the lab's and is kept; only the rest pose is searched. The rest pose starts at the robot's
-   admissible pose nearest to the file's rest pose (``rest = "first"``: home), an interior pose.
-2. Local refinement (L-BFGS-B, SciPy) of the rest pose and the placement, minimising the fit's mean weighted
-   residual 0.5 abs(r)^2 over :data:`SEARCH_FRAMES` frames at the current scale. Its gradient is exact: at a
-   fitted pose the derivative of the fit's optimal value with respect to the recorded pose is that of the
-   residual (the constraints do not depend on the recording: Danskin's theorem), chained with the Jacobian of
-   the registered poses by the unknowns (CasADi, :class:`~chewbot.recordings.robotfit.RegistrationFunctions`).
-   Bounds: the rest pose within each coordinate's reachable range (:mod:`chewbot.recordings.reach`), the
-   tracker's rotation within :data:`MAX_TRACKER_DEG` of the file's (so that an opening stays an opening) and
-   every marker within :data:`PLAUSIBLE_MM` of the model's incisor point (on the teeth, a bite fork or the chin),
-   both as quadratic penalties; and a small pull (:data:`PRIOR`) toward the file's tracker rotation, which decides
-   where residuals do not. Refined at s = 1, then, if the share falls short of 1, again at the share found;
-   the registration with the larger share is kept (the start's among them), and of equal shares the smaller
-   residual.
-
-**Identifiability.** On the target the HKPs put both condyles on one plane, p1 x + z + p2 = 0, which every
-motion of the robot keeps: moving the tracker by a rotation about the plane's normal or a translation along the
-plane changes no residual. A recording identifies the other three components of the tracker's placement (the
-plane's tilt, two angles, and its height) and, through the sockets and the chains' reach, bounds the three in
-the plane; among those, the search keeps the placement nearest to its start. The 6RSS reaches every pose near
-home: there no component is identified by residuals alone.
+**What a recording identifies.** On the target the HKPs put both condyles on one plane, p1 x + z + p2 = 0, which
+every motion of the robot keeps: moving the registration by a rotation about the plane's normal or a translation
+along the plane changes no residual, and those components keep the prior's values. A turn of the placement about
+the condylar axis moves only the glide's direction, and a shift of the axis perpendicular to the glide moves the
+condyles, to first order, along the plane: neither is seen by residuals either.
 """
 
 from __future__ import annotations
@@ -54,38 +48,42 @@ from scipy.spatial.transform import Rotation
 
 from chewbot.errors import RecordingError
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
+from chewbot.recordings.anatomy import RigidPrior, rigid_prior
 from chewbot.recordings.fit import fit_to_robot, settings_vector
-from chewbot.recordings.reach import reach
 from chewbot.recordings.rigid import kabsch
-from chewbot.recordings.robotfit import fit_functions, registration_functions
+from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_X, fit_functions, registration_functions
+from chewbot.units import factor
 
-MAX_TRACKER_DEG = 30.0
-PLAUSIBLE_MM = 100.0
+# Hard bounds of the search around the prior: the tracker's (and the placement's) turn, deg, and shift per axis, mm.
+MAX_TURN_DEG = 10.0
+MAX_SHIFT_MM = 5.0
 # Frames the refinement fits per evaluation (evenly spread, plus the largest rotation and displacement).
 SEARCH_FRAMES = 120
-# Frames rotating less than this do not locate the rotation axis.
-AXIS_MIN_DEG = 1.0
 # The share's bisection steps on [0, 1]: resolution 2^-12 = 2.4e-4.
 BISECTIONS = 12
+# Refinements while bisecting the share between the prior's and 1.
+SCALE_BISECTIONS = 5
 # L-BFGS-B iterations per refinement.
-ITERATIONS = 60
-# Weight of the penalties (residual units per deg^2 beyond the tracker bound, per mm^2 beyond the markers' bound).
-PENALTY = 10.0
-# Weight of the tracker's rotation away from the file's (residual units per deg^2): where the residual does not
-# tell the placements apart (the plane's symmetries, a rotation about a hinge axis), the search keeps the one
-# nearest to what the lab measured. Small beside the residual's curvature in the identified directions: on the
-# tests' synthetic recording 1e-4 moved the plane's tilt by 0.57 deg, 1e-6 by 0.006 deg, 1e-8 by 2e-4 deg.
-PRIOR = 1e-8
-MM, DEG = 1e-3, np.pi / 180
+ITERATIONS = 40
+# The refinement brings every frame within MARGIN of the tolerance (in tolerances; the import's fit may end a
+# little farther).
+MARGIN = 0.8
+# Poses whose positions (m) and rotation matrices differ by less than this are the same to rounding.
+SAME_POSE = 1e-12
+# Pull toward the prior (per deg^2 and mm^2 of the unknowns): decides where the residuals do not.
+PULL = 1e-6
+MM, DEG = factor("mm"), factor("deg")
 
 
 @dataclass(frozen=True, eq=False)
 class FoundRegistration:
     """What the search found (SI): the tracker ``rotation`` (3, 3) and ``origin`` (3,) (p_S = rotation p_T +
-    origin), the ``markers`` {name: position in {M}}, the ``share`` (see the module), the RMS of the weighted
-    residual over all frames at that share, the frames (indices) and constraints that limit it (the frames that
-    fail just above it), the tracker's rotation away from the file's (deg), the start's rotation axis in {M}
-    and the time taken."""
+    origin), the ``markers`` {name: position in {M}} (none for a point path), the ``share`` (see the module), the
+    RMS of the weighted residual over all frames at that share, the frames (indices) and constraints that limit it
+    (the frames that fail just above it); the prior's tracker, and how far the registration moved from it: the
+    tracker's turn (deg) and the shift of the rest pose (mm), the placement's turn (deg) and shift (mm); whether
+    the search refined the prior at all, evaluations, the time taken and notes."""
 
     rotation: np.ndarray
     origin: np.ndarray
@@ -94,189 +92,197 @@ class FoundRegistration:
     residual: float
     limiting_frames: np.ndarray
     limiting: str
-    tracker_change_deg: float
+    prior_rotation: np.ndarray
+    prior_origin: np.ndarray
+    turn_deg: float
+    shift_mm: float
+    placement_turn_deg: float
+    placement_shift_mm: float
+    refined: bool
     evaluations: int
     seconds: float
     notes: tuple[str, ...]
+    fit: object = None  # the fit (RobotFit) of every frame registered at the share, and those poses (p (N, 3), R (N, 3, 3))
+    poses: tuple[np.ndarray, np.ndarray] | None = None
+
+    def fit_of(self, p: np.ndarray, R: np.ndarray):
+        """The search's fit of these poses where they are the ones it fitted (to rounding), else None: the import
+        need not fit them again."""
+        if self.poses is None or self.fit is None or len(p) != len(self.poses[0]):
+            return None
+        same = np.abs(p - self.poses[0]).max() <= SAME_POSE and np.abs(R - self.poses[1]).max() <= SAME_POSE
+        return self.fit if same else None
+
+    def describe(self) -> str:
+        """How far the registration found lies from the prior, in a line."""
+        if not self.refined:
+            return "registration: the prior (every frame reached at scale 1 there; nothing moved it)"
+        text = (f"registration: refined from the prior within its bounds ({MAX_TURN_DEG:g} deg, {MAX_SHIFT_MM:g} mm per axis): "
+                f"tracker turned {self.turn_deg:.3g} deg, rest pose moved {self.shift_mm:.3g} mm")
+        if self.markers:
+            text += f"; markers' placement turned {self.placement_turn_deg:.3g} deg and moved {self.placement_shift_mm:.3g} mm"
+        return text
 
 
-def _flat(R: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) -> (N, 9) column by column, as the graphs take matrices."""
-    return np.swapaxes(R, 1, 2).reshape(len(R), 9)
-
-
-def _unflat(v: np.ndarray) -> np.ndarray:
-    return v.reshape(-1, 3, 3).transpose(0, 2, 1)
-
-
-def _angle_deg(R: np.ndarray) -> float:
+def angle_deg(R: np.ndarray) -> float:
+    """The rotation angle of R (3, 3), deg."""
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
 
 
-def _physics_start(R_Y, p_Y, c, R_B_file):
-    """R_B, t_B putting the recording's dominant rotation axis on the condylar axis (see the module)."""
-    phi = Rotation.from_matrix(R_Y).as_rotvec()
-    k = int(np.argmax(np.linalg.norm(phi, axis=1)))
-    if np.linalg.norm(phi[k]) < AXIS_MIN_DEG * DEG:
-        raise RecordingError(f"the recording rotates at most {np.degrees(np.linalg.norm(phi[k])):.3g} deg: no rotation axis "
-                             "to put on the condylar axis; give the markers in {M} ([markers])")
-    a = np.linalg.svd(phi, full_matrices=False)[2][0]
-    a = a if a @ phi[k] > 0 else -a
-    current = R_B_file @ np.array([0.0, 1.0, 0.0])
-    cross = np.cross(current, a)
-    turn = Rotation.from_rotvec(cross / max(np.linalg.norm(cross), 1e-300) * np.arctan2(np.linalg.norm(cross), current @ a))
-    R_B = turn.as_matrix() @ R_B_file
-    use = np.linalg.norm(phi, axis=1) > AXIS_MIN_DEG * DEG
-    lhs = (np.eye(3) - R_Y[use]).reshape(-1, 3)
-    point = np.linalg.lstsq(lhs, p_Y[use].reshape(-1), rcond=None)[0]
-    point += a * (a @ (c.mean(axis=0) - point))
-    return R_B, point, a
+def box(n_turn: int, n_shift: int, free: bool = True) -> list[tuple[float, float]]:
+    """L-BFGS-B bounds: turns (deg) within MAX_TURN_DEG / sqrt(3) per component (so within MAX_TURN_DEG in all),
+    shifts (mm) within MAX_SHIFT_MM; fixed at 0 where not ``free``."""
+    t, s = (MAX_TURN_DEG / np.sqrt(3), MAX_SHIFT_MM) if free else (0.0, 0.0)
+    return [(-t, t)] * n_turn + [(-s, s)] * n_shift
 
 
-def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...], rotation: np.ndarray,
-                     origin: np.ndarray, markers: dict[str, np.ndarray] | None, point, weights: tuple[float, float],
-                     tolerances: tuple[float, float], min_transmission_deg: float, progress=None) -> FoundRegistration:
-    """Search the registration of the marker paths ``positions`` (N, K, 3) m in the tracker's frame (named
-    ``names``), starting from the file's tracker ``rotation``, ``origin`` and ``markers`` in {M} (None:
-    ``rest = "first"``). ``weights``: the fit's (per mm, per deg); ``tolerances``: ``--max-residual`` (mm, deg)."""
-    started = time.perf_counter()
-    step = progress or (lambda message: None)
-    fns = fit_functions(model, min_transmission_deg)
-    reg = registration_functions(model)
-    settings = settings_vector(model, point, *weights)
-    n, N = fns.n, len(positions)
-    c = positions[0]
-    R_Y, p_Y = kabsch(c, positions)
-    notes = []
-    if markers is not None:
-        body = np.array([markers[name] for name in names])
-        R_B, t_B = (v[0] for v in kabsch(body, c[None]))
-        X0_p, X0_R = rotation @ t_B + origin, rotation @ R_B
-        fixed = True
-    else:
-        R_B, point_axis, axis = _physics_start(R_Y, p_Y, c, rotation.T)
-        hkp = model.hkp
-        t_B = point_axis - R_B @ (0.5 * (hkp.T_L + hkp.T_R))
-        X0_p, X0_R = np.zeros(3), np.eye(3)
-        fixed = False
-        notes.append(f"start: the recording's rotation axis {np.round(axis, 3).tolist()} (tracker frame) on the condylar "
-                     f"axis, through {np.round(point_axis / MM, 2).tolist()} mm (tracker frame)")
-    rest = fit_to_robot(model, X0_p[None], X0_R[None], point, *weights, min_transmission_deg)
-    z0 = rest.q[0] / fns.scale if rest.admissible[0] else np.zeros(n)
-    const = np.r_[_flat(R_B[None])[0], t_B, 1.0]
+def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, float, object, bool]:
+    """The search of the module docstring, for any registration: ``verdict(x, s)`` -> (every frame passes (N,),
+    the fit) at the unknowns x (0: the prior) and the scale s; ``objective(x, s)`` -> (value, gradient);
+    ``bounds`` of x (L-BFGS-B). Returns x, the share, its fit and whether the prior was refined."""
+    n = len(bounds)
 
-    ranges = reach(model, min_transmission_deg).coordinates
-    bounds = [ranges[name] for name in fns.coords] + [(-10.0, 10.0)] * (6 - n)
-    bounds += [(0.0, 0.0)] * 6 if fixed else [(-45.0, 45.0)] * 3 + [(-30.0, 30.0)] * 3
-    x0 = np.r_[np.clip(z0, [b[0] for b in bounds[:n]], [b[1] for b in bounds[:n]]), np.zeros(12 - n)]
-
-    phi = Rotation.from_matrix(R_Y).as_rotvec()
-    search = np.unique(np.r_[np.linspace(0, N - 1, min(N, SEARCH_FRAMES)).round().astype(int),
-                             np.argmax(np.linalg.norm(phi, axis=1)), np.argmax(np.linalg.norm(p_Y, axis=1))])
-    D = _flat(R_Y - np.eye(3))
-    counter = [0]
-
-    def frames_at(s, rows):
-        return np.hstack([_flat(Rotation.from_rotvec(s * phi[rows]).as_matrix()), D[rows], p_Y[rows]])
-
-    def penalty(x):
-        v, J = reg.placement(x, const)
-        A, dA = _unflat(v[None, :9])[0], J[:9].reshape(3, 3, 12).transpose(1, 0, 2)
-        t_b, dt = v[9:12], J[9:12]
-        Rb, dRb = _unflat(v[None, 12:21])[0], J[12:21].reshape(3, 3, 12).transpose(1, 0, 2)
-        # 2 (1 - cos theta) ~ theta^2 (rad^2), smooth at theta = 0
-        k = np.degrees(1.0) ** 2
-        value = PRIOR * k * (3.0 - np.trace(rotation.T @ A))
-        grad = -PRIOR * k * np.einsum("ij,ijk->k", rotation, dA)
-        cos = np.clip((np.trace(rotation.T @ A) - 1) / 2, -1.0, 1.0)
-        angle = np.degrees(np.arccos(cos))
-        if angle > MAX_TRACKER_DEG:
-            dangle = -np.degrees(1.0) / np.sqrt(max(1 - cos**2, 1e-300)) * 0.5 * np.einsum("ij,ijk->k", rotation, dA)
-            value += PENALTY * (angle - MAX_TRACKER_DEG) ** 2
-            grad += 2 * PENALTY * (angle - MAX_TRACKER_DEG) * dangle
-        if not fixed:
-            rel = c - t_b  # (K, 3)
-            m = rel @ Rb  # R_B^T (c - t_B), rows
-            dm = np.einsum("kj,jil->kil", rel, dRb) - np.einsum("ji,jl->il", Rb, dt)[None]
-            off = m - model.incisor
-            dist = np.linalg.norm(off, axis=1) / MM
-            over = dist > PLAUSIBLE_MM
-            if over.any():
-                ddist = np.einsum("ki,kil->kl", off[over], dm[over]) / (np.linalg.norm(off[over], axis=1)[:, None] * MM) / MM
-                value += PENALTY * np.sum((dist[over] - PLAUSIBLE_MM) ** 2)
-                grad += 2 * PENALTY * np.einsum("k,kl->l", dist[over] - PLAUSIBLE_MM, ddist)
-        return value, grad
-
-    def objective(x, s):
-        counter[0] += 1
-        const[12] = s
-        target, J = reg.targets(x, frames_at(s, search), const)
-        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg)
-        ok = fit.admissible
-        z = np.where(ok[:, None], fit.q / fns.scale, 0.0)
-        r = fns.errors(z, target, settings)[2]
-        cost = np.where(ok, 0.5 * np.sum(r**2, axis=1), 1e6)
-        g = np.where(ok[:, None], fns.cost_gradient(z, target, settings), 0.0)
-        value, grad = penalty(x)
-        return cost.mean() + value, np.einsum("ka,kab->b", g, J) / len(search) + grad
-
-    def registered(x, s):
-        const[12] = s
-        target, _ = reg.targets(x, frames_at(s, np.arange(N)), const)
-        return target[:, :3], _unflat(target[:, 3:])
-
-    def verdict(x, s):
-        p, R = registered(x, s)
-        fit = fit_to_robot(model, p, R, point, *weights, min_transmission_deg)
-        ok = fit.admissible & (fit.position_error_mm <= tolerances[0]) & (fit.orientation_error_deg <= tolerances[1])
-        return ok, fit
-
-    def share_of(x):
+    def share_of(x, lo=0.0):
         ok, fit = verdict(x, 1.0)
         if ok.all():
-            return 1.0, fit, ok
-        lo, hi, best = 0.0, 1.0, (None, None)
+            return 1.0, fit
+        hi, best = 1.0, None
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
             ok_mid, fit_mid = verdict(x, mid)
             if ok_mid.all():
-                lo, best = mid, (fit_mid, ok_mid)
+                lo, best = mid, fit_mid
             else:
                 hi = mid
-        return lo, best[0], best[1]
+        if best is None and lo > 0:  # no scale above the one it started from passed: that one's fit
+            best = verdict(x, lo)[1]
+        return lo, best
 
     def refine(x, s):
-        step(f"refining the registration at scale {s:.4g}")
-        res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-9})
+        progress(f"refining the registration around its prior at scale {s:.4g}")
+        res = minimize(objective, x, args=(s,), jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": ITERATIONS, "ftol": 1e-15, "gtol": 1e-12})
         return res.x
 
-    start_share, start_fit, _ = share_of(x0)
-    candidates = [(start_share, x0, start_fit)]  # the start itself: the search never ends below it
-    x = refine(x0, 1.0)
-    share, fit, ok = share_of(x)
-    candidates.append((share, x, fit))
-    if share < 1.0 and share > 0.0:
-        x2 = refine(x, share)
-        share2, fit2, ok2 = share_of(x2)
-        candidates.append((share2, x2, fit2))
+    x = np.zeros(n)
+    prior_share, prior_fit = share_of(x)
+    if prior_share == 1.0:
+        return x, 1.0, prior_fit, False
+    lo, hi = prior_share, 1.0
+    x1 = refine(x, 1.0)
+    if verdict(x1, 1.0)[0].all():
+        x, lo = x1, 1.0
+    else:
+        for _ in range(SCALE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            xm = refine(x, mid)
+            if verdict(xm, mid)[0].all():
+                lo, x = mid, xm
+            else:
+                hi = mid
+    share, fit = share_of(x, lo)
+    if fit is None and prior_fit is None:
+        raise RecordingError("--fit-registration: the robot reaches no scale of the recording registered at its prior, not "
+                             "even its first frame within --max-residual (is it a motion of the jaw, and does tracked "
+                             "name the point it gives?)")
+    if share < prior_share:  # never below the prior
+        return np.zeros(n), prior_share, prior_fit, False
+    return x, share, fit, True
 
-    def rms(fit):
-        if fit is None:
-            return np.inf
-        return float(np.sqrt(np.nanmean(fit.position_error_mm**2 * weights[0] ** 2 + fit.orientation_error_deg**2 * weights[1] ** 2)))
 
-    share, x, fit = max(candidates, key=lambda cand: (round(cand[0], 6), -rms(cand[2])))
-    limiting_frames, limiting = np.zeros(0, dtype=int), ""
-    if share < 1.0:
-        above = min(1.0, share + 2.0**-BISECTIONS)
-        ok_above, fit_above = verdict(x, above)
-        limiting_frames = np.flatnonzero(~ok_above)
-        broken = [nm for nm, b in zip(fit_above.constraint_names, fit_above.outside[~ok_above].any(axis=0)) if b]
-        limiting = ", ".join(broken) if broken else "the residual tolerance (--max-residual)"
-    v, _ = reg.placement(x, const)
-    A, t_b, Rb = _unflat(v[None, :9])[0], v[9:12], _unflat(v[None, 12:21])[0]
-    p_rest = registered(x, 1.0)[0][0]  # p_0: the rest frame does not move (Y_0 = I)
-    origin_found = p_rest - A @ t_b
-    found_markers = {name: Rb.T @ (c[k] - t_b) for k, name in enumerate(names)}
-    return FoundRegistration(A, origin_found, found_markers, share, rms(fit), limiting_frames, limiting,
-                             _angle_deg(rotation.T @ A), counter[0], time.perf_counter() - started, tuple(notes))
+def limited_by(verdict, x, share) -> tuple[np.ndarray, str]:
+    """The frames that fail just above the share, and the constraints they break."""
+    if share >= 1.0:
+        return np.zeros(0, dtype=int), ""
+    ok_above, fit_above = verdict(x, min(1.0, share + 2.0**-BISECTIONS))
+    frames = np.flatnonzero(~ok_above)
+    broken = [nm for nm, b in zip(fit_above.constraint_names, fit_above.outside[~ok_above].any(axis=0)) if b]
+    return frames, ", ".join(broken) if broken else "the residual tolerance (--max-residual)"
+
+
+def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...], rotation: np.ndarray,
+                     markers: dict[str, np.ndarray] | None, point, weights: tuple[float, float],
+                     tolerances: tuple[float, float], min_transmission_deg: float, progress: Progress = SILENT) -> FoundRegistration:
+    """Search the registration of the marker paths ``positions`` (N, K, 3) m in the tracker's frame (named
+    ``names``) from its anatomical prior; ``rotation``: the file's tracker rotation (used only where the condyles
+    do not glide); ``markers`` in {M} (None: ``rest = "first"``, the placement is searched). ``weights``: the
+    fit's (per mm, per deg); ``tolerances``: ``--max-residual`` (mm, deg)."""
+    started = time.perf_counter()
+    fns = fit_functions(model, min_transmission_deg)
+    reg = registration_functions(model)
+    N = len(positions)
+    c = positions[0]
+    body = None if markers is None else np.array([markers[name] for name in names])
+    prior: RigidPrior = rigid_prior(model, positions, rotation, body)
+    R_Y, p_Y = kabsch(c, positions)
+    phi = Rotation.from_matrix(R_Y).as_rotvec()
+    D = np.swapaxes(R_Y - np.eye(3), 1, 2).reshape(N, 9)
+    centre = prior.rotation @ prior.t_B + prior.origin  # the prior's rest position of O_M
+    search_rows = np.unique(np.r_[np.linspace(0, N - 1, min(N, SEARCH_FRAMES)).round().astype(int),
+                                  np.argmax(np.linalg.norm(phi, axis=1)), np.argmax(np.linalg.norm(p_Y, axis=1))])
+    # the search's fit weighs errors in tolerances: its residual's length is 1 where a frame is at its tolerance
+    settings = settings_vector(model, point, 1.0 / tolerances[0], 1.0 / tolerances[1])
+    counter = [0]
+
+    def const(s):
+        return REGISTRATION_CONST.join(rotation=prior.rotation, origin=prior.origin, centre=centre, R_B=prior.R_B,
+                                       t_B=prior.t_B, scale=s)
+
+    def frames(s, rows):  # rows laid out as robotfit.REGISTRATION_FRAME: [exp(s phi_k); R_Y,k - I; p_Y,k]
+        turned = Rotation.from_rotvec(s * phi[rows]).as_matrix()
+        return np.hstack([np.swapaxes(turned, 1, 2).reshape(len(rows), 9), D[rows], p_Y[rows]])
+
+    def poses(x, s, rows):
+        target, J = reg.targets(x, frames(s, rows), const(s))
+        return target, J
+
+    def verdict(x, s):
+        target, _ = poses(x, s, np.arange(N))
+        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg)
+        ok = fit.admissible & (fit.position_error_mm <= tolerances[0]) & (fit.orientation_error_deg <= tolerances[1])
+        return ok, fit
+
+    def objective(x, s):
+        counter[0] += 1
+        target, J = poses(x, s, search_rows)
+        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, 1.0 / tolerances[0], 1.0 / tolerances[1],
+                           min_transmission_deg)
+        ok = fit.admissible
+        z = np.where(ok[:, None], fit.q / fns.scale, 0.0)
+        r = fns.errors(z, target, settings)[2]
+        e = np.sqrt(np.sum(r**2, axis=1))
+        excess = np.where(ok, np.maximum(0.0, e - MARGIN), 0.0)
+        factor = np.where(excess > 0, excess / np.maximum(e, 1e-300), 0.0)
+        g = factor[:, None] * fns.cost_gradient(z, target, settings)
+        value = 0.5 * np.mean(excess**2) + (~ok).sum() / len(search_rows) + PULL * x @ x
+        return value, np.einsum("ka,kab->b", g, J) / len(search_rows) + 2 * PULL * x
+
+    bounds = box(3, 3) + box(3, 3, free=markers is None)
+    x, share, fit, refined = search(verdict, objective, bounds, progress)
+    limiting_frames, limiting = limited_by(verdict, x, share)
+    u = REGISTRATION_X.cut(x)
+    turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
+    A = turn @ prior.rotation
+    origin = turn @ (prior.origin - centre) + centre + u["shift"] * MM
+    R_B = prior.R_B @ Rotation.from_rotvec(u["placement_turn"] * DEG).as_matrix()
+    t_B = prior.t_B + prior.R_B @ u["placement_shift"] * MM
+    found_markers = {name: R_B.T @ (c[k] - t_B) for k, name in enumerate(names)}
+    target, _ = poses(x, share, np.arange(N))
+    rest = A @ t_B + origin
+    rms = float(np.sqrt(np.nanmean(fit.position_error_mm**2 * weights[0] ** 2 + fit.orientation_error_deg**2 * weights[1] ** 2)))
+    notes = list(prior.notes)
+    if markers is None:
+        notes.append(f"prior: the opening axis {np.round(prior.axis, 3).tolist()} (tracker frame) on the condylar axis, the "
+                     f"condyles gliding {prior.glide_mm:.3g} mm on the robot's condylar path, frame {prior.closed + 1} (the most "
+                     "closed) at home")
+    else:
+        notes.append(f"prior: the markers where [markers] puts them, frame {prior.closed + 1} (the most closed) at home")
+    return FoundRegistration(A, origin, found_markers, share, rms, limiting_frames, limiting, prior.rotation, prior.origin,
+                             angle_deg(turn), float(np.linalg.norm(rest - centre) / MM),
+                             float(np.linalg.norm(u["placement_turn"])), float(np.linalg.norm(u["placement_shift"])), refined,
+                             counter[0], time.perf_counter() - started, tuple(notes), fit, (target[:, :3], _unflat(target[:, 3:])))
+
+
+def _unflat(v: np.ndarray) -> np.ndarray:
+    """(N, 9) column by column -> (N, 3, 3)."""
+    return v.reshape(-1, 3, 3).transpose(0, 2, 1)

@@ -22,18 +22,18 @@ Every error is a :class:`~chewbot.errors.RecordingError` naming the file and the
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, field_validator
 
+from chewbot.config import Strict, key_error, read_text, validate
 from chewbot.errors import RecordingError
-from chewbot.config import Strict, format_validation_error
-from chewbot.model.params import ROTATION_TOLERANCE
+from chewbot.model.params import POSITION, ROTATION_TOLERANCE
 from chewbot.recordings.formats import known_length_units, length_factor
+from chewbot.units import factor
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
@@ -50,7 +50,7 @@ class TrackerSection(Strict):
 class FitSection(Strict):
     position_weight_per_mm: float = Field(1.0, gt=0)
     orientation_weight_per_deg: float = Field(1.0, gt=0)
-    point_mm: Vec3 | None = None
+    point_mm: Annotated[Vec3, POSITION] | None = None
 
 
 # Landmarks a lab may digitise at the rest frame, each mapped to the model's point of the same name.
@@ -68,10 +68,14 @@ class LandmarksSection(Strict):
 class RegistrationFile(Strict):
     """The TOML file as written."""
 
+    DOCS = "docs/recordings.md"
+
     units: str
     markers: dict[str, Vec3] | None = None
     rest: Literal["first"] | None = None
-    tracked: Literal["incisor"] | None = None
+    # what the recording tracks: a rigid body, or the point of the mandible (a LANDMARKS name) whose path the markers
+    # give (one marker, or several moving in parallel); without the key it is detected (recordings.anatomy.detect)
+    tracked: Literal["rigid", "incisor", "molar_left", "molar_right", "condyle_left", "condyle_right"] | None = None
     landmarks: LandmarksSection | None = None
     tracker: TrackerSection = TrackerSection()
     scale: float = Field(1.0, gt=0)
@@ -92,7 +96,8 @@ class Registration:
     ``rotation`` (3, 3) and ``origin`` (3,) m with p_S = rotation p_T + origin; ``point`` (3,) m in {M} or None
     (the model's incisal point); weights per mm and per degree; ``landmarks``: digitised points of the mandible
     at the rest frame in the tracker's frame (m), by the name of the model's point they are (:data:`LANDMARKS`),
-    or None; ``tracked``: "incisor" for an incisal-point recording, else None."""
+    or None; ``tracked``: "rigid", the name of the point of the mandible whose path the markers give (a
+    :data:`LANDMARKS` name), or None: detected from the recording."""
 
     source: str
     units: str
@@ -105,40 +110,35 @@ class Registration:
     orientation_weight_per_deg: float
     point: np.ndarray | None
     landmarks: dict[str, np.ndarray] | None = None  # name: position (m) in the tracker's frame at the rest frame
-    tracked: str | None = None  # "incisor": the recording tracks the incisal point (its markers move in parallel)
+    tracked: str | None = None  # "rigid", a landmark's name (a point path) or None (detected from the recording)
+
+    @property
+    def point_path(self) -> bool:
+        """The recording is the path of one point of the mandible (``tracked`` names it)."""
+        return self.tracked not in (None, "rigid")
 
 
 def load_registration(path: str | Path) -> Registration:
     """Read and validate a registration file."""
-    path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: no such registration file") from None
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{path}: not valid TOML ({exc})") from None
-    return registration_from_dict(raw, str(path))
+    text = read_text(path, "registration file", RecordingError)
+    return registration_from_dict(text.data, str(text.path))
 
 
 def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
     """Validate a parsed registration file and convert it to SI."""
-    try:
-        f = RegistrationFile.model_validate(raw)
-    except ValidationError as exc:
-        raise RecordingError(format_validation_error(source, exc)) from None
+    f = validate(RegistrationFile, raw, source, RecordingError)
 
     def fail(key: str, reason: str):
-        raise RecordingError(f"{source}: key '{key}': {reason}")
+        raise key_error(source, key, reason, RecordingError)
 
-    if f.tracked is not None:
-        if f.markers is not None or f.landmarks is not None or f.rest is not None or f.fit.point_mm is not None:
-            fail("tracked", "tracked = \"incisor\": the recording's markers are the incisal point, carried into {S} by "
-                 "[tracker]; it takes no [markers], [landmarks], rest or [fit] point_mm")
+    if f.tracked not in (None, "rigid"):
+        if f.markers is not None or f.landmarks is not None or f.fit.point_mm is not None:
+            fail("tracked", f"tracked = \"{f.tracked}\": the recording's markers give the path of that point, carried into "
+                 "{S} by [tracker]; it takes no [markers], [landmarks] or [fit] point_mm (rest, [tracker], scale and the "
+                 "[fit] weights it takes)")
         return Registration(source, f.units, None, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * length_factor(f.units, source),
                             f.scale, f.angle_scale, f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                            None, None, "incisor")
+                            None, None, f.tracked)
     if (f.markers is None) == (f.rest is None):
         fail("markers" if f.markers is None else "rest", "give either a [markers] table (each marker's position in {M}) "
              "or rest = \"first\" (the first frame defines the markers and is the home pose), not both or neither")
@@ -160,7 +160,8 @@ def registration_from_dict(raw: dict, source: str = "<dict>") -> Registration:
             fail("markers", "the markers lie on one line (or nearly): they do not fix a rotation about it")
     return Registration(source, f.units, markers, _rotation(f.tracker.rotation, fail), np.array(f.tracker.origin) * unit, f.scale, f.angle_scale,
                         f.fit.position_weight_per_mm, f.fit.orientation_weight_per_deg,
-                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * 1e-3, landmarks)
+                        None if f.fit.point_mm is None else np.array(f.fit.point_mm) * factor("mm"), landmarks,
+                        "rigid" if f.markers is not None or landmarks is not None else f.tracked)
 
 
 def _rotation(rows, fail) -> np.ndarray:
@@ -187,15 +188,17 @@ def registration_toml(reg: Registration, comment: str) -> str:
     def vec(v) -> str:
         return "[" + ", ".join(repr(float(x)) for x in v) + "]"
 
+    mm = factor("mm")
+
     lines = [f"# {line}" for line in comment.splitlines()]
     lines += ['units = "mm"', f"scale = {float(reg.scale)!r}", f"angle_scale = {float(reg.angle_scale)!r}"]
     if reg.tracked is not None:
         lines += [f'tracked = "{reg.tracked}"']
-    else:
-        lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / 1e-3)}" for name, p in (reg.markers or {}).items()]
+    if not reg.point_path:
+        lines += ["", "[markers]"] + [f"{name} = {vec(np.asarray(p) / mm)}" for name, p in (reg.markers or {}).items()]
     lines += ["", "[tracker]", "rotation = [" + ",\n            ".join(vec(row) for row in reg.rotation) + "]",
-              f"origin = {vec(reg.origin / 1e-3)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
+              f"origin = {vec(reg.origin / mm)}", "", "[fit]", f"position_weight_per_mm = {float(reg.position_weight_per_mm)!r}",
               f"orientation_weight_per_deg = {float(reg.orientation_weight_per_deg)!r}"]
     if reg.point is not None:
-        lines.append(f"point_mm = {vec(reg.point / 1e-3)}")
+        lines.append(f"point_mm = {vec(reg.point / mm)}")
     return "\n".join(lines) + "\n"

@@ -70,6 +70,25 @@ def _coefficients(model: Model, task: Task, rows: np.ndarray, side: str):
     return A - C, B - C, C, theta_prime
 
 
+def limit_report(model: Model, task: Task) -> list[str]:
+    """Where ``task`` at its own times breaks the model's crank speed, acceleration and torque limits (the
+    frictionless inverse dynamics, as :func:`retime` uses them): per limit broken, its largest value, the crank
+    and the time, and the span of times over which it is broken."""
+    lim = model.limits
+    kin = solve_kinematics(model, task)
+    tau = inverse_dynamics(model, kin, "hessian", side=task.side).tau
+    out = []
+    for name, v, bound, unit in (("crank speed", kin.dtheta, lim.speed, "rad/s"), ("crank acceleration", kin.ddtheta, lim.acceleration, "rad/s^2"),
+                                 ("torque", tau, lim.torque, "N*m")):
+        over = np.abs(v) > bound
+        if np.isfinite(bound) and over.any():
+            i, j = np.unravel_index(int(np.argmax(np.abs(v))), v.shape)
+            times = task.t[over.any(axis=1)]
+            out.append(f"{name} up to {abs(v[i, j]):.4g} {unit} (crank {j + 1}, t = {task.t[i]:.4g} s) above the limit {bound:g} {unit} "
+                       f"between t = {times[0]:.4g} and {times[-1]:.4g} s")
+    return out
+
+
 def retime(model: Model, task: Task) -> Retiming:
     """The time-optimal re-timing of ``task`` within ``model``'s limits (module docstring): its samples every
     :data:`GRID_S` of its own time are the grid, each at its new time."""

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-MM = 1e-3
+from chewbot.units import factor
+
+MM = factor("mm")
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,9 +33,9 @@ from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
+from chewbot.units import factor
 
-MM = 1e-3
-DEG = np.pi / 180
+MM, DEG = factor("mm"), factor("deg")
 # Gauss-Newton iterations per frame inside the compiled kernel. From the previous frame's result or from the
 # recorded pose's own coordinates, the fit's last step falls to rounding (1e-14 mm) in 4 iterations on a chewing
 # recording at 100 Hz without noise and in 6 with 0.1 mm of marker noise (quadratic convergence where the robot
@@ -52,13 +52,19 @@ REACH_MARGIN = 2 * SINGULAR_TOLERANCE
 # task runs without near-singular samples (a free search otherwise ends on the chains' dead points, where a crank's
 # speed is unbounded for a finite speed of the mandible).
 MIN_TRANSMISSION_DEG = NEAR_SINGULAR_DEG
+# A point of {M} this near the condylar axis (mm) has no opening direction of its own: no turn about the axis moves
+# it down (a condyle glides instead).
+MIN_LEVER_MM = 10.0
+# SQP iterations per frame at most: a frame on the boundary takes about 3; one that stalls is started again
+# elsewhere, or kept where it stalled if admissible (chewbot.recordings.fit).
+SQP_ITERATIONS = 40
 _SQP = {
     "qpsol": "qrqp", "convexify_strategy": "eigen-clip",  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                       "constr_viol_tol": 1e-13},
     "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
-    "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": 100,
+    "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": SQP_ITERATIONS,
 }
 
 
@@ -269,32 +275,57 @@ def _build(model: Model) -> FitFunctions:
 
 # ------------------------------------------------------------------------------------------ registration search
 
+@dataclass(frozen=True)
+class Layout:
+    """A named layout of a flat vector: ``parts`` (name, size) in order; :meth:`cut` gives each part's slice of a
+    NumPy or CasADi vector, :meth:`join` the vector of named NumPy parts."""
+
+    parts: tuple[tuple[str, int], ...]
+
+    @property
+    def size(self) -> int:
+        return sum(n for _, n in self.parts)
+
+    def slices(self) -> dict[str, slice]:
+        out, at = {}, 0
+        for name, n in self.parts:
+            out[name] = slice(at, at + n)
+            at += n
+        return out
+
+    def cut(self, v) -> dict:
+        return {name: v[sl] for name, sl in self.slices().items()}
+
+    def join(self, **values) -> np.ndarray:
+        return np.concatenate([np.ravel(np.asarray(values[name], dtype=float), order="F") for name, _ in self.parts])
+
+
+# The rigid-body registration search's unknowns (relative to the prior) and constants (matrices column by column).
+REGISTRATION_X = Layout((("turn", 3), ("shift", 3), ("placement_turn", 3), ("placement_shift", 3)))
+REGISTRATION_CONST = Layout((("rotation", 9), ("origin", 3), ("centre", 3), ("R_B", 9), ("t_B", 3), ("scale", 1)))
+# A frame of the recording relative to its first: [exp(s phi_k); R_Y,k - I; p_Y,k].
+REGISTRATION_FRAME = Layout((("turned", 9), ("D", 9), ("p", 3)))
+
+
 @dataclass(frozen=True, eq=False)
 class RegistrationFunctions:
-    """The graphs of the registration search (:mod:`chewbot.recordings.register`), for one model.
+    """The graph of the registration search around its prior (:mod:`chewbot.recordings.register`), for one model.
 
-    The unknowns x (12,): the rest pose of {M} (the fit's n coordinates z0 in mm and deg, then, on the target,
-    an offset of Z in mm and of gamma in deg off the robot's poses) and a correction of the markers' placement
-    B = (R_B, t_B), {M} in the tracker's frame at rest: R_B = R_B,start exp(dr) (dr in deg), t_B = t_B,start + dt
-    (mm). With the tracker's motion Y_k (Y_0 = I) and the scale s, frame k is at
-    p_k = p_0 + s R_0 R_B^T ((R_Y,k - I) t_B + p_Y,k), R_k = R_0 R_B^T exp(s phi_k) R_B, phi_k the rotation vector
-    of R_Y,k. Per frame [exp(s phi_k) (9); R_Y,k - I (9); p_Y,k (3)] (columns first), constants [R_B,start (9);
-    t_B,start (3) m; s].
+    The prior (:func:`chewbot.recordings.anatomy.rigid_prior`): the tracker (A_p, o_p; p_S = A p_T + o) and the
+    markers' placement B_p = (R_B,p, t_B,p), {M} in the tracker's frame at the first frame. The unknowns x
+    (:data:`REGISTRATION_X`): the tracker turned by exp(w) (deg) about the prior's rest position of O_M h and
+    shifted by v (mm) in {S}: A = exp(w) A_p, o = exp(w) (o_p - h) + h + v; the placement turned and shifted in
+    {M}: R_B = R_B,p exp(w_B), t_B = t_B,p + R_B,p v_B (mm). With the tracker's motion Y_k (Y_0 = I) and the scale
+    s, frame k is at p_k = p_0 + s A ((R_Y,k - I) t_B + p_Y,k), R_k = A exp(s phi_k) R_B, p_0 = A t_B + o, phi_k the
+    rotation vector of R_Y,k. Constants :data:`REGISTRATION_CONST`, frames :data:`REGISTRATION_FRAME`.
     """
 
-    n_x: int
     _targets: ca.Function
-    _placement: ca.Function
 
     def targets(self, x, frames, const) -> tuple[np.ndarray, np.ndarray]:
         """The recorded poses (N, 12) as the fit takes them and their Jacobians (N, 12, 12) by x."""
         t, J = evaluate(self._targets, frames, x, const)
         return t, J
-
-    def placement(self, x, const) -> tuple[np.ndarray, np.ndarray]:
-        """[R_0 R_B^T (9, the tracker's rotation); t_B (3) m; R_B (9)] of x, and its Jacobian (21, 12) by x."""
-        v, J = evaluate(self._placement, x[None], const[None])
-        return v[0], J[0]
 
 
 def _expm(w):
@@ -307,87 +338,90 @@ def _expm(w):
 
 
 def registration_functions(model: Model) -> RegistrationFunctions:
-    """The registration search's graphs for ``model`` (built once per process)."""
-    return cached_graph(folded(model), ("recordings", "registration"), lambda: _build_registration(model))
+    """The registration search's graph (built once per process; it does not depend on the model)."""
+    return cached_graph(folded(model), ("recordings", "registration", "prior"), _build_registration)
 
 
-def _build_registration(model: Model) -> RegistrationFunctions:
-    s_model = symbolic(folded(model), "euler-angles")
-    coords = COORDINATES[(model.mechanism, "euler-angles")]
-    scale = np.array([MM if c in ("X", "Y", "Z") else DEG for c in coords])
-    n = len(coords)
-    x = ca.SX.sym("x", 12)
-    p0, R0 = ca.Function("reg_pose", [s_model.q], [s_model.p, s_model.R])(ca.DM(scale) * x[:n])
-    if n == 4:  # off the robot's poses: Z and gamma of the rest pose
-        p0 = p0 + ca.vertcat(0, 0, x[4] * MM)
-        c, s_ = ca.cos(x[5] * DEG), ca.sin(x[5] * DEG)
-        R0 = ca.mtimes(R0, ca.vertcat(ca.horzcat(c, -s_, 0), ca.horzcat(s_, c, 0), ca.horzcat(0, 0, 1)))
-    const = ca.SX.sym("const", 13)
-    R_B = ca.mtimes(ca.reshape(const[:9], 3, 3), _expm(x[6:9] * DEG))
-    t_B = const[9:12] + x[9:12] * MM
-    scale_s = const[12]
-    frame = ca.SX.sym("frame", 21)
-    Rs, D, pY = ca.reshape(frame[:9], 3, 3), ca.reshape(frame[9:18], 3, 3), frame[18:21]
-    A = ca.mtimes(R0, R_B.T)
-    p_k = p0 + scale_s * ca.mtimes(A, ca.mtimes(D, t_B) + pY)
-    R_k = ca.mtimes(ca.mtimes(A, Rs), R_B)
+def _build_registration() -> RegistrationFunctions:
+    x = ca.SX.sym("x", REGISTRATION_X.size)
+    const = ca.SX.sym("const", REGISTRATION_CONST.size)
+    frame = ca.SX.sym("frame", REGISTRATION_FRAME.size)
+    u, c, f = REGISTRATION_X.cut(x), REGISTRATION_CONST.cut(const), REGISTRATION_FRAME.cut(frame)
+    turn = _expm(u["turn"] * DEG)
+    A = ca.mtimes(turn, ca.reshape(c["rotation"], 3, 3))
+    o = ca.mtimes(turn, c["origin"] - c["centre"]) + c["centre"] + u["shift"] * MM
+    R_Bp = ca.reshape(c["R_B"], 3, 3)
+    R_B = ca.mtimes(R_Bp, _expm(u["placement_turn"] * DEG))
+    t_B = c["t_B"] + ca.mtimes(R_Bp, u["placement_shift"] * MM)
+    p_k = ca.mtimes(A, t_B) + o + c["scale"] * ca.mtimes(A, ca.mtimes(ca.reshape(f["D"], 3, 3), t_B) + f["p"])
+    R_k = ca.mtimes(ca.mtimes(A, ca.reshape(f["turned"], 3, 3)), R_B)
     target = ca.vertcat(p_k, ca.reshape(R_k, 9, 1))
-    targets = ca.Function("reg_targets", [frame, x, const], [target, ca.jacobian(target, x)])
-    placed = ca.vertcat(ca.reshape(A, 9, 1), t_B, ca.reshape(R_B, 9, 1))
-    placement = ca.Function("reg_placement", [x, const], [placed, ca.jacobian(placed, x)])
-    return RegistrationFunctions(12, targets, placement)
+    return RegistrationFunctions(ca.Function("reg_targets", [frame, x, const], [target, ca.jacobian(target, x)]))
+
+
+# The point-path registration search's unknowns and constants.
+POINT_X = Layout((("turn", 3), ("rest", 3)))
+POINT_CONST = Layout((("rotation", 9), ("scale", 1), ("home", 3), ("point", 3)))
 
 
 @dataclass(frozen=True, eq=False)
 class PointRegistrationFunctions:
-    """The graphs of the registration search for an incisal-point recording (``tracked = "incisor"``,
-    :mod:`chewbot.recordings.register_point`), for one model.
+    """The graph of the registration search for a point path (:mod:`chewbot.recordings.register_point`), for one
+    model.
 
-    The unknowns x (6,): a turn dr (deg) of the tracker's rotation, A = exp(dr) A_start, and the rest incisor's
-    offset o (mm) from the home incisor I_home in {S}. Frame k's tracked point, relative to the first frame in the
-    tracker's frame, is d_k (m); at the scale s the registered point is Q_k = I_home + o + s A d_k, and the pose the
-    fit is given is the hinge guess of :func:`chewbot.recordings.importer.hinge_angle` written again here: R_k the
-    rotation about y by beta_k = psi + asin(-(s (A d_k)_z + r_z) / abs(r_xz)) (r = I - C in {M}, C the condyles'
-    middle, psi = atan2(r_z, r_x)), p_k = Q_k - R_k I. Constants [A_start (9, columns first); s; I_home (3) m;
-    A_file (9)].
+    The unknowns x (:data:`POINT_X`): a turn w (deg) of the tracker's rotation about the prior's, A = exp(w) A_p,
+    and the first frame's point's offset o (mm) from where the tracked point b of {M} is at home, Q_home, in {S}.
+    Frame k's point, relative to the first frame in the tracker's frame, is d_k (m); at the scale s the
+    registered point is Q_k = Q_home + o + s A d_k, and the pose the fit is given is the hinge guess
+    (:func:`hinge_beta`, the import's too): R_k the rotation about y by beta_k = psi + asin(-(s (A d_k)_z + r_z) /
+    abs(r_xz)) (r = b - C in {M}, C the condyles' middle, psi = atan2(r_z, r_x); none for a point within
+    :data:`MIN_LEVER_MM` of the condylar axis), p_k = Q_k - R_k b. Constants :data:`POINT_CONST`: A_p, s, Q_home
+    (m), b (m).
     """
 
     _targets: ca.Function
-    _turn: ca.Function
 
     def targets(self, x, frames, const) -> tuple[np.ndarray, np.ndarray]:
         """The recorded poses (N, 12) as the fit takes them, and their Jacobians (N, 12, 6) by x; ``frames`` (N, 3)."""
         t, J = evaluate(self._targets, frames, x, const)
         return t, J
 
-    def turn(self, x, const) -> tuple[np.ndarray, float, np.ndarray]:
-        """The tracker's rotation A (3, 3), its angle from the file's (deg) and that angle's gradient (6,) by x."""
-        a, angle, grad = evaluate(self._turn, x[None], const[None])
-        return a[0].reshape(3, 3).T, float(angle[0, 0]), grad[0]
-
 
 def point_registration_functions(model: Model) -> PointRegistrationFunctions:
-    """The incisal-point registration search's graphs for ``model`` (built once per process)."""
-    return cached_graph(folded(model), ("recordings", "point registration"), lambda: _build_point_registration(model))
+    """The point-path registration search's graph for ``model`` (built once per process)."""
+    return cached_graph(folded(model), ("recordings", "point registration", "prior"), lambda: _build_point_registration(model))
+
+
+def hinge_beta(model: Model, b, drop):
+    """The rotation about the condylar axis (+y of {M} through the condyles' midpoint C) that moves the point b
+    of {M} by ``drop`` along z (m; negative: down), the condyles held: -abs(r_xz) sin(beta - psi) = drop + r_z,
+    r = b - C, psi = atan2(r_z, r_x); beta = 0 at drop = 0 (the argument of arcsin clipped to [-1, 1]). For NumPy
+    or CasADi values of b and drop; 0 for a point within MIN_LEVER_MM of the axis, which no turn moves down."""
+    is_ca = isinstance(drop, (ca.SX, ca.MX)) or isinstance(b, (ca.SX, ca.MX))
+    lib = ca if is_ca else np
+    C = 0.5 * (model.hkp.T_L + model.hkp.T_R)
+    rx, rz = b[0] - C[0], b[2] - C[2]
+    size = lib.sqrt(rx**2 + rz**2 + 1e-18)  # (1e-9 m)^2: a finite derivative on the axis, where the guess is 0
+    psi = lib.arctan2(rz, rx) if not is_ca else ca.atan2(rz, rx)
+    arg = -(drop + rz) / lib.fmax(size, 1e-9) if is_ca else -(drop + rz) / max(float(size), 1e-9)
+    arg = ca.fmin(1, ca.fmax(-1, arg)) if is_ca else np.clip(arg, -1.0, 1.0)
+    beta = psi + (ca.asin(arg) if is_ca else np.arcsin(arg))
+    if is_ca:
+        return ca.if_else(size < MIN_LEVER_MM * MM, 0, beta)
+    return np.zeros_like(np.asarray(drop, dtype=float)) if size < MIN_LEVER_MM * MM else beta
 
 
 def _build_point_registration(model: Model) -> PointRegistrationFunctions:
-    x = ca.SX.sym("x", 6)
-    const = ca.SX.sym("const", 22)
+    x = ca.SX.sym("x", POINT_X.size)
+    const = ca.SX.sym("const", POINT_CONST.size)
     d = ca.SX.sym("d", 3)
-    A = ca.mtimes(_expm(x[:3] * DEG), ca.reshape(const[:9], 3, 3))
-    s, home, A_file = const[9], const[10:13], ca.reshape(const[13:22], 3, 3)
-    v = s * ca.mtimes(A, d)
-    Q = home + x[3:6] * MM + v
-    incisor = ca.DM(model.incisor)
-    r = model.incisor - 0.5 * (model.hkp.T_L + model.hkp.T_R)
-    size, psi = float(np.hypot(r[0], r[2])), float(np.arctan2(r[2], r[0]))
-    beta = psi + ca.asin(ca.fmin(1, ca.fmax(-1, -(v[2] + r[2]) / size)))
-    c, s_ = ca.cos(beta), ca.sin(beta)
-    R = ca.vertcat(ca.horzcat(c, 0, s_), ca.horzcat(0, 1, 0), ca.horzcat(-s_, 0, c))
-    target = ca.vertcat(Q - ca.mtimes(R, incisor), ca.reshape(R, 9, 1))
-    targets = ca.Function("point_reg_targets", [d, x, const], [target, ca.jacobian(target, x)])
-    cos = ca.fmin(1, ca.fmax(-1, 0.5 * (ca.trace(ca.mtimes(A_file.T, A)) - 1)))
-    angle = ca.acos(cos) / DEG
-    turn = ca.Function("point_reg_turn", [x, const], [ca.reshape(A, 9, 1), angle, ca.gradient(angle, x)])
-    return PointRegistrationFunctions(targets, turn)
+    u, c = POINT_X.cut(x), POINT_CONST.cut(const)
+    A = ca.mtimes(_expm(u["turn"] * DEG), ca.reshape(c["rotation"], 3, 3))
+    v = c["scale"] * ca.mtimes(A, d)
+    Q = c["home"] + u["rest"] * MM + v
+    b = c["point"]
+    beta = hinge_beta(model, b, v[2])
+    cb, sb = ca.cos(beta), ca.sin(beta)
+    R = ca.vertcat(ca.horzcat(cb, 0, sb), ca.horzcat(0, 1, 0), ca.horzcat(-sb, 0, cb))
+    target = ca.vertcat(Q - ca.mtimes(R, b), ca.reshape(R, 9, 1))
+    return PointRegistrationFunctions(ca.Function("point_reg_targets", [d, x, const], [target, ca.jacobian(target, x)]))

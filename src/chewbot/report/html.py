@@ -38,8 +38,10 @@ from chewbot.report.view import FRAME_STEP_S, MAX_FRAMES, RunView
 from chewbot.table import Table
 from chewbot.run.columns import POSE_NAMES
 from chewbot.rotation import matrix_from_euler_angles
+from chewbot.units import factor, shown
 
 FORCE_SCALE_MM_PER_N = 0.25  # bite-force arrow: 80 N is drawn 20 mm long
+MM = factor("mm")  # the 3-D views are drawn in mm
 MANDIBLE_POINTS = ("T_L", "T_R", "I", "B_L", "B_R")
 ARCH = ("T_R", "B_R", "I", "B_L", "T_L")  # drawn as one line: the U of the lower jaw
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
@@ -147,14 +149,14 @@ def robot_positions(model: Model, rows: Table) -> dict[str, np.ndarray]:
 def _segments(a: np.ndarray, b: np.ndarray) -> list[list[float | None]]:
     """x, y, z lists (mm) of the segments a_k b_k, separated by gaps, for one scatter3d line trace."""
     out: list[list[float | None]] = [[], [], []]
-    for p, q in zip(np.round(a * 1e3, 3).tolist(), np.round(b * 1e3, 3).tolist()):
+    for p, q in zip(np.round(a / MM, 3).tolist(), np.round(b / MM, 3).tolist()):
         for c in range(3):
             out[c] += [p[c], q[c], None]
     return out
 
 
 def _xyz(points: np.ndarray) -> dict[str, list[float]]:
-    mm = np.round(points * 1e3, 3)
+    mm = np.round(points / MM, 3)
     return {"x": mm[:, 0].tolist(), "y": mm[:, 1].tolist(), "z": mm[:, 2].tolist()}
 
 
@@ -185,7 +187,7 @@ def _moving_traces(model: Model, side: str, body: np.ndarray, S: np.ndarray, F: 
             "textfont": {"size": 9, "color": "#4a5a6a"}, "marker": {"size": 3, "color": "#4a5a6a"}, "name": "coupler ends M<sub>i</sub>",
             "hovertemplate": POINT_HOVER}
     B = body[names.index(_bite_point(side))]
-    x, y, z = _segments(B[None], (B + F * FORCE_SCALE_MM_PER_N * 1e-3)[None])
+    x, y, z = _segments(B[None], (B + F * FORCE_SCALE_MM_PER_N * MM)[None])
     force = {"type": "scatter3d", "x": x, "y": y, "z": z, "mode": "lines", "line": {"color": "#c81e1e", "width": 8},
              "name": f"bite force F<sub>B</sub> ({1 / FORCE_SCALE_MM_PER_N:g} N per mm)",
              "hovertext": f"F_B = ({F[0]:.1f}, {F[1]:.1f}, {F[2]:.1f}) N", "hoverinfo": "text"}
@@ -230,13 +232,13 @@ def robot_figure(model: Model, view: RunView, side: str) -> dict:
     frames = [{"name": f"{t[f]:.3f}", "data": _moving_traces(model, side, pos["body"][f], pos["S"][f], force[f]), "traces": moving}
               for f in range(len(t))]
     names, _ = mandible_body_points(model)
-    arrows = pos["body"][:, names.index(_bite_point(side))] * 1e3 + force * FORCE_SCALE_MM_PER_N
-    everything = np.vstack([model.G * 1e3, pos["S"].reshape(-1, 3) * 1e3, pos["body"].reshape(-1, 3) * 1e3, arrows.reshape(-1, 3)])
+    arrows = pos["body"][:, names.index(_bite_point(side))] / MM + force * FORCE_SCALE_MM_PER_N
+    everything = np.vstack([model.G / MM, pos["S"].reshape(-1, 3) / MM, pos["body"].reshape(-1, 3) / MM, arrows.reshape(-1, 3)])
     lo, hi = everything.min(axis=0) - 8, everything.max(axis=0) + 8
     span = hi - lo
     axis = lambda name, j: {"title": {"text": f"{name}<sub>S</sub> [mm]"}, "range": [lo[j], hi[j]],  # noqa: E731
                             "backgroundcolor": "#f7f9fb", "gridcolor": "#dde3ea"}
-    play = {"frame": {"duration": FRAME_STEP_S * 1000, "redraw": True}, "fromcurrent": True, "transition": {"duration": 0}, "mode": "immediate"}
+    play = {"frame": {"duration": FRAME_STEP_S / factor("ms"), "redraw": True}, "fromcurrent": True, "transition": {"duration": 0}, "mode": "immediate"}
     pause = {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}
     layout = {
         "margin": {"l": 0, "r": 0, "t": 10, "b": 10},
@@ -259,16 +261,12 @@ def robot_figure(model: Model, view: RunView, side: str) -> dict:
 # --- time plots -----------------------------------------------------------------------------------------
 
 # Display units: lengths in mm and angles in degrees read better than m and rad at the robot's scale.
-_DISPLAY = {"m": (1e3, "mm"), "rad": (180 / math.pi, "deg")}
-
-
 def display_unit(unit: str) -> tuple[float, str]:
-    """The factor and the label to show a column of ``unit`` (SI) with: m -> mm, rad -> deg, rates alike."""
+    """The factor and the label to show a column of ``unit`` (SI) with: m -> mm, rad -> deg, rates alike
+    (:func:`chewbot.units.shown`)."""
     if unit == "1":
         return 1.0, "-"
-    base, sep, rest = unit.partition("/")
-    factor, shown = _DISPLAY.get(base, (1.0, base))
-    label = shown + sep + rest
+    factor, label = shown(unit)
     return factor, label.replace("*", "·").replace("^2", "²").replace("^3", "³")
 
 
@@ -486,7 +484,7 @@ def _robot_section(model: Model, view: RunView, side: str, figures: dict) -> str
             f'<p class="note">{{S}} coordinates in mm. Base points G<sub>i</sub>, cranks G<sub>i</sub>S<sub>i</sub> (orange), couplers '
             f"S<sub>i</sub>M<sub>i</sub> (grey), the mandible (the hull of M<sub>i</sub>, condyles T<sub>L</sub>, T<sub>R</sub>, incisor I and "
             f"molars B<sub>L</sub>, B<sub>R</sub>);{planes} the bite force at B<sub>{'L' if side == 'left' else 'R'}</sub> in red "
-            f"({1 / FORCE_SCALE_MM_PER_N:g} N per mm). One frame every {FRAME_STEP_S * 1000:g} ms of the task (at most {MAX_FRAMES}); "
+            f"({1 / FORCE_SCALE_MM_PER_N:g} N per mm). One frame every {FRAME_STEP_S / factor('ms'):g} ms of the task (at most {MAX_FRAMES}); "
             "drag to rotate, scroll to zoom, click a legend entry to hide it.</p>"
             '<div id="robot" class="plot"></div></section>')
 
@@ -514,7 +512,7 @@ def _summary_section(record: dict, model: Model, view: RunView) -> str:
     rows = []
     for a in "xyz":
         s, start = stats[f"incisor_{a}"], view.first[f"incisor_{a}"]
-        rows.append([f"incisor {a}, from its start", number((s.min - start) * 1e3), number((s.max - start) * 1e3), "mm"])
+        rows.append([f"incisor {a}, from its start", number((s.min - start) / MM), number((s.max - start) / MM), "mm"])
     force = stats["bite_force"]
     incisor_block = ("<div><h3>Incisor and bite force</h3>" + html_table(["", "min", "max", "unit"], rows)
                      + f'<p class="note">Largest bite force |F<sub>B</sub>| = {force.max:.4g} N at t = {force.t_max:.3f} s.</p></div>')

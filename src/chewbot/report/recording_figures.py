@@ -8,27 +8,43 @@ import io
 import numpy as np
 
 from chewbot.report.plotting import layout, subplots
+from chewbot.units import factor
 
 
-def incisor_paths_svg(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str) -> str:
+def incisor_paths_svg(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str, tracker=None) -> str:
     """:func:`incisor_paths` as SVG text without its XML declaration."""
-    return _svg(incisor_paths(t, recorded, reproduced, title), text_as_text=False)
+    return _svg(incisor_paths(t, recorded, reproduced, title, tracker), text_as_text=False)
 
 
-def incisor_paths(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str):
-    """Three panels: the incisor point's path in the sagittal plane (x, z of {S}) and in the frontal plane (y, z),
-    recorded (registered, scale 1) and reproduced by the robot, and its distance from the first frame over time;
-    ``recorded``, ``reproduced`` (N, 3) m. Returns the figure, laid out."""
-    fig, (side, front, time) = subplots(1, 3, figsize=(13.0, 4.0))
-    rec, rep = recorded / 1e-3, reproduced / 1e-3
-    for ax, (i, j), name in ((side, (0, 2), "sagittal"), (front, (1, 2), "frontal")):
-        ax.plot(rec[:, i], rec[:, j], color="0.55", lw=2.2, label="recorded")
-        ax.plot(rep[:, i], rep[:, j], color="C0", lw=1.0, label="reproduced")
-        ax.set_xlabel(f"{'xy'[i]} in {{S}} [mm]")
-        ax.set_ylabel("z in {S} [mm]")
-        ax.set_title(f"incisor path, {name} plane")
-        ax.set_aspect("equal", adjustable="datalim")
+def incisor_paths(t: np.ndarray, recorded: np.ndarray, reproduced: np.ndarray, title: str, tracker=None):
+    """The incisor point's path, recorded (registered, scale 1) and reproduced by the robot (``recorded``,
+    ``reproduced`` (N, 3) m in {S}): in the sagittal plane (x, z of {S}) and the frontal plane (y, z), and its
+    distance from the first frame over time; with ``tracker`` (rotation (3, 3), origin (3,) m: p_S = rotation p_T
+    + origin) a second row shows both paths side by side in the tracker's frame (its x, z and y, z planes), as the
+    recording saw them. Returns the figure, laid out."""
+    rows = 1 if tracker is None else 2
+    fig, axes = subplots(rows, 3, figsize=(13.0, 4.0 * rows), squeeze=False)
+    side, front, time = axes[0]
+    rec, rep = recorded / factor("mm"), reproduced / factor("mm")
+    frames = [(rec, rep, "{S}", "the robot's frame", axes[0][:2])]
+    if tracker is not None:
+        rotation, origin = tracker
+
+        def seen(p):  # p_T = rotation^T (p_S - origin), mm
+            return (p - origin) @ rotation / factor("mm")
+
+        frames.append((seen(recorded), seen(reproduced), "the tracker's frame", "the tracker's frame", axes[1][:2]))
+    for r, p, frame, where, pair in frames:
+        for ax, (i, j), name in zip(pair, ((0, 2), (1, 2)), ("x, z", "y, z")):
+            ax.plot(r[:, i], r[:, j], color="0.55", lw=2.2, label="recorded")
+            ax.plot(p[:, i], p[:, j], color="C0", lw=1.0, label="reproduced")
+            ax.set_xlabel(f"{'xyz'[i]} in {frame} [mm]")
+            ax.set_ylabel(f"{'xyz'[j]} in {frame} [mm]")
+            ax.set_title(f"incisor path in {where} ({name})", fontsize=9)
+            ax.set_aspect("equal", adjustable="datalim")
     side.legend(loc="best", fontsize=8)
+    if tracker is not None:
+        axes[1][2].set_axis_off()
     time.plot(t, np.linalg.norm(rec - rec[0], axis=1), color="0.55", lw=2.2, label="recorded")
     time.plot(t, np.linalg.norm(rep - rep[0], axis=1), color="C0", lw=1.0, label="reproduced")
     time.set_xlabel("t [s]")
@@ -75,13 +91,16 @@ def _svg(fig, text_as_text: bool = True) -> str:
 
 
 def recording_report_html(title: str, t: np.ndarray, measures, share: float | None, limiting: str,
-                          limiting_t: np.ndarray, tolerance_mm: float, lines: list[str], notes: list[str]) -> str:
+                          limiting_t: np.ndarray, tolerance_mm: float, lines: list[str], notes: list[str], tracker=None,
+                          registration: list[tuple[str, str]] = ()) -> str:
     """A small self-contained HTML page (no script, the figures inline SVG) of what the robot reproduces of an
-    imported recording: a table of the measures (the share, what limits it, the shares of the recorded rotation
-    and incisal excursion with their correlations r, the largest and RMS errors), the recorded and reproduced
-    incisor path side by side, and the errors over time. ``measures``: a
-    :class:`~chewbot.recordings.measures.Measures`; ``lines``: the import's summary; ``notes``: what the
-    preparation did. Without chewbot's marker line (the caller writes it first)."""
+    imported recording: a table of what was recorded and how it was registered (``registration``: (what, value)
+    rows: detected, prior, found, moved from the prior), a table of the measures (the share, what limits it, the
+    shares of the recorded rotation and incisal excursion with their correlations r, the largest and RMS errors),
+    the recorded and reproduced incisor path side by side in {S} and in the tracker's frame (``tracker``: its
+    rotation and origin), and the errors over time. ``measures``: a :class:`~chewbot.recordings.measures.Measures`;
+    ``lines``: the import's summary; ``notes``: what the preparation did. Without chewbot's marker line (the caller
+    writes it first)."""
     from chewbot.recordings.measures import IN_STEP_R
     from chewbot.report.html import escape, html_table, number
 
@@ -111,7 +130,9 @@ def recording_report_html(title: str, t: np.ndarray, measures, share: float | No
         ["mandible rotation error, largest / RMS",
          f"{number(peak(m.mandible_rotation_error))} / {number(rms(m.mandible_rotation_error))} deg", "at scale 1"],
     ]
-    paths = _svg(incisor_paths(t, m.recorded_incisor, m.reproduced_incisor, "recorded (registered, scale 1) and reproduced incisor path"))
+    paths = _svg(incisor_paths(t, m.recorded_incisor, m.reproduced_incisor, "recorded (registered, scale 1) and reproduced incisor path",
+                               tracker))
+    registered = html_table(["registration", "value"], [[escape(a), escape(b)] for a, b in registration]) if registration else ""
     errors = _svg(errors_over_time(t, m.incisor_error, m.mandible_error, m.mandible_rotation_error, limiting_t, tolerance_mm,
                                    "errors per frame (ticks: the frames that limit the share)"))
     items = "".join(f"<li>{escape(line)}</li>" for line in lines)
@@ -120,6 +141,7 @@ def recording_report_html(title: str, t: np.ndarray, measures, share: float | No
              "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}svg{max-width:100%;height:auto}")
     return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
             f"<style>{style}</style></head><body>\n<h1>{escape(title)}</h1>\n"
-            f"<h2>What the robot reproduces</h2>\n{html_table(['measure', 'value', ''], rows)}\n<ul>{items}</ul>\n"
+            + (f"<h2>What was recorded and how it was registered</h2>\n{registered}\n" if registered else "")
+            + f"<h2>What the robot reproduces</h2>\n{html_table(['measure', 'value', ''], rows)}\n<ul>{items}</ul>\n"
             f"<h2>Incisor path</h2>\n{paths}\n<h2>Errors over time</h2>\n{errors}\n"
             + (f"<h2>Notes</h2>\n<ul>{noted}</ul>\n" if notes else "") + "</body></html>\n")

@@ -8,9 +8,7 @@ import numpy as np
 
 from chewbot.report.plotting import joint_columns, per_joint, save, subplots
 from chewbot.table import Table
-
-# Display of a coordinate's error: lengths in mm, angles in deg.
-_DISPLAY = {"m": (1e3, "mm"), "rad": (180 / np.pi, "deg")}
+from chewbot.units import factor, shown
 
 
 def error_columns(table: Table) -> list[str]:
@@ -23,7 +21,7 @@ def tracking_error(table: Table, path: Path, title: str = "") -> Path:
     names = error_columns(table)
     fig, axes = subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 1), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
-        scale, unit = _DISPLAY[table.units[name]]
+        scale, unit = shown(table.units[name])
         ax.plot(table["t"], table[name] * scale, lw=0.9)
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(f"{name} [{unit}]")
@@ -57,7 +55,7 @@ def comparison(tables: dict[str, Table], path: Path) -> Path:
         names = error_columns(table)
         lin = [n for n in names if table.units[n] == "m"]
         ang = [n for n in names if table.units[n] == "rad"]
-        axes[0].plot(t, np.linalg.norm(np.column_stack([table[n] for n in lin]), axis=1) * 1e3, lw=0.9, label=label)
+        axes[0].plot(t, np.linalg.norm(np.column_stack([table[n] for n in lin]), axis=1) / factor("mm"), lw=0.9, label=label)
         axes[1].plot(t, np.degrees(np.linalg.norm(np.column_stack([table[n] for n in ang]), axis=1)), lw=0.9, label=label)
         axes[2].plot(t, np.max(np.abs(joint_columns(table, "tau")), axis=1), lw=0.9, label=label)
     for ax, label in zip(axes, ("position error [mm]", "orientation error [deg]", "largest abs(τ_i) [N·m]")):

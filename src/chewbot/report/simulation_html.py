@@ -16,6 +16,7 @@ from chewbot.report.html import RUN_NAV, checks_section, escape, float32, number
 from chewbot.report.view import PLOT_POINTS, RunView, ViewBuilder, every_kth
 from chewbot.table import Table
 from chewbot.run.columns import kinematics_table
+from chewbot.units import factor
 
 
 def _page(title: str, subtitle: str, body: list[str], figures: dict, path: Path, nav=RUN_NAV) -> Path:
@@ -98,7 +99,7 @@ def _integrator_text(info: dict, sim) -> str:
     """The plant's integrator in words: chewbot's Radau IIA, or MuJoCo's solver settings (run.json's plant)."""
     if "integrator" in info:
         i = info["integrator"]
-        return (f"{escape(i['method'])}; steps of at most {i['max_step_s'] * 1e3:g} ms, {i['split_steps']} split; largest "
+        return (f"{escape(i['method'])}; steps of at most {i['max_step_s'] / factor('ms'):g} ms, {i['split_steps']} split; largest "
                 f"residual {number(i['largest_residual_Nm'], 3)} N·m")
     p = info["plant"]
     settings = ", ".join(f"{escape(k)} {escape(str(v))}" for k, v in p["solver"].items())
@@ -147,7 +148,7 @@ def _comparison_figure(results: dict) -> dict:
     for label, r in results.items():
         idx = every_kth(r.table.n, PLOT_POINTS)
         names = [n for n in r.table.columns if n.startswith("e_") and r.table.units[n] == "m"]
-        err = np.linalg.norm(np.column_stack([r.table[n] for n in names]), axis=1)[idx] * 1e3
+        err = np.linalg.norm(np.column_stack([r.table[n] for n in names]), axis=1)[idx] / factor("mm")
         data.append({"type": "scatter", "x": float32(r.table["t"][idx]), "y": float32(err), "mode": "lines", "name": label,
                      "hovertemplate": f"{label}: %{{y:.3g}} mm<extra></extra>"})
     return {"data": data, "layout": {"xaxis": {"title": {"text": "time t [s]"}}, "yaxis": {"title": {"text": "position error [mm]"}, "type": "log"},

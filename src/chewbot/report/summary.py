@@ -8,13 +8,13 @@ the report always agree. Everything here reads what a run contains (columns of t
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+from chewbot.config import read_text
 from chewbot.table import Table
 
 if TYPE_CHECKING:
@@ -60,7 +60,7 @@ def assumed_values(model: Model, keys: tuple[str, ...] | None = None) -> dict[st
     """
     raw: dict = {}
     if Path(model.source).is_file():
-        raw = tomllib.loads(Path(model.source).read_text("utf-8"))
+        raw = read_text(model.source, "parameter file").data
     out = {}
     for key in model.assumed if keys is None else keys:
         value: object = raw

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from chewbot.report.plotting import save, subplots
+from chewbot.units import factor
 
 _LABELS = {"plant": "plant (the food's force)", "estimated": "estimated from the torques"}
 
@@ -32,7 +33,7 @@ def force_displacement(curves: dict, path: Path, height: float | None, title: st
     fig, ax = subplots(figsize=(7, 5))
     base = 0.0 if height is None else height
     for label, (_, g, F) in curves.items():
-        ax.plot((base - np.asarray(g)) * 1e3, F, lw=1.0, label=_LABELS.get(label, label), ls="-" if label == "plant" else "--")
+        ax.plot((base - np.asarray(g)) / factor("mm"), F, lw=1.0, label=_LABELS.get(label, label), ls="-" if label == "plant" else "--")
     ax.axhline(0.0, color="k", lw=0.5)
     ax.axvline(0.0, color="k", lw=0.5)
     ax.set_xlabel("compression h0 - g [mm]" if height is not None else "closing of the gap -g [mm]")

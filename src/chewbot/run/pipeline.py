@@ -32,6 +32,7 @@ import numpy as np
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.task import Task
 from chewbot.model import Model
+from chewbot.progress import SILENT, Progress
 from chewbot.run.columns import kinematics_table, singularity_columns
 from chewbot.run.options import RunOptions, complete
 from chewbot.table import Table
@@ -128,12 +129,12 @@ class Chunk:
     the formulation's loops that may swallow a signal."""
 
     def __init__(self, model: Model, task: Task, options: RunOptions, offset: int = 0, size: int | None = None,
-                 theta_before: np.ndarray | None = None, carry: dict | None = None, progress=None,
+                 theta_before: np.ndarray | None = None, carry: dict | None = None, progress: Progress = SILENT,
                  check: Callable[[], None] | None = None):
         self.model, self.task, self.options, self.offset = model, task, options, offset
         self.part = task if offset == 0 and (size is None or size >= task.n) else task.window(offset, offset + size)
         self.theta_before, self.carry, self.check = theta_before, carry, check
-        self.step = _stepper(progress)
+        self.progress = progress
         self.timings: dict[str, float] = {}
 
     @property
@@ -142,7 +143,7 @@ class Chunk:
 
     @cached_property
     def kinematics(self) -> Kinematics:
-        self.step("kinematics", done=self.offset)
+        self.progress("kinematics", done=self.offset)
         t0 = time.perf_counter()
         kin = _kinematics(self.model, self.task, self.part, self.offset, self.options.orientation, self.theta_before)
         self.timings["kinematics_s"] = time.perf_counter() - t0
@@ -156,7 +157,7 @@ class Chunk:
         from chewbot.dynamics.registry import inverse_dynamics
 
         kin = self.kinematics
-        self.step(f"inverse dynamics ({o.method})", done=self.offset, stage="dynamics" if self.offset == 0 else None)
+        self.progress(f"inverse dynamics ({o.method})", done=self.offset, stage="dynamics" if self.offset == 0 else None)
         t0 = time.perf_counter()
         dyn = inverse_dynamics(self.model, kin, o.method, carry=self.carry, check=self.check, **o.formulation_options())
         self.timings[f"dynamics_{o.method}_s"] = time.perf_counter() - t0
@@ -192,7 +193,7 @@ class Chunk:
         from chewbot.analysis.coupling import coupling
 
         kin = self.kinematics
-        self.step("inertia coupling", done=self.offset)
+        self.progress("inertia coupling", done=self.offset)
         t0 = time.perf_counter()
         c = coupling(self.model, kin)
         self.timings["coupling_s"] = time.perf_counter() - t0
@@ -234,7 +235,7 @@ def _continued(theta: np.ndarray, before: np.ndarray | None) -> np.ndarray:
     return theta + 2 * np.pi * turns if turns.any() else theta
 
 
-def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHUNK_SAMPLES, progress=None,
+def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHUNK_SAMPLES, progress: Progress = SILENT,
            check: Callable[[], None] | None = None) -> Iterator[Chunk]:
     """The task through every stage, ``size`` samples at a time (None: in one piece), in order: each chunk's
     ``table`` computed. ``progress(message, done=samples, stage=None)`` is told each stage (the first chunk's inverse
@@ -245,7 +246,7 @@ def chunks(model: Model, task: Task, options: RunOptions, size: int | None = CHU
     size = task.n if size is None else int(size)
     if size < 1:
         raise ValueError(f"chunk size must be at least 1 sample, not {size}")
-    prepare_kernels(run_kernels(model, options))
+    prepare_kernels(run_kernels(model, options), progress=progress)
     theta_end, carry = None, None
     for start in range(0, max(task.n, 1), size):
         part = Chunk(model, task, options, start, size, theta_end, carry, progress, check)
@@ -366,18 +367,17 @@ def _joined(parts: list, cls):
     return cls(**values)
 
 
-def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None,
-            task: Task | None = None) -> RunResult:
+def compute(options: RunOptions, progress: Progress = SILENT, chunk: int | None = CHUNK_SAMPLES,
+            check: Callable[[], None] | None = None, task: Task | None = None) -> RunResult:
     """Compute a run in memory (no files), ``chunk`` samples at a time (None: the task in one piece; the results
     are the same). ``task``: a task built in memory instead of ``options.task``."""
     from chewbot.kinematics.motion import Kinematics
 
-    step = _stepper(progress)
-    step("task")
+    progress("task")
     options, model, task = inputs(options, task)
     totals = Totals(model, options)
     parts = []
-    for part in chunks(model, task, options, chunk, step, check):
+    for part in chunks(model, task, options, chunk, progress, check):
         totals.add(part)
         parts.append(part)
     result = RunResult(options=options, model=model, task=task, kinematics=_joined([p.kinematics for p in parts], Kinematics),
@@ -388,12 +388,6 @@ def compute(options: RunOptions, progress=None, chunk: int | None = CHUNK_SAMPLE
         dyn = [p.dynamics for p in parts]
         result.dynamics = replace(_joined(dyn, Dynamics), table=Table.concat([d.table for d in dyn]),
                                   info=result.info.get("dynamics", {}), carry=dyn[-1].carry)
-    step("validity checks")
+    progress("validity checks")
     result.checks = totals.checks.results()
     return result
-
-
-def _stepper(progress):
-    """The progress callback ``step(message, done=None, total=None, stage=None)`` (samples done, of total), or one that
-    does nothing."""
-    return progress or (lambda msg, done=None, total=None, stage=None: None)

@@ -1,4 +1,5 @@
-"""Studies that reproduce a paper's findings: each is ``run(out, force=False, progress=None) -> Path``."""
+"""Studies that reproduce a paper's findings: each is ``run(out, force=False, progress=SILENT) -> Path``
+(:class:`chewbot.progress.Progress`)."""
 
 from chewbot.study.seed000 import run as seed000
 from chewbot.study.seed001 import run as seed001

@@ -14,6 +14,7 @@ import numpy as np
 
 from chewbot.analysis.coupling import coupling
 from chewbot.bench.benchmark import TASK_CASES, Comparison, bench_task, ratios
+from chewbot.progress import SILENT, Progress
 from chewbot.study.claims import STUDY_FORMAT, Claim, write_claims
 from chewbot.dynamics.registry import inverse_dynamics
 from chewbot.kinematics.motion import solve_kinematics
@@ -150,19 +151,18 @@ def _figures(results: dict, folder: Path) -> list[Path]:
     return paths
 
 
-def run(out: Path, force: bool = False, progress=None) -> Path:
+def run(out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
     from chewbot.files import STUDY_FOLDER, atomic_folder, check_output, to_json
 
-    step = progress or (lambda msg: None)
     out = Path(out)
     check_output(out, force, STUDY_FOLDER)
     results = {}
     for names in VARIANTS.values():
         for name in names:
-            step(f"inverse dynamics and coupling: {name}")
+            progress(f"inverse dynamics and coupling: {name}")
             results[name] = _solve(name)
-    step("timing the formulations")
+    progress("timing the formulations")
     measured = bench_task(repeats=11, cases=tuple(c for c in TASK_CASES if c.label in ("hessian", "liang")))
     timings = ratios(measured)
     rows = claims(results, timings)
@@ -174,6 +174,6 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
                    "peak_torque_N_m": {name: {s: np.abs(r[2][s, "hessian"]).max(axis=0).tolist() for s in SIDES}
                                        for name, r in results.items()}}
         (tmp / "study.json").write_text(to_json(summary))
-        step("figures")
+        progress("figures")
         _figures(results, tmp)
     return out

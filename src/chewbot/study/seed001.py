@@ -25,6 +25,7 @@ from chewbot.dynamics.options import GOALS
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.kinematics.options import ORIENTATIONS
 from chewbot.model.params import load_model
+from chewbot.progress import SILENT, Progress
 from chewbot.report import newton_euler_figures
 from chewbot.report.plotting import save, subplots
 from chewbot.run.columns import kinematics_table
@@ -180,14 +181,13 @@ def normal_force_signs(rows: list[dict]) -> Claim:
                  "; ".join(figure(g) for g in ("G1", "G2", "G3")), pattern and peaks, "; ".join(reasons))
 
 
-def run(out: Path, force: bool = False, progress=None) -> Path:
+def run(out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """Run the study and write its folder ``out`` atomically (replaced only with ``force``)."""
     from chewbot.files import STUDY_FOLDER, atomic_folder, check_output, to_json
 
-    step = progress or (lambda msg: None)
     out = Path(out)
     check_output(out, force, STUDY_FOLDER)
-    rows = _rows(step)
+    rows = _rows(progress)
     with atomic_folder(out, force, STUDY_FOLDER) as tmp:
         with open(tmp / "table3.csv", "w", newline="") as f:
             writer = csv.writer(f)
@@ -201,7 +201,7 @@ def run(out: Path, force: bool = False, progress=None) -> Path:
                             f"{REPEATS} interleaved runs after a warm-up, kinematics excluded"}
         (tmp / "study.json").write_text(to_json(summary))
         write_claims(claims(rows) + [normal_force_signs(rows)], tmp)
-        step("figures")
+        progress("figures")
         for r in rows:
             if r["mechanism"] == "target" and r["orientation"] == "euler-parameters":
                 table = kinematics_table(r["_kin"])

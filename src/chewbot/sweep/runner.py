@@ -29,6 +29,7 @@ import pyarrow.parquet as pq
 
 from chewbot.errors import ChewbotError
 from chewbot.files import atomic_member, shield
+from chewbot.progress import SILENT, Progress
 from chewbot.sweep.record import SweepFolder
 
 # Chunks in flight per worker thread: enough that a worker never waits for the client, few enough that the
@@ -122,16 +123,16 @@ class ChunkRunner:
 
     ``task(spec_payload, values) -> {column: (n,) array, "error": [str | None]}`` is the function mapped over the
     chunks (:func:`chewbot.sweep.evaluate.evaluate_chunk` for chewbot's model); ``units`` gives the unit of each
-    output column (Parquet field metadata). ``progress(done, total, stage=None)`` is told the evaluations done (after
-    a chunk written to the folder, as the stage ``chunk``); ``check()`` is called as each chunk arrives, and raises
+    output column (Parquet field metadata). ``progress("evaluations", done, total, stage=None)`` is told the
+    evaluations done (after a chunk written to the folder, as the stage ``chunk``); ``check()`` is called as each chunk arrives, and raises
     to stop (a signal that Dask's machinery may swallow).
     """
 
     def __init__(self, client, folder: SweepFolder, task: Callable, payload, chunk: int, units: dict[str, str],
-                 progress: Callable[..., None] | None = None, check: Callable[[], None] | None = None):
+                 progress: Progress = SILENT, check: Callable[[], None] | None = None):
         self.client, self.folder, self.task, self.payload, self.chunk = client, folder, task, payload, chunk
         self.units = units
-        self.progress = progress or (lambda done, total, stage=None: None)
+        self.progress = progress
         self.check = check or (lambda: None)
         self.reused = self.computed = 0  # chunks read back from an interrupted run, and chunks evaluated
         self.evaluations = 0
@@ -197,7 +198,7 @@ class ChunkRunner:
 
     def _advance(self, n: int, stage: str | None = None) -> None:
         self.done += n
-        self.progress(self.done, self.total, stage=stage)
+        self.progress("evaluations", done=self.done, total=self.total, stage=stage)
 
     def _table(self, design: Design, a: int, b: int, columns: dict) -> pa.Table:
         """A chunk's rows: ``sample``, the parameters (keys), the outputs (with their units), ``error``."""

@@ -13,24 +13,26 @@ and ``task.NAME`` for the default task's parameters); pose coordinates of a ``gr
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Annotated, Generic, Literal, TypeVar
 
+from pydantic import AfterValidator, ConfigDict, Field, field_validator, model_validator
+
+from chewbot.config import Plausible, Strict, did_you_mean, either, key_error, quoted, read_text, validate
 from chewbot.dynamics.options import CONTACT_MODELS, GOALS
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.options import ORIENTATIONS
+from chewbot.run.options import Switch
+from chewbot.units import factor, key_unit
 
 KINDS = ("monte-carlo", "sobol", "grid", "optimize")
 DISTRIBUTIONS = ("uniform", "normal", "lognormal")
 MAPS = ("workspace", "singularity", "force")
-POSE_KEYS = {"X_mm": 1e-3, "Y_mm": 1e-3, "Z_mm": 1e-3, "alpha_deg": math.pi / 180, "beta_deg": math.pi / 180,
-             "gamma_deg": math.pi / 180}  # factor to SI
 # Directions of the force-capability map when the SPEC names none: the axes of {S} (x forward, y to the left, z up).
 DEFAULT_DIRECTIONS = {"up": (0.0, 0.0, 1.0), "down": (0.0, 0.0, -1.0), "forward": (1.0, 0.0, 0.0),
                       "back": (-1.0, 0.0, 0.0), "left": (0.0, 1.0, 0.0), "right": (0.0, -1.0, 0.0)}
@@ -141,6 +143,229 @@ class Spec:
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()
 
 
+# -------------------------------------------------------------------------------------------- the file
+
+
+def _interval(pair: list[float]) -> list[float]:
+    if not pair[0] < pair[1]:
+        raise ValueError(f"[{pair[0]}, {pair[1]}] is not an interval [low, high] with low < high")
+    return pair
+
+
+def _spread(pair: list[float]) -> list[float]:
+    if not pair[1] > 0:
+        raise ValueError(f"the standard deviation ({pair[1]}) must be positive")
+    return pair
+
+
+N = TypeVar("N")
+Pair = Annotated[list[float], Field(min_length=2, max_length=2)]
+Interval = Annotated[Pair, AfterValidator(_interval)]
+Spread = Annotated[Pair, AfterValidator(_spread)]
+
+
+class Distribution(Strict):
+    """A parameter of a Monte Carlo or Sobol' sweep: exactly one distribution."""
+
+    EXAMPLE = "{ uniform = [low, high] }"
+
+    uniform: Interval | None = None
+    normal: Spread | None = None
+    lognormal: Spread | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if len(self.model_fields_set) != 1:
+            raise ValueError(f"give exactly one of {', '.join(DISTRIBUTIONS)}")
+        return self
+
+    def parameter(self, key: str) -> Parameter:
+        kind = next(iter(self.model_fields_set))
+        return Parameter(key, kind, tuple(getattr(self, kind)))
+
+
+class Values(Strict, Generic[N]):
+    """A coordinate or parameter of a grid: its values, or a range and a number of steps."""
+
+    EXAMPLE = "{ values = [...] } or { range = [low, high], steps = n }"
+
+    values: Annotated[list[N], Field(min_length=1)] | None = None
+    range: Annotated[list[N], Field(min_length=2, max_length=2)] | None = None
+    steps: int | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        given = self.model_fields_set
+        if given not in ({"values"}, {"range", "steps"}):
+            raise ValueError("give exactly one of values (or range and steps)")
+        if given == {"range", "steps"}:
+            (lo, hi), steps = self.range, self.steps
+            if steps < 1 or (steps > 1 and not lo < hi) or (steps == 1 and lo != hi):
+                raise ValueError(f"range [{lo}, {hi}] with {steps} steps: give low < high and steps >= 2 (or one step with low = high)")
+        return self
+
+    def parameter(self, key: str) -> Parameter:
+        if self.values is not None:
+            return Parameter(key, "values", tuple(self.values))
+        (lo, hi), steps = self.range, self.steps
+        return Parameter(key, "values", tuple(lo + (hi - lo) * k / max(steps - 1, 1) for k in range(steps)))
+
+
+class Bounds(Strict):
+    """A parameter of a search: its bounds."""
+
+    EXAMPLE = "{ bounds = [low, high] }"
+
+    bounds: Interval
+
+    def parameter(self, key: str) -> Parameter:
+        return Parameter(key, "bounds", tuple(self.bounds))
+
+
+# A pose coordinate of a grid over poses, in the unit of its key: held (a number) or varied (a table).
+Length = Annotated[float, Plausible(-200.0, 200.0, "mm", "displacements of a mandible from its home pose")]
+Angle = Annotated[float, Plausible(-180.0, 180.0, "deg", "rotations of a mandible from its home pose")]
+LengthAxis = either(number=Length, table=Values[Length])
+AngleAxis = either(number=Angle, table=Values[Angle])
+
+
+class PoseGrid(Strict):
+    """``[grid]``: the pose coordinates, each held or varied."""
+
+    X_mm: LengthAxis | None = None
+    Y_mm: LengthAxis | None = None
+    Z_mm: LengthAxis | None = None
+    alpha_deg: AngleAxis | None = None
+    beta_deg: AngleAxis | None = None
+    gamma_deg: AngleAxis | None = None
+
+
+POSE_KEYS = {key: factor(key_unit(key)[1]) for key in PoseGrid.model_fields}  # factor to SI
+
+
+def _outputs(names: list[str]) -> list[str]:
+    if not names:
+        raise ValueError("must name at least one output, e.g. [\"peak_tau_Nm\", \"mean_MCI\"]")
+    for name in names:
+        _output(name)
+    if len(set(names)) != len(names):
+        raise ValueError("names an output twice")
+    return names
+
+
+def _output(name: str) -> str:
+    from chewbot.sweep.quantities import OUTPUTS
+
+    if name not in OUTPUTS:
+        raise ValueError(f"unknown output {name!r}{did_you_mean(name, OUTPUTS)}; docs/sweeps.md lists the outputs")
+    return name
+
+
+def _objective(name: str) -> str:
+    if _output(name) == "feasible":
+        raise ValueError("'feasible' is the constraint of the search, not an output to minimise")
+    return name
+
+
+Outputs = Annotated[list[str], AfterValidator(_outputs)]
+
+
+class SobolSection(Strict):
+    resamples: int = Field(100, ge=1)  # bootstrap resamples of the confidence intervals
+    confidence: float = Field(0.95, gt=0, lt=1)  # level of the confidence intervals
+
+
+def _dither(pair: list[float]) -> list[float]:
+    if not 0 <= pair[0] <= pair[1] < 2:
+        raise ValueError("dithering [low, high] with 0 <= low <= high < 2")
+    return pair
+
+
+class OptimizerSection(Strict):
+    """Differential evolution's settings (scipy.optimize.differential_evolution's names; generations is its
+    maxiter)."""
+
+    generations: int = Field(30, ge=1)
+    popsize: int = Field(8, ge=1)
+    tol: float = Field(0.01, ge=0)
+    atol: float = Field(0.0, ge=0)
+    mutation: either(number=Annotated[float, Field(ge=0, lt=2)], list=Annotated[Pair, AfterValidator(_dither)]) = [0.5, 1.0]
+    recombination: float = Field(0.7, ge=0, le=1)
+    init: Literal["latinhypercube", "sobol", "halton", "random"] = "latinhypercube"
+
+
+OPTIMIZER_DEFAULTS = OptimizerSection().model_dump()
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class ForceSection(Strict):
+    directions: dict[str, Vec3] | None = None  # name -> a direction in {S} (any length but zero)
+
+
+class SpecKind(Strict):
+    """The key that decides which keys a SPEC has."""
+
+    model_config = ConfigDict(extra="ignore")
+    DOCS = "docs/sweeps.md"
+
+    kind: Literal[KINDS]
+
+
+class SpecFile(SpecKind):
+    """The keys every kind shares."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    model: str = "target"
+    task: str = "default"
+    side: Literal["left", "right"] | None = None
+    orientation: Literal[ORIENTATIONS] = "euler-angles"
+    method: str | None = None
+    goal: Literal[GOALS] | None = None
+    friction: Literal[tuple(s.value for s in Switch)] | None = None
+    contact: Literal[CONTACT_MODELS] = "bilateral"
+    seed: int = Field(0, ge=0)
+    fixed: dict[str, float] = Field({}, alias="set")  # overrides applied to every evaluation
+    counterpart: str | None = None
+    chunk: int | None = Field(None, ge=1)
+
+
+class MonteCarloFile(SpecFile):
+    samples: int = Field(ge=1)
+    parameters: dict[str, Distribution]
+    outputs: Outputs
+
+
+class SobolFile(MonteCarloFile):
+    sobol: SobolSection = SobolSection()
+
+    @field_validator("samples")
+    @classmethod
+    def _power_of_two(cls, n: int) -> int:
+        if n & (n - 1):
+            raise ValueError(f"{n} base samples: Sobol' sequences need a power of 2 (e.g. 1024)")
+        return n
+
+
+class GridFile(SpecFile):
+    grid: PoseGrid | None = None
+    parameters: dict[str, Values[float]] | None = None
+    outputs: Outputs | None = None
+    maps: list[Literal[MAPS]] | None = None
+    force: ForceSection | None = None
+
+
+class OptimizeFile(SpecFile):
+    parameters: dict[str, Bounds]
+    minimize: Annotated[str, AfterValidator(_objective)]
+    outputs: Outputs = []
+    require_feasible: bool = True  # the validity checks must pass, not only the kinematics
+    optimizer: OptimizerSection = OptimizerSection()
+
+
+SPEC_FILES = {"monte-carlo": MonteCarloFile, "sobol": SobolFile, "grid": GridFile, "optimize": OptimizeFile}
+
+
 # -------------------------------------------------------------------------------------------- reading
 
 
@@ -161,118 +386,20 @@ def spec_path(name_or_path: str | Path) -> Path:
 def read_spec(name_or_path: str | Path) -> Spec:
     """Parse and validate a SPEC file (or a built-in SPEC by name); :class:`SpecError` names the file and key."""
     path = spec_path(name_or_path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        known = ", ".join(builtin_spec_names())
-        raise SpecError(f"{path}: no such SPEC file (nor a built-in SPEC: {known})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError(f"{path}: cannot read it ({getattr(exc, 'strerror', None) or exc})") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path}: not valid TOML ({exc})") from None
-    return parse_spec(raw, str(path), base=path.parent)
-
-
-def quoted(key: str) -> str:
-    """A key as TOML writes it inside a table name: quoted where it has dots or brackets."""
-    return f'"{key}"' if any(c in key for c in ".[]") else key
-
-
-class _Reader:
-    """Reads keys of a table, each once, with errors naming the file and the key; :meth:`done` refuses the rest."""
-
-    def __init__(self, table: dict, source: str, prefix: str = ""):
-        self.table, self.source, self.prefix, self.used = table, source, prefix, set()
-
-    def error(self, key: str, reason: str) -> SpecError:
-        return SpecError(f"{self.source}: key '{self.prefix}{key}': {reason}")
-
-    def get(self, key: str, kind, default=None, required: bool = False):
-        self.used.add(key)
-        if key not in self.table:
-            if required:
-                raise self.error(key, "missing key")
-            return default
-        value = self.table[key]
-        return _typed(value, kind, lambda reason: self.error(key, reason))
-
-    def choice(self, key: str, choices, default=None, required: bool = False):
-        value = self.get(key, str, default, required)
-        if value is not None and value not in choices:
-            close = difflib.get_close_matches(value, list(choices), n=1)
-            raise self.error(key, f"{value!r} is not one of {', '.join(choices)}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-        return value
-
-    def done(self, allowed: tuple[str, ...] | None = None) -> None:
-        for key in self.table:
-            if key not in self.used:
-                known = sorted(self.used if allowed is None else allowed)
-                close = difflib.get_close_matches(key, known, n=1)
-                hint = f"; did you mean '{self.prefix}{close[0]}'?" if close else ""
-                raise self.error(key, f"unknown key{hint} (docs/sweeps.md lists the keys of each kind)")
-
-
-def _typed(value, kind, error):
-    """``value`` checked against ``kind``: int, float (an int is accepted), str, bool, dict, list."""
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise error(f"must be a number, not {value!r}")
-        if not math.isfinite(value):
-            raise error(f"must be a finite number, not {value!r}")
-        return float(value)
-    if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
-        raise error(f"must be a whole number, not {value!r}")
-    if kind is not int and not isinstance(value, kind):
-        raise error(f"must be a {dict((int, 'whole number'), ((str, 'string'), (bool, 'true or false'), (dict, 'table'), (list, 'list')))[kind]}, not {value!r}")
-    return value
-
-
-def _numbers(value, error, count: int | None = None) -> tuple[float, ...]:
-    if not isinstance(value, list) or (count is not None and len(value) != count) or not value:
-        raise error(f"must be a list of {count or 'one or more'} numbers, not {value!r}")
-    return tuple(_typed(v, float, lambda reason: error(f"entry {i + 1} {reason}")) for i, v in enumerate(value))
-
-
-def _parameter(key: str, table, kinds: tuple[str, ...], error) -> Parameter:
-    """A parameter's table: one of ``kinds`` (``{ uniform = [lo, hi] }``, ``{ range = [lo, hi], steps = n }`` ...).
-    ``error(suffix, reason)``: the error for the key with ``suffix`` (``""``, ``".uniform"``) after it."""
-    if not isinstance(table, dict):
-        example = {"uniform": "{ uniform = [low, high] }", "values": "{ values = [...] } or { range = [low, high], steps = n }",
-                   "bounds": "{ bounds = [low, high] }"}[kinds[0]]
-        raise error("", f"must be a table such as {example}, not {table!r}")
-    given = set(table)
-    if "values" in kinds and given == {"range", "steps"}:
-        lo, hi = _numbers(table["range"], lambda r: error(".range", r), 2)
-        steps = _typed(table["steps"], int, lambda r: error(".steps", r))
-        if steps < 1 or (steps > 1 and not lo < hi) or (steps == 1 and lo != hi):
-            raise error("", f"range [{lo}, {hi}] with {steps} steps: give low < high and steps >= 2 (or one step with low = high)")
-        return Parameter(key, "values", tuple(lo + (hi - lo) * k / max(steps - 1, 1) for k in range(steps)))
-    if len(given) != 1 or not given <= set(kinds):
-        unknown = sorted(given - set(kinds) - ({"range", "steps"} if "values" in kinds else set()))
-        what = f"unknown entry {unknown[0]!r}; " if unknown else ""
-        raise error("", f"{what}give exactly one of {', '.join(kinds)}" + (" (or range and steps)" if "values" in kinds else ""))
-    kind = given.pop()
-    args = table[kind]
-    sub = lambda r: error(f".{kind}", r)  # noqa: E731
-    if kind == "values":
-        return Parameter(key, kind, _numbers(args, sub))
-    a, b = _numbers(args, sub, 2)
-    if kind in ("uniform", "bounds") and not a < b:
-        raise sub(f"[{a}, {b}] is not an interval [low, high] with low < high")
-    if kind in ("normal", "lognormal") and not b > 0:
-        raise sub(f"the standard deviation ({b}) must be positive")
-    return Parameter(key, kind, (a, b))
+    text = read_text(path, f"SPEC file (nor a built-in SPEC: {', '.join(builtin_spec_names())})", SpecError)
+    return parse_spec(text.data, str(path), base=path.parent)
 
 
 def parse_spec(raw: dict, source: str = "<spec>", base: Path | None = None) -> Spec:
     """Validate a parsed SPEC (see :func:`read_spec`); relative paths resolve against ``base``."""
     from chewbot.model.params import BUILTIN_MODELS
 
-    top = _Reader(raw, source)
-    kind = top.choice("kind", KINDS, required=True)
+    kind = validate(SpecKind, raw, source, SpecError).kind
+    f = validate(SPEC_FILES[kind], raw, source, SpecError)
     base = base or Path(".")
+
+    def fail(key: str, reason: str) -> SpecError:
+        return key_error(source, key, reason, SpecError)
 
     def resolved(key: str, value: str, builtin=()) -> str:
         if value in builtin or value == "default" and key == "task":
@@ -280,218 +407,106 @@ def parse_spec(raw: dict, source: str = "<spec>", base: Path | None = None) -> S
         path = Path(value).expanduser()
         path = path if path.is_absolute() else base / path
         if not path.is_file():
-            raise top.error(key, f"{value!r} is " + (f"neither a built-in model ({', '.join(BUILTIN_MODELS)}) nor " if key != "task" else "neither 'default' nor ")
-                            + f"a file (looked for {path})")
+            raise fail(key, f"{value!r} is " + (f"neither a built-in model ({', '.join(BUILTIN_MODELS)}) nor " if key != "task" else "neither 'default' nor ")
+                       + f"a file (looked for {path})")
         return str(path)
 
-    model = resolved("model", top.get("model", str, "target"), BUILTIN_MODELS)
-    task = resolved("task", top.get("task", str, "default"))
-    side = top.choice("side", ("left", "right"))
-    orientation = top.choice("orientation", ORIENTATIONS, "euler-angles")
-    method = top.get("method", str, None)
-    values: dict = {"source": source, "kind": kind, "model": model, "task": task, "side": side, "orientation": orientation}
-    values.update(_dynamics_options(top, method, orientation, _mechanism(top, model)))
-    values["seed"] = top.get("seed", int, 0)
-    if values["seed"] < 0:
-        raise top.error("seed", "must be >= 0")
-    values["fixed"] = _fixed(top)
-    counterpart = top.get("counterpart", str, None)
-    if counterpart is not None:
-        counterpart = resolved("counterpart", counterpart, BUILTIN_MODELS)
-    values["counterpart"] = counterpart
-
+    model = resolved("model", f.model, BUILTIN_MODELS)
+    values: dict = {"source": source, "kind": kind, "model": model, "task": resolved("task", f.task), "side": f.side,
+                    "orientation": f.orientation, "seed": f.seed, "fixed": dict(f.fixed),
+                    "counterpart": None if f.counterpart is None else resolved("counterpart", f.counterpart, BUILTIN_MODELS)}
+    values.update(_dynamics_options(f, _mechanism(model, fail), fail))
+    if kind == "grid":
+        values.update(_grid(f, raw.get("grid", {}), fail))
+    else:
+        values["parameters"] = tuple(table.parameter(key) for key, table in f.parameters.items())
+        values["outputs"] = tuple(f.outputs)
+        if not values["parameters"]:
+            raise fail("parameters", "names no parameter")
     if kind in ("monte-carlo", "sobol"):
-        values["samples"] = top.get("samples", int, required=True)
-        if values["samples"] < 1:
-            raise top.error("samples", "must be at least 1")
-        if kind == "sobol" and values["samples"] & (values["samples"] - 1):
-            raise top.error("samples", f"{values['samples']} base samples: Sobol' sequences need a power of 2 (e.g. 1024)")
-        values["parameters"] = _parameters(top, DISTRIBUTIONS)
-        if kind == "sobol":
-            sobol = _Reader(top.get("sobol", dict, {}), source, "sobol.")
-            values["resamples"] = sobol.get("resamples", int, 100)
-            values["confidence"] = sobol.get("confidence", float, 0.95)
-            if values["resamples"] < 1 or not 0 < values["confidence"] < 1:
-                raise sobol.error("resamples" if values["resamples"] < 1 else "confidence",
-                                  "resamples >= 1 and 0 < confidence < 1")
-            sobol.done()
-            if len(values["parameters"]) < 2:
-                raise top.error("parameters", "Sobol' indices need at least two parameters")
-        values["outputs"] = _outputs(top, required=True)
-    elif kind == "grid":
-        grid = top.get("grid", dict, None)
-        if grid is not None:
-            if "parameters" in raw:
-                raise top.error("grid", "a grid is over poses ([grid]) or over parameters ([parameters]), not both")
-            if "outputs" in raw:
-                raise top.error("outputs", "a grid over poses computes its maps (maps = [\"workspace\", \"singularity\", "
-                                "\"force\"]), not outputs")
-            values.update(_pose_grid(top, grid, model))
-        else:
-            values["parameters"] = _parameters(top, ("values",))
-            values["outputs"] = _outputs(top, required=True)
-    else:  # optimize
-        values["parameters"] = _parameters(top, ("bounds",))
-        values["minimize"] = top.get("minimize", str, required=True)
-        _check_outputs([values["minimize"]], lambda r: top.error("minimize", r))
-        if values["minimize"] == "feasible":
-            raise top.error("minimize", "'feasible' is the constraint of the search, not an output to minimise")
-        values["outputs"] = _outputs(top, required=False)
-        values["require_feasible"] = top.get("require_feasible", bool, True)
-        values["optimizer"] = _optimizer(_Reader(top.get("optimizer", dict, {}), source, "optimizer."))
-    default_chunk = DEFAULT_POSE_CHUNK if values.get("poses") else DEFAULT_CHUNK
-    values["chunk"] = top.get("chunk", int, default_chunk)
-    if values["chunk"] < 1:
-        raise top.error("chunk", "must be at least 1 evaluation per chunk")
-    top.done()
+        values["samples"] = f.samples
+    if kind == "sobol":
+        values.update(resamples=f.sobol.resamples, confidence=f.sobol.confidence)
+        if len(values["parameters"]) < 2:
+            raise fail("parameters", "Sobol' indices need at least two parameters")
+    if kind == "optimize":
+        values.update(minimize=f.minimize, require_feasible=f.require_feasible, optimizer=f.optimizer.model_dump())
+    values["chunk"] = f.chunk or (DEFAULT_POSE_CHUNK if values.get("poses") else DEFAULT_CHUNK)
     spec = Spec(**values)
-    _check_against_model(spec, top)
+    _check_against_model(spec, fail)
     return spec
 
 
-def _mechanism(top: _Reader, model: str) -> str:
+def _mechanism(model: str, fail) -> str:
     from chewbot.model.params import load_model
 
     try:
         return load_model(model).mechanism
     except ChewbotError as exc:
-        raise top.error("model", str(exc)) from None
+        raise fail("model", str(exc)) from None
 
 
-def _dynamics_options(top: _Reader, method: str | None, orientation: str, mechanism: str) -> dict:
+def _dynamics_options(f: SpecFile, mechanism: str, fail) -> dict:
     """method, goal, friction, contact as ``chewbot run`` takes them, with its defaults and rules
     (:func:`chewbot.run.options.resolve_dynamics`)."""
     from chewbot.dynamics.registry import METHODS
-    from chewbot.run.options import OptionError, Switch, resolve_dynamics
+    from chewbot.run.options import OptionError, resolve_dynamics
 
-    if method is not None and method not in METHODS:
-        close = difflib.get_close_matches(method, list(METHODS), n=1)
-        raise top.error("method", f"{method!r} is not a formulation; choose one of {', '.join(METHODS)}"
-                        + (f" (did you mean {close[0]!r}?)" if close else ""))
-    goal = top.choice("goal", GOALS)
-    friction = top.choice("friction", tuple(Switch))
-    contact = top.choice("contact", CONTACT_MODELS, "bilateral")
+    if f.method is not None and f.method not in METHODS:
+        raise fail("method", f"{f.method!r} is not a formulation; choose one of {', '.join(METHODS)}" + did_you_mean(f.method, METHODS))
     try:
-        d = resolve_dynamics(method, orientation, goal, friction, contact, has_hkp=mechanism == "target")
+        d = resolve_dynamics(f.method, f.orientation, f.goal, f.friction, f.contact, has_hkp=mechanism == "target")
     except OptionError as exc:
-        raise top.error(exc.options[0], exc.reason if len(exc.options) == 1 else exc.worded(lambda option: f"'{option}'")) from None
+        raise fail(exc.options[0], exc.reason if len(exc.options) == 1 else exc.worded(lambda option: f"'{option}'")) from None
     return {"method": d.method, "goal": d.goal, "friction": d.friction, "contact": d.contact}
 
 
-def _fixed(top: _Reader) -> dict:
-    table = top.get("set", dict, {})
-    out = {}
-    for key, value in table.items():
-        out[key] = _typed(value, float, lambda r, key=key: top.error(f"set.{quoted(key)}", r))
-    return out
-
-
-def _parameters(top: _Reader, kinds: tuple[str, ...]) -> tuple[Parameter, ...]:
-    table = top.get("parameters", dict, required=True)
-    if not table:
-        raise top.error("parameters", "names no parameter")
-    return tuple(_parameter(key, value, kinds, lambda suffix, r, key=key: top.error(f"parameters.{quoted(key)}{suffix}", r))
-                 for key, value in table.items())
-
-
-def _outputs(top: _Reader, required: bool) -> tuple[str, ...]:
-    names = top.get("outputs", list, None if not required else None, required=required)
-    if names is None:
-        return ()
-    if not names or not all(isinstance(n, str) for n in names):
-        raise top.error("outputs", "must be a list of output names, e.g. [\"peak_tau_Nm\", \"mean_MCI\"]")
-    _check_outputs(names, lambda r: top.error("outputs", r))
-    if len(set(names)) != len(names):
-        raise top.error("outputs", "names an output twice")
-    return tuple(names)
-
-
-def _check_outputs(names, error) -> None:
-    from chewbot.sweep.quantities import OUTPUTS
-
-    for name in names:
-        if name not in OUTPUTS:
-            close = difflib.get_close_matches(name, list(OUTPUTS), n=1)
-            raise error(f"unknown output {name!r}" + (f"; did you mean {close[0]!r}?" if close else "")
-                        + " (docs/sweeps.md lists the outputs)")
-
-
-def _pose_grid(top: _Reader, grid: dict, model: str) -> dict:
-    reader = _Reader(grid, top.source, "grid.")
-    poses, fixed = [], {}
-    for key in grid:
-        if key not in POSE_KEYS:
-            reader.used.add(key)
-            close = difflib.get_close_matches(key, list(POSE_KEYS), n=1)
-            raise reader.error(key, "not a pose coordinate" + (f" (did you mean {close[0]!r}?)" if close else "")
-                               + f"; the coordinates are {', '.join(POSE_KEYS)}")
-        value = grid[key]
-        reader.used.add(key)
-        if isinstance(value, dict):
-            poses.append(_parameter(key, value, ("values",), lambda suffix, r, key=key: reader.error(key + suffix, r)))
+def _grid(f: GridFile, raw_grid: dict, fail) -> dict:
+    """A grid over parameters, or over poses: its coordinates in the SPEC's order, the held ones, the maps and the
+    force map's directions."""
+    if f.grid is None:
+        for key in ("maps", "force"):
+            if key in f.model_fields_set:
+                raise fail(key, "belongs to a grid over poses ([grid]), not to a grid over parameters")
+        for key in ("parameters", "outputs"):
+            if getattr(f, key) is None:
+                raise fail(key, "missing key")
+        return {"parameters": tuple(table.parameter(key) for key, table in f.parameters.items()), "outputs": tuple(f.outputs)}
+    if f.parameters is not None:
+        raise fail("grid", "a grid is over poses ([grid]) or over parameters ([parameters]), not both")
+    if f.outputs is not None:
+        raise fail("outputs", "a grid over poses computes its maps (maps = [\"workspace\", \"singularity\", \"force\"]), not outputs")
+    poses, held = [], {}
+    for key in raw_grid:  # the SPEC's order: the design's columns
+        value = getattr(f.grid, key)
+        if isinstance(value, Values):
+            poses.append(value.parameter(key))
         else:
-            fixed[key] = _typed(value, float, lambda r, key=key: reader.error(key, r))
+            held[key] = value
     if not poses:
-        raise top.error("grid", "varies no coordinate: give one as { range = [low, high], steps = n } or { values = [...] }")
-    maps = top.get("maps", list, list(MAPS))
-    for name in maps:
-        if name not in MAPS:
-            raise top.error("maps", f"{name!r} is not a map; choose among {', '.join(MAPS)}")
+        raise fail("grid", "varies no coordinate: give one as { range = [low, high], steps = n } or { values = [...] }")
+    maps = list(MAPS) if f.maps is None else f.maps
     if not maps or len(set(maps)) != len(maps):
-        raise top.error("maps", "must name each map once, at least one")
+        raise fail("maps", "must name each map once, at least one")
     directions = dict(DEFAULT_DIRECTIONS)
-    force = _Reader(top.get("force", dict, {}), top.source, "force.")
-    given = force.get("directions", dict, None)
-    force.done()
+    given = None if f.force is None else f.force.directions
     if given is not None:
         if "force" not in maps:
-            raise force.error("directions", "the force map is not among the maps")
+            raise fail("force.directions", "the force map is not among the maps")
         if not given:
-            raise force.error("directions", "names no direction")
+            raise fail("force.directions", "names no direction")
         directions = {}
-        for name, vector in given.items():
-            v = _numbers(vector, lambda r, name=name: force.error(f"directions.{name}", r), 3)
+        for name, v in given.items():
             size = math.sqrt(sum(x * x for x in v))
             if not size > 0:
-                raise force.error(f"directions.{name}", "is the zero vector")
+                raise fail(f"force.directions.{quoted(name)}", "is the zero vector")
             if not name.replace("_", "").isalnum():
-                raise force.error(f"directions.{name}", "a direction's name is letters, digits and _ (it names a column)")
+                raise fail(f"force.directions.{quoted(name)}", "a direction's name is letters, digits and _ (it names a column)")
             directions[name] = tuple(x / size for x in v)
-    return {"poses": tuple(poses), "pose_fixed": fixed, "maps": tuple(maps), "directions": directions}
+    return {"poses": tuple(poses), "pose_fixed": held, "maps": tuple(maps), "directions": directions}
 
 
-OPTIMIZER_DEFAULTS = {"generations": 30, "popsize": 8, "tol": 0.01, "atol": 0.0, "mutation": [0.5, 1.0],
-                      "recombination": 0.7, "init": "latinhypercube"}
-
-
-def _optimizer(reader: _Reader) -> dict:
-    """Differential evolution's settings (scipy.optimize.differential_evolution's names; generations is its
-    maxiter)."""
-    out = {"generations": reader.get("generations", int, 30), "popsize": reader.get("popsize", int, 8),
-           "tol": reader.get("tol", float, 0.01), "atol": reader.get("atol", float, 0.0),
-           "recombination": reader.get("recombination", float, 0.7),
-           "init": reader.choice("init", ("latinhypercube", "sobol", "halton", "random"), "latinhypercube")}
-    mutation = reader.table.get("mutation", [0.5, 1.0])
-    reader.used.add("mutation")
-    if isinstance(mutation, list):
-        out["mutation"] = list(_numbers(mutation, lambda r: reader.error("mutation", r), 2))
-        if not 0 <= out["mutation"][0] <= out["mutation"][1] < 2:
-            raise reader.error("mutation", "dithering [low, high] with 0 <= low <= high < 2")
-    else:
-        out["mutation"] = _typed(mutation, float, lambda r: reader.error("mutation", r))
-        if not 0 <= out["mutation"] < 2:
-            raise reader.error("mutation", "must lie in [0, 2)")
-    for key in ("generations", "popsize"):
-        if out[key] < 1:
-            raise reader.error(key, "must be at least 1")
-    if out["tol"] < 0 or out["atol"] < 0 or not 0 <= out["recombination"] <= 1:
-        raise reader.error("tol" if out["tol"] < 0 else "atol" if out["atol"] < 0 else "recombination",
-                           "tol, atol >= 0 and 0 <= recombination <= 1")
-    reader.done()
-    return out
-
-
-def _check_against_model(spec: Spec, top: _Reader) -> None:
+def _check_against_model(spec: Spec, fail) -> None:
     """The parameter keys and fixed values name numbers that the model (and the counterpart) has, with values it
     accepts at the parameters' central values; the outputs exist for its mechanism."""
     from chewbot.model.params import apply_overrides, model_from_dict, read_parameter_file, resolve_model_path, split_overrides
@@ -502,13 +517,13 @@ def _check_against_model(spec: Spec, top: _Reader) -> None:
     if any(needs_counterpart(o) for o in spec.outputs + ((spec.minimize,) if spec.minimize else ())):
         counterpart = spec.counterpart or COUNTERPARTS.get(spec.model)
         if counterpart is None:
-            raise top.error("counterpart", "missing: a ratio output needs the model it compares with (e.g. counterpart = \"6rss\")")
+            raise fail("counterpart", "missing: a ratio output needs the model it compares with (e.g. counterpart = \"6rss\")")
         models.append(("counterpart", counterpart))
     elif spec.counterpart is not None:
-        raise top.error("counterpart", "no output compares with a counterpart (ratio_MCI...)")
+        raise fail("counterpart", "no output compares with a counterpart (ratio_MCI...)")
     if spec.task != "default" and any(k.startswith("task.") for k in list(spec.fixed) + list(spec.keys)):
         key = next(k for k in list(spec.fixed) + list(spec.keys) if k.startswith("task."))
-        raise top.error(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}",
+        raise fail(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}",
                         f"the default task's parameters apply to task = \"default\", not to {spec.task}")
     from chewbot.run.options import friction_methods, unused_override
 
@@ -516,13 +531,13 @@ def _check_against_model(spec: Spec, top: _Reader) -> None:
         why = unused_override(key, friction=spec.friction == "on", contact=spec.contact,
                               friction_users=f"the {friction_methods()} method with friction = \"on\" (its default)")
         if why:
-            raise top.error(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}", why)
+            raise fail(f"{'parameters' if key in spec.keys else 'set'}.{quoted(key)}", why)
     central = {p.key: p.central() for p in spec.parameters}
     for role, name in models:
         try:
             raw = read_parameter_file(resolve_model_path(name))
         except ChewbotError as exc:
-            raise top.error(role, str(exc)) from None
+            raise fail(role, str(exc)) from None
         raw.pop("__sha256__")
         mechanism = raw.get("mechanism")
         for label, overrides in ([("set", {k: v}) for k, v in spec.fixed.items()]
@@ -535,13 +550,13 @@ def _check_against_model(spec: Spec, top: _Reader) -> None:
                 model_from_dict(apply_overrides(raw, model_part), source=name)
             except ChewbotError as exc:
                 what = "" if label == "set" else f" (at its central value {overrides[key]:g})"
-                raise SpecError(f"{top.source}: key '{label}.{quoted(key)}'{what}: {exc}") from None
+                raise SpecError(f"{spec.source}: key '{label}.{quoted(key)}'{what}: {exc}") from None
         if role == "model":
             for p in spec.poses:
                 if p.key in ("Z_mm", "gamma_deg") and mechanism == "target":
-                    raise top.error(f"grid.{p.key}", "Z and gamma of the target follow from its HKPs: vary X, Y, alpha, beta")
+                    raise fail(f"grid.{p.key}", "Z and gamma of the target follow from its HKPs: vary X, Y, alpha, beta")
             for key in spec.pose_fixed:
                 if key in ("Z_mm", "gamma_deg") and mechanism == "target":
-                    raise top.error(f"grid.{key}", "Z and gamma of the target follow from its HKPs")
+                    raise fail(f"grid.{key}", "Z and gamma of the target follow from its HKPs")
             if spec.minimize and mechanism != "target" and OUTPUTS[spec.minimize].target_only:
-                raise top.error("minimize", f"{spec.minimize} is not defined on the 6RSS (it has no HKPs)")
+                raise fail("minimize", f"{spec.minimize} is not defined on the 6RSS (it has no HKPs)")

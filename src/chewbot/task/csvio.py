@@ -20,9 +20,12 @@ task does not take (theta1, tau1, MCI1, ...) are skipped, and the bite force's s
 
 from __future__ import annotations
 
+import codecs
 import csv
-import itertools
 import json
+import mmap
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -81,85 +84,140 @@ def _parse_header(path: Path, line: int, cells: list[str], columns: dict = COLUM
     return names, np.array(factors), kept
 
 
-# Rows parsed at a time: a block's cells are Python strings (about 60 bytes each), the file's numbers are kept as
-# floats only, so a long recording (an hour at 1 kHz) is read in the memory of its numbers.
-BLOCK_ROWS = 65_536
+# A cell that is a number as pyarrow's CSV reader reads one (the error path names a cell that is not).
+NUMBER = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.IGNORECASE)
+LONE_CR = re.compile(rb"\r(?!\n)")
+# After a line end, what may begin a blank line or a comment: where none follows, every line of the rows is a row.
+SKIPPED_START = re.compile(rb"\n[\n\r \t,#]")
 
 
-def _rows(path: Path, f):
-    """(line, cells) of each row of an open CSV file, skipping blank and comment lines; a malformed file (bad
-    quoting, a NUL byte) is named with its line."""
-    reader = csv.reader(f)
+def _source(path: Path, what: str):
+    """The file's bytes (memory-mapped: a long log is not copied into memory) and where they begin (after a UTF-8
+    byte-order mark); old Mac line ends (a lone CR) are read as line ends."""
     try:
-        for cells in reader:
-            if cells and any(c.strip() for c in cells) and not cells[0].lstrip().startswith("#"):
-                yield reader.line_num, cells
-    except csv.Error as exc:
-        raise TaskError(f"{path}: line {reader.line_num}: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise TaskError(f"{path}: cannot read the task file ({exc})") from None
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
+    except FileNotFoundError:
+        raise TaskError(f"{path}: no such file (expected {what})") from None
+    except OSError as exc:
+        raise TaskError(f"{path}: cannot read it as {what} ({exc.strerror or exc})") from None
+    begin = len(codecs.BOM_UTF8) if data[:3] == codecs.BOM_UTF8 else 0
+    if data.find(b"\r", begin) >= 0 and LONE_CR.search(data, begin):
+        data, begin = data[begin:].replace(b"\r\n", b"\n").replace(b"\r", b"\n"), 0
+    return data, begin
 
 
-def _to_float(path: Path, names: list[str], lines: list[int], cells: list[list[str]]) -> np.ndarray:
-    """The block's cells as numbers (rows, columns); a cell that is not a number is named by line and column."""
-    try:
-        return np.array(cells, dtype=float).reshape(len(cells), len(names))
-    except ValueError:
-        for i, row in enumerate(cells):
-            for j, cell in enumerate(row):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {cell.strip()!r} is not a number") from None
-        raise
+def _skipped(text: bytes) -> bool:
+    """A blank line (nothing but spaces and commas) or a comment (its first cell begins with ``#``)."""
+    return not text.strip(b", \t\r") or text.lstrip(b" \t").startswith(b"#")
+
+
+def _header(path: Path, data, pos: int, what: str, required: tuple[str, ...]) -> tuple[int, list[str], int]:
+    """The header's line (1-based), its cells, and where the rows after it start: the first line from ``pos`` that is
+    neither blank nor a comment."""
+    line = 1
+    while pos < len(data):
+        end = data.find(b"\n", pos)
+        end = len(data) if end < 0 else end
+        text = data[pos:end]
+        if not _skipped(text):
+            try:
+                return line, next(csv.reader([text.decode("utf-8").rstrip("\r")])), end + 1
+            except UnicodeDecodeError as exc:
+                raise TaskError(f"{path}: line {line}: cannot read the column names ({exc})") from None
+        line, pos = line + 1, end + 1
+    raise TaskError(f"{path}: empty file (expected {what}: a header such as '{','.join(required[:5])}{',...' if len(required) > 5 else ''}' "
+                    "and one row per sample)")
+
+
+def _without_skipped(data, pos: int) -> tuple[bytes, np.ndarray]:
+    """The lines from ``pos`` on without the blank and comment lines, and the 0-based line (counted from ``pos``) of
+    each line kept: every line classified at once, NumPy over its bytes."""
+    a = np.frombuffer(data, dtype=np.uint8, offset=pos)
+    ends = np.flatnonzero(a == ord("\n"))
+    if a[-1] != ord("\n"):
+        ends = np.append(ends, a.size)
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    space = np.isin(a, np.frombuffer(b" \t\r\n", dtype=np.uint8))
+    filled = np.append(np.flatnonzero(~space & (a != ord(","))), a.size)  # neither a space nor a comma; a sentinel
+    visible = np.append(np.flatnonzero(~space), a.size)
+    blank = filled[np.searchsorted(filled, starts)] >= ends
+    first = visible[np.searchsorted(visible, starts)]
+    comment = ~blank & (a[np.minimum(first, a.size - 1)] == ord("#"))
+    keep = ~(blank | comment)
+    within = np.repeat(keep, ends - starts + 1)[:a.size]  # each line with its line end
+    return a[within].tobytes(), np.flatnonzero(keep).astype(np.int64)
+
+
+def _first_refused(path: Path, rows, line: int, within: np.ndarray | None, width: int, names: list[str], kept: list[int],
+                   reason: str) -> TaskError:
+    """The error of the first row that pyarrow refused, named by its line and column: a row with another number of
+    cells than the header, or a cell that is not a number. ``line``: the first row's line; ``within``: each row's line
+    from there (None: one after the other)."""
+    text = [row.rstrip("\r") for row in bytes(rows).decode("utf-8", errors="replace").removesuffix("\n").split("\n")]
+    for k, cells in enumerate(csv.reader(text)):
+        number = line + (k if within is None else int(within[k]))
+        if len(cells) != width:
+            return TaskError(f"{path}: line {number}: {len(cells)} cells, the header has {width} columns")
+        for name, j in zip(names, kept):
+            if not NUMBER.fullmatch(cells[j].strip()):
+                return TaskError(f"{path}: line {number}, column {name!r}: {cells[j].strip()!r} is not a number")
+    return TaskError(f"{path}: cannot read the rows ({reason})")
+
+
+def _floats(column) -> np.ndarray:
+    """A float64 column of pyarrow's (no nulls: the reader takes no null values) as one array, from its chunks'
+    buffers (``to_numpy`` would load pandas first, half a second on a first call)."""
+    return np.concatenate([np.frombuffer(c.buffers()[1], dtype=np.float64, count=len(c), offset=8 * c.offset) for c in column.chunks])
 
 
 def read_signals(path: Path, columns: dict, required: tuple[str, ...], what: str, outputs: frozenset[str] = frozenset()):
     """Parse, check and convert to SI a file of signals over time: (names, header, lines, col) with col the
-    columns by name (SI, (N,) each), header the cells of the columns read. Columns in ``outputs`` that are not in
-    ``columns`` are skipped. Every defect is a TaskError naming the file and the line or column. The file is read
-    in blocks of :data:`BLOCK_ROWS` rows, keeping only the numbers."""
+    columns by name (SI, (N,) each), header the cells of the columns read, lines each row's line in the file. Columns in
+    ``outputs`` that are not in ``columns`` are skipped. Every defect is a TaskError naming the file and the line or
+    column.
+
+    The rows are read by pyarrow's CSV reader (columnar, in parallel blocks, each number correctly rounded: the float
+    nearest to its decimal text, as Python's ``float``), from the file memory-mapped, only the columns used converted;
+    blank lines and comments among the rows are left out first."""
+    import pyarrow as pa
+    import pyarrow.csv as pc
+
+    data, begin = _source(path, what)
+    header_line, header, pos = _header(path, data, begin, what, required)
+    names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
+    missing = [c for c in required if c not in names]
+    if missing:
+        raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
+    for n in names:
+        kind, order = columns[n]
+        if order and n[order:] not in names:
+            raise TaskError(f"{path}: column {n!r} is a rate of {n[order:]!r}, which the file does not give")
+    body = pos < len(data)
+    if body and SKIPPED_START.search(data, pos - 1):
+        rows, within = _without_skipped(data, pos)
+    else:
+        rows, within = (pa.py_buffer(data)[pos:] if body else b""), None
+    cells = [f"c{j}" for j in range(len(header))]
     try:
-        f = open(path, encoding="utf-8-sig", newline="")
-    except FileNotFoundError:
-        raise TaskError(f"{path}: no such file (expected {what})") from None
-    except OSError as exc:
-        raise TaskError(f"{path}: cannot read it as {what} ({exc})") from None
-    with f:
-        rows = _rows(path, f)
-        first = next(rows, None)
-        if first is None:
-            raise TaskError(f"{path}: empty file (expected {what}: a header such as '{','.join(required[:5])}{',...' if len(required) > 5 else ''}' "
-                            "and one row per sample)")
-        header_line, header = first
-        names, factors, kept = _parse_header(path, header_line, header, columns, outputs)
-        missing = [c for c in required if c not in names]
-        if missing:
-            raise TaskError(f"{path}: missing column(s) {', '.join(missing)} ({what} needs {', '.join(required)})")
-        for n in names:
-            kind, order = columns[n]
-            if order and n[order:] not in names:
-                raise TaskError(f"{path}: column {n!r} is a rate of {n[order:]!r}, which the file does not give")
-        blocks, lines = [], []
-        while block := list(itertools.islice(rows, BLOCK_ROWS)):
-            numbers = [line for line, _ in block]
-            for line, cells in block:
-                if len(cells) != len(header):
-                    raise TaskError(f"{path}: line {line}: {len(cells)} cells, the header has {len(header)} columns")
-            blocks.append(_to_float(path, names, numbers, [[cells[j] for j in kept] for _, cells in block]))
-            lines.append(np.array(numbers, dtype=np.int64))
-    n = sum(b.shape[0] for b in blocks)
+        table = pc.read_csv(pa.BufferReader(rows), read_options=pc.ReadOptions(column_names=cells),
+                            convert_options=pc.ConvertOptions(include_columns=[cells[j] for j in kept],
+                                                              column_types={cells[j]: pa.float64() for j in kept},
+                                                              null_values=[], strings_can_be_null=False,
+                                                              quoted_strings_can_be_null=False))
+    except pa.ArrowInvalid as exc:
+        raise _first_refused(path, rows, header_line + 1, within, len(header), names, kept, str(exc)) from None
+    n = table.num_rows
+    lines = header_line + 1 + (within if within is not None else np.arange(n, dtype=np.int64))
     if n < MIN_ROWS:
         raise TaskError(f"{path}: {n} data row(s); {what} needs at least {MIN_ROWS}")
-    data = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
-    del blocks
-    lines = np.concatenate(lines)
-    bad = np.argwhere(~np.isfinite(data))
-    if bad.size:
-        i, j = bad[0]
-        raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {data[i, j]} is not a finite number")
-    data *= factors
-    col = {n: data[:, j] for j, n in enumerate(names)}
+    values = [_floats(table.column(j)) for j in range(len(names))]
+    bad = [(int(np.argmin(finite)), j) for j, finite in enumerate(np.isfinite(v) for v in values) if not finite.all()]
+    if bad:
+        i, j = min(bad)
+        raise TaskError(f"{path}: line {lines[i]}, column {names[j]!r}: {values[j][i]} is not a finite number")
+    col = {name: v * f if f != 1.0 else v for name, v, f in zip(names, values, factors)}
     t = col["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:

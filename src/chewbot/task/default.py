@@ -10,15 +10,16 @@ Everything is analytic: the rates are exact derivatives of the bumps.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 from numpy.polynomial import Polynomial
 
+from chewbot.config import unknown_key
 from chewbot.errors import TaskError
 from chewbot.model import Model
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
+from chewbot.units import factor
 
 
 @dataclass(frozen=True)
@@ -65,9 +66,8 @@ def parameters_with(overrides: dict[str, float], base: ChewingParameters | None 
     for name, value in overrides.items():
         argument = f"--set task.{name}={value:g}"
         if name not in types:
-            close = difflib.get_close_matches(name, list(types), n=1)
-            raise TaskError(f"{argument}: the default task has no parameter {name!r}"
-                            + (f"; did you mean task.{close[0]}?" if close else f" (its parameters: {', '.join(types)})"))
+            reason = unknown_key(name, types, prefix="task.", value=value).removeprefix("unknown key")
+            raise TaskError(f"{argument}: the default task has no parameter {name!r}{reason}")
         if types[name] in ("int", int):
             if float(value) != int(value):
                 raise TaskError(f"{argument}: task.{name} must be a whole number")
@@ -110,8 +110,8 @@ def default_task(model: Model | None = None, side: str = "left", params: Chewing
     T = params.period_s
     sign = 1.0 if side == "left" else -1.0
     amplitudes = {
-        "X": (params.X_mm * 1e-3, params.peak_open),
-        "Y": (sign * params.Y_mm * 1e-3, params.peak_swing),
+        "X": (params.X_mm * factor("mm"), params.peak_open),
+        "Y": (sign * params.Y_mm * factor("mm"), params.peak_swing),
         "alpha": (sign * np.radians(params.alpha_deg), params.peak_swing),
         "beta": (np.radians(params.beta_deg), params.peak_open),
     }

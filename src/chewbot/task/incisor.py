@@ -37,12 +37,13 @@ from chewbot.kinematics.symbolic import COORDINATES, symbolic
 from chewbot.model import Model
 from chewbot.table import Table
 from chewbot.kinematics.task import TARGET_COORDS, Task
+from chewbot.units import factor
 
 PINNABLE = ("X", "Y", "alpha", "beta")
 LEVELS = ("displacement", "velocity", "acceleration")
 # Residuals are scaled to millimetres and lengths to millimetres in the solver, so that its tolerances are
 # meaningful for a mandible whose motions are millimetres and tenths of radians.
-_MM = 1e-3
+_MM = factor("mm")
 # A pinned coordinate or abs(e) = 1 violated by more than this after a solve means the solver failed.
 CONSTRAINT_TOLERANCE = 1e-9
 _SQP = {
