@@ -201,7 +201,8 @@ def test_the_estimates_derivative_with_respect_to_the_models_numbers_is_exact(fo
         # converge to ~1e-9 N; 1e-3 relative and 1e-4 of the largest entry bound both
         np.testing.assert_allclose(predicted, fd, rtol=1e-3, atol=1e-4 * fd.max() + 1e-9)
         # each key moves the estimate by over 1e3 times the re-solved estimates' convergence (~1e-9 N), so that the
-        # comparison can fail (measured 6.6e-5 N for the mandible's I_xz on this slow bite, 8e-4 N for J_5, 3e-2 N for the friction)
+        # comparison can fail (measured 6.6e-5 N for the mandible's I_xz on this slow bite, 8e-4 N for J_5, 3e-2 N
+        # for the friction)
         assert fd.max() > 1e-6
 
 
