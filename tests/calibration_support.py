@@ -18,7 +18,8 @@ from chewbot.identification.identifier import identify
 from chewbot.identification.log import RobotLog
 from chewbot.identification.output import model_text
 from chewbot.model.params import load_model
-from chewbot.simulation.run import SimulateOptions, compute
+from chewbot.simulation.options import resolve
+from chewbot.simulation.run import compute
 from chewbot.simulation.texture import TPA_FREQUENCY_HZ, simulated_log
 from chewbot.task.csvio import task_table
 
@@ -67,8 +68,8 @@ def plant_log(task_path: Path, plant: dict[str, float], sigma_tau: float = 0.0, 
 def excited(task_path: str, plant: tuple = ()):
     """chewbot simulate of the excitation task on the plant (``plant``: sorted overrides): computed torque with the
     nominal model's Newton-Euler dynamics, friction in the plant and the controller."""
-    return compute(SimulateOptions(controller="computed-torque", task=task_path, method="newton-euler", friction="on",
-                                   plant_overrides=dict(plant)))
+    return compute(resolve(controller="computed-torque", task=task_path, method="newton-euler", friction="on",
+                           plant_overrides=dict(plant)))
 
 
 def noisy(log: RobotLog, sigma_tau: float, seed: int) -> RobotLog:
@@ -99,9 +100,9 @@ def texture_test(food: str, plant: tuple = (), speed_mm_s: float = 4.0, friction
     p = protocol(f.height, 50.0, speed_mm_s, pause_s)
     t = p.times()
     task = molar_path_task(nominal, "left", t, *p.path(t), name=f"texture test of the {f.name}")
-    r = compute(SimulateOptions(controller="computed-torque", model="target", side="left", rate=1000.0, food=food,
-                                gain_overrides={"computed_torque.frequency_Hz": TPA_FREQUENCY_HZ}, friction=friction,
-                                plant_overrides=dict(plant), noise_rad=encoder_noise), task=task)
+    r = compute(resolve(controller="computed-torque", model="target", side="left", rate=1000.0, food=food,
+                        gain_overrides={"computed_torque.frequency_Hz": TPA_FREQUENCY_HZ}, friction=friction,
+                        plant_overrides=dict(plant), noise_rad=encoder_noise), task=task)
     return r, simulated_log(r)
 
 

@@ -286,7 +286,8 @@ def test_a_constructed_force_step_is_followed_without_a_spike(tmp_path):
     """A bite force that steps from -20 N to -4 N on the plant (a task's Fz, the controller not told it), the robot
     holding a pose: the estimate steps with it, within 5 % of the step's peak (as the peanut's)."""
     from chewbot.kinematics.task import TARGET_COORDS, Task
-    from chewbot.simulation.run import SimulateOptions, compute
+    from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import compute
     from chewbot.simulation.texture import simulated_log
 
     m = load_model("target")
@@ -299,7 +300,7 @@ def test_a_constructed_force_step_is_followed_without_a_spike(tmp_path):
     force = np.zeros((t.size, 3))
     force[:, 2] = np.where(t < 0.6, 0.0, np.where(t < 0.8003, -20.0 * np.clip((t - 0.6) / 0.1, 0, 1), -4.0))
     task = Task(name="step", t=t, coords=TARGET_COORDS, q=q, dq=dq, ddq=ddq, force=force, side="left")
-    r = compute(SimulateOptions(controller="computed-torque", friction="on", bite_unknown=True, rate=1000.0), task=task)
+    r = compute(resolve(controller="computed-torque", friction="on", bite_unknown=True, rate=1000.0), task=task)
     log = simulated_log(r)
     F = r.simulation.force[:, 2]
     step = int(np.flatnonzero(np.diff(F) > 5)[0]) + 1

@@ -23,7 +23,8 @@ from typer.testing import CliRunner
 from chewbot.cli import app
 from chewbot.export.controller import (STATUS_BITS, STRUCTS, ExportedController, SharedLibrary, StepLibrary, StepSpec, build_shared,
                                        fk_function, law_function, structures)
-from chewbot.simulation.run import SimulateOptions, build, compute
+from chewbot.simulation.options import resolve
+from chewbot.simulation.run import build, compute
 from chewbot.table import Table
 
 runner = CliRunner()
@@ -106,8 +107,8 @@ def test_make_check_runs_the_example_and_a_changed_log_fails_it(exported, tmp_pa
 def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
     """On the default task: the C step's commanded torques equal the Python controller's with --sensor measured, on
     the ticks of the same run (both fed the same measured angles) and between two separate closed-loop runs."""
-    c = compute(SimulateOptions(controller=kind, exported=True), exported=ExportedController)  # the default gains
-    py = compute(SimulateOptions(controller=kind, sensor="measured"))
+    c = compute(resolve(kind, exported=True), exported=ExportedController)  # the default gains
+    py = compute(resolve(kind, sensor="measured"))
     assert c.metrics["stopped"] is None and py.metrics["stopped"] is None
     same_run = c.info["simulation"]["exported"]
     assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE and same_run["status_bits_seen"] == []
@@ -120,7 +121,7 @@ def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
 def test_exported_step_with_noisy_encoders_sees_what_the_python_controller_sees():
     """With 1e-4 rad of encoder noise both controllers are fed the same noisy angles each tick: their torques agree
     on the same ticks as without noise."""
-    c = compute(SimulateOptions(noise_rad=1e-4, seed=2, exported=True), exported=ExportedController)
+    c = compute(resolve(noise_rad=1e-4, seed=2, exported=True), exported=ExportedController)
     same_run = c.info["simulation"]["exported"]
     assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE
     assert c.info["simulation"]["sensor"]["noise_rad"] == 1e-4 and c.metrics["stopped"] is None
@@ -156,7 +157,7 @@ def test_exported_needs_the_measured_sensor_and_a_held_rate(tmp_path):
 @pytest.fixture(scope="module")
 def step():
     """The default computed-torque step (the library simulate --exported compiles) and the first reference sample."""
-    controller = build(SimulateOptions(controller="computed-torque", sensor="measured"))[6]
+    controller = build(resolve("computed-torque", sensor="measured")).controller
     spec = StepSpec.of(controller, 1000.0)
     return StepLibrary(spec, build_shared(spec)), spec
 
@@ -177,7 +178,7 @@ def test_context_mirror_has_the_c_compilers_layout(options, tmp_path):
     (one unused normal-force slot, 12 gains)."""
     from chewbot.export.controller.sources import dimensions, filled, header
 
-    spec = StepSpec.of(build(SimulateOptions(sensor="measured", **options))[6], 1000.0)
+    spec = StepSpec.of(build(resolve(sensor="measured", **options)).controller, 1000.0)
     fk, law = fk_function(spec.model), law_function(spec)
     (tmp_path / "chewbot_ctrl.h").write_text(header(spec, fk, law))
     mirror = structures(dimensions(spec, fk, law), filled(spec))
@@ -369,11 +370,11 @@ def test_g1_with_friction_exported_equals_python_and_reports_active_limits():
     with an acceleration far beyond the actuators raises LIMIT_ACTIVE (and saturation); DISTRIBUTION_NOT_CONVERGED
     by its tolerance."""
     options = dict(controller="computed-torque", method="newton-euler", friction="on")
-    c = compute(SimulateOptions(**options, exported=True), exported=ExportedController)
-    py = compute(SimulateOptions(**options, sensor="measured"))
+    c = compute(resolve(**options, exported=True), exported=ExportedController)
+    py = compute(resolve(**options, sensor="measured"))
     a, b = tau_cmd(c.table), tau_cmd(py.table)
     assert np.max(np.abs(a - b)) <= TOLERANCE * np.max(np.abs(b))
-    controller = build(SimulateOptions(**options, sensor="measured"))[6]
+    controller = build(resolve(**options, sensor="measured")).controller
     spec = StepSpec.of(controller, 1000.0)
     lib = StepLibrary(spec, build_shared(spec))
     lib.init(0.0)

@@ -19,7 +19,8 @@ from chewbot.dynamics.energy import energies
 from chewbot.food.geometry import molar_path_task
 from chewbot.food.law import load_food
 from chewbot.food.tpa import protocol
-from chewbot.simulation.run import SimulateOptions, compute
+from chewbot.simulation.options import resolve
+from chewbot.simulation.run import compute
 from chewbot.simulation.texture import TpaOptions, run_tpa
 
 from support import model
@@ -104,7 +105,7 @@ def test_energy_the_food_absorbs_is_the_area_under_its_curve(tmp_path):
     p = protocol(H0_MM * 1e-3, 50, SPEED, 0.3)
     t = p.times()
     task = molar_path_task(m, "left", t, *p.path(t))
-    result = compute(SimulateOptions(food=f, gain_overrides={"computed_torque.frequency_Hz": 100.0}), task=task)
+    result = compute(resolve(food=f, gain_overrides={"computed_torque.frequency_Hz": 100.0}), task=task)
     table, kin, sim = result.table, result.kinematics, result.simulation
     work = float(np.sum(sim.tau[:-1] * np.diff(kin.theta, axis=0)))
     T, V, _ = energies(m, kin)
@@ -199,7 +200,7 @@ def test_sliding_on_the_tooth(tmp_path):
     there, back = _smooth_step(t, 1.0, 0.5, 1e-3), _smooth_step(t, 1.6, 0.5, -1e-3)
     shift = tuple(np.column_stack([a + b, np.zeros(t.size)]) for a, b in zip(there, back))
     task = molar_path_task(m, "left", t, *g, shift=shift)
-    result = compute(SimulateOptions(food=food_file(tmp_path, tooth_friction=mu),
+    result = compute(resolve(food=food_file(tmp_path, tooth_friction=mu),
                                      gain_overrides={"computed_torque.frequency_Hz": 100.0}), task=task)
     table, kin, sim = result.table, result.kinematics, result.simulation
     F = np.column_stack([table["Fx"], table["Fy"], table["Fz"]])

@@ -20,8 +20,10 @@ from chewbot.cli import app
 from chewbot.compiled.kernels import evaluate, native
 from chewbot.food.geometry import molar_path_task
 from chewbot.model.params import load_model
-from chewbot.simulation.controllers import Gains, task_state_kernel
-from chewbot.simulation.run import SimulateOptions, compute
+from chewbot.simulation.controllers.gains import Gains
+from chewbot.simulation.controllers.hybrid import task_state_kernel
+from chewbot.simulation.options import resolve
+from chewbot.simulation.run import compute
 
 runner = CliRunner()
 RAMP = (0.35, 0.45, 0.75, 0.85)  # s: the force reference's ramp, hold and release
@@ -60,7 +62,7 @@ def cylinder(path, k: float, h0: float, mu: float = 0.0, d: float = 10e-3):
 def hybrid(k: float, peak: float, h0: float, folder, friction: str = "off", mu: float = 0.0):
     food = cylinder(folder / f"food_{k:g}_{mu:g}.toml", k, h0, mu)
     method = "newton-euler" if friction == "on" else "hessian"
-    return compute(SimulateOptions(controller="hybrid", food=food, friction=friction, method=method), task=bite_task(h0, peak))
+    return compute(resolve("hybrid", food=food, friction=friction, method=method), task=bite_task(h0, peak))
 
 
 @pytest.fixture(scope="module")
@@ -133,14 +135,14 @@ def test_impedance_holds_the_food_with_its_springs(folder):
     # spring settles within ~0.1 s; what remains is its decay).
     food = cylinder(folder / "imp.toml", 5e3, 8e-3)
     task = bite_task(8e-3, 0.0, opens=0.8)
-    r = compute(SimulateOptions(controller="impedance", food=food), task=task)
+    r = compute(resolve("impedance", food=food), task=task)
     sim, g = r.simulation, Gains.load()
     m = load_model("target")
     y, _, y_ref, _ = evaluate(native(task_state_kernel("target")), sim.q, sim.dq, sim.q_ref, sim.dq_ref, m.molar("left"), m.vector())
     k = np.searchsorted(sim.t, 0.8)
     F = sim.force[k]
     assert F[2] < -1.0  # pressed: about K_z k / (K_z + k) 2 mm
-    assert np.allclose(g.imp_stiffness * (y_ref[k, :3] - y[k, :3]), -F, rtol=5e-3, atol=1e-3)
+    assert np.allclose(np.array(g["impedance"].stiffness_N_per_m) * (y_ref[k, :3] - y[k, :3]), -F, rtol=5e-3, atol=1e-3)
     assert sim.stopped is None
 
 
@@ -151,10 +153,10 @@ def test_gains_files_may_leave_out_the_new_sections_and_name_bad_keys(tmp_path):
     old.write_text("[pd]\nkp_Nm_per_rad = 10\nkd_Nms_per_rad = 0.01\n[computed_torque]\nfrequency_Hz = 30\ndamping = 1\n"
                    "[estimator]\ncutoff_Hz = 50\n")
     g = Gains.load(old)
-    assert g.observer_cutoff == Gains.load().observer_cutoff and "hybrid.threshold_N" in g.defaulted
+    assert g["observer"].cutoff_Hz == Gains.load()["observer"].cutoff_Hz and "hybrid.threshold_N" in g.defaulted
     bad = tmp_path / "bad.toml"
     bad.write_text(old.read_text() + "[hybrid]\nthreshold_N = -1\n")
-    with pytest.raises(ChewbotError, match=r"bad\.toml: hybrid\.threshold_N"):
+    with pytest.raises(ChewbotError, match=r"bad\.toml: key 'hybrid\.threshold_N': expected one positive number"):
         Gains.load(bad)
     with pytest.raises(ChewbotError, match="stiffness_min_N_per_m"):
         Gains.load(overrides={"hybrid.stiffness_min_N_per_m": 1e6})

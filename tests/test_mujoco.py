@@ -327,9 +327,10 @@ def test_computed_torque_tracks_the_default_task_in_mujoco():
     """Computed torque (Hessian method, 1 kHz, the exact model) on MuJoCo's plant: RMS tracking error at most 0.1 mm
     and 0.1 deg over the default task (measured 0.0018 mm and 0.0041 deg, as on chewbot's plant), both condyles pressed
     throughout, the loops closed to 1 um (measured 0.15 um)."""
-    from chewbot.simulation.run import SimulateOptions, compute
+    from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import compute
 
-    r = compute(SimulateOptions(engine="mujoco", contact="unilateral"), write_mjcf=mjcf)
+    r = compute(resolve(engine="mujoco", contact="unilateral"), write_mjcf=mjcf)
     assert r.metrics["stopped"] is None
     assert r.metrics["rms_position_mm"] <= 0.1 and r.metrics["rms_orientation_deg"] <= 0.1
     assert r.simulation.N.min() > 0

@@ -18,11 +18,16 @@ from chewbot.dynamics.energy import energies
 from chewbot.dynamics.formulations.hessian import hessian_rates
 from chewbot.kinematics.motion import solve_kinematics
 from chewbot.model.params import load_model
-from chewbot.simulation.controllers import Gains, ModelBasedController, inverse_dynamics_function
+from chewbot.simulation.controllers.gains import Gains
+from chewbot.simulation.controllers.law import inverse_dynamics_function, make_controller
+from chewbot.simulation.controllers.table import controller_row
+from chewbot.simulation.interfaces import ControllerCapabilities
 from chewbot.simulation.forward import forward_dynamics, residual_function
 from chewbot.simulation.plant import Plant
 from chewbot.simulation.reference import Reference
-from chewbot.simulation.run import SimulateOptions, compute, constraint_drift, motion_task
+from chewbot.simulation.options import resolve
+from chewbot.simulation.plant import constraint_drift
+from chewbot.simulation.run import compute, motion_task
 from chewbot.simulation.simulator import simulate
 from chewbot.task.default import default_task, parameters_with
 
@@ -95,13 +100,25 @@ def test_reference_is_scipys_quintic_hermite():
 
 
 class HeldTorques:
-    """A controller that applies given torques, one row per tick (for the energy balance)."""
+    """A controller that applies given torques, one row per tick (for the energy balance): a controller of the
+    interface (chewbot.simulation.interfaces.Controller) written here, which the simulator runs unchanged."""
+
+    capabilities = ControllerCapabilities()
 
     def __init__(self, t0: float, rate: float, tau: np.ndarray):
         self.t0, self.rate, self.tau = t0, rate, tau
 
+    def kernels(self):
+        return []
+
     def __call__(self, t, state):
         return self.tau[int(round((t - self.t0) * self.rate))]
+
+    def columns(self, t):
+        return []
+
+    def info(self):
+        return {}
 
 
 def test_energy_balance_without_friction(mechanism):
@@ -167,7 +184,7 @@ def test_computed_torque_on_the_exact_model_reproduces_the_task(name):
     rad (measured: about 1e-12)."""
     m = model(name)
     ref = Reference.from_task(m, default_task(m))
-    ct = ModelBasedController("computed-torque", m, ref, Gains.load(mechanism=m.mechanism))
+    ct = make_controller(controller_row("computed-torque"), m, ref)
     sim = simulate(Plant(m), ct, ref, rate=None)
     assert sim.stopped is None and sim.t[-1] == pytest.approx(ref.end, rel=0, abs=1e-12)  # to the last sample (t in s)
     assert np.max(np.abs(sim.q_ref - sim.q)) < 1e-6
@@ -193,14 +210,13 @@ def test_computed_torque_beats_pd_under_a_mass_error():
     by 20 %, the feedback absorbing the rest) tracks at least 2 times better than independent PD on the cranks in
     RMS position and orientation error (measured: 18 times in position, 42 times in orientation, with the default
     gains), and neither leaves the workspace; the plant's constraints do not drift (<= 1e-9 m)."""
-    options = SimulateOptions(plant_overrides=mass_error_plant_set())
-    ct = compute(options)
-    pd = compute(SimulateOptions(controller="pd", plant_overrides=mass_error_plant_set()))
+    ct = compute(resolve(plant_overrides=mass_error_plant_set()))
+    pd = compute(resolve("pd", plant_overrides=mass_error_plant_set()))
     assert ct.metrics["stopped"] is None and pd.metrics["stopped"] is None
     assert ct.metrics["rms_position_mm"] * 2 < pd.metrics["rms_position_mm"]
     assert ct.metrics["rms_orientation_deg"] * 2 < pd.metrics["rms_orientation_deg"]
-    assert ct.plant.mandible_mass == pytest.approx(1.2 * ct.model.mandible_mass)
-    assert ct.plant.coupler_mass == pytest.approx(1.2 * ct.model.coupler_mass)
+    assert ct.plant_model.mandible_mass == pytest.approx(1.2 * ct.model.mandible_mass)
+    assert ct.plant_model.coupler_mass == pytest.approx(1.2 * ct.model.coupler_mass)
     for r in (ct, pd):
         assert max(r.table["drift_chains"].max(), r.table["drift_hkp"].max()) <= 1e-9
 
@@ -214,14 +230,14 @@ def test_gains_file_errors_name_the_file_and_key(tmp_path):
     bad = tmp_path / "g.toml"
     bad.write_text("[pd]\nkp_Nm_per_rad = -1\nkd_Nms_per_rad = 0.1\n[computed_torque]\nfrequency_Hz = 5\ndamping = 1\n"
                    "[estimator]\ncutoff_Hz = 50\n")
-    with pytest.raises(ChewbotError, match=r"g\.toml: pd\.kp_Nm_per_rad"):
+    with pytest.raises(ChewbotError, match=r"g\.toml: key 'pd\.kp_Nm_per_rad': gains must be finite and non-negative"):
         Gains.load(bad)
     bad.write_text("[pd]\nkp = 1\n")
-    with pytest.raises(ChewbotError, match=r"unknown key 'pd\.kp'"):
+    with pytest.raises(ChewbotError, match=r"g\.toml: key 'pd\.kp': unknown key"):
         Gains.load(bad)
     g = Gains.load(overrides={"pd.kp_Nm_per_rad[2]": 4.0})
-    assert g.pd_kp[1] == 4.0 and g.pd_kp[0] != 4.0
-    assert Gains.load(overrides={"estimator.cutoff_Hz": 200.0}).cutoff == 200.0
+    assert g["pd"].kp_Nm_per_rad[1] == 4.0 and g["pd"].kp_Nm_per_rad[0] != 4.0
+    assert Gains.load(overrides={"estimator.cutoff_Hz": 200.0})["estimator"].cutoff_Hz == 200.0
     with pytest.raises(ChewbotError, match=r"estimator\.cutoff_Hz has 1 entry"):
         Gains.load(overrides={"estimator.cutoff_Hz[2]": 1.0})
 
@@ -348,12 +364,13 @@ def test_the_default_pd_gains_are_stable_on_the_estimate_with_a_margin_of_two():
     are run by tests/test_docs.py)."""
     m = model("target")
     g = Gains.load(mechanism="target")
-    assert (g.pd_kp[0], g.pd_kd[0], g.cutoff) == (2.0, 0.004, 300.0)  # the file the docs explain
+    kp, kd, cutoff = g["pd"].kp_Nm_per_rad[0], g["pd"].kd_Nms_per_rad[0], g["estimator"].cutoff_Hz
+    assert (kp, kd, cutoff) == (2.0, 0.004, 300.0)  # the file the docs explain
     assert _pd_loop(m, 10.0, 0.01, None) < 1 < _pd_loop(m, 10.0, 0.01, 50.0)  # measured 0.972 and 1.297
-    assert _pd_loop(m, g.pd_kp[0], g.pd_kd[0], g.cutoff) < 1  # measured 0.983
-    assert _pd_loop(m, 2 * g.pd_kp[0], 2 * g.pd_kd[0], g.cutoff) < 1  # the margin: twice the gains
-    assert _pd_loop(m, 2.5 * g.pd_kp[0], 2.5 * g.pd_kd[0], g.cutoff) > 1  # and not much more (2.17 measured)
-    assert _pd_loop(m, g.pd_kp[0], g.pd_kd[0], None) < 1
+    assert _pd_loop(m, kp, kd, cutoff) < 1  # measured 0.983
+    assert _pd_loop(m, 2 * kp, 2 * kd, cutoff) < 1  # the margin: twice the gains
+    assert _pd_loop(m, 2.5 * kp, 2.5 * kd, cutoff) > 1  # and not much more (2.17 measured)
+    assert _pd_loop(m, kp, kd, None) < 1
 
 
 def test_sensor_estimate_and_noisy_pd():
@@ -374,22 +391,22 @@ def test_sensor_estimate_and_noisy_pd():
     task = default_task(m, "left", parameters_with({"cycles": 1, "rest_s": 0.2}))
     ref = Reference.from_task(m, task)
     gains = Gains.load(mechanism="target")
-    pd = ModelBasedController("pd", m, ref, gains)
-    sim = simulate(Plant(m), pd, ref, 1000.0, CrankSensor(m, 1e-4, gains.cutoff, seed=1))
+    pd = make_controller(controller_row("pd"), m, ref, gains)
+    sim = simulate(Plant(m), pd, ref, 1000.0, CrankSensor(m, 1e-4, gains["estimator"].cutoff_Hz, seed=1))
     e = np.abs(sim.q_ref - sim.q)
     assert sim.stopped is None
     assert e[:, :2].max() < 1.5e-3 and np.degrees(e[:, 2:].max()) < 1.5
-    clean = simulate(Plant(m), ModelBasedController("pd", m, ref, gains), ref, 1000.0)
+    clean = simulate(Plant(m), make_controller(controller_row("pd"), m, ref, gains), ref, 1000.0)
     assert np.abs(sim.tau - clean.tau).max() > 1e-4  # N m: the noise reached the torques
 
 
 def test_simulate_tells_the_time_simulated_and_the_real_time_factor():
     """compute's progress is told, during the loop, how much of the task is simulated and how fast (the loop's
     wall-clock time, kernels prepared before it), in increasing order."""
-    from chewbot.simulation.run import SimulateOptions, compute
+    from chewbot.simulation.run import compute
 
     messages = []
-    compute(SimulateOptions(controller="pd", overrides={"task.cycles": 1, "task.rest_s": 0.2}),
+    compute(resolve("pd", overrides={"task.cycles": 1, "task.rest_s": 0.2}),
             progress=lambda msg, done=None, total=None, stage=None: messages.append(msg))
     found = [re.search(r"^simulation \(pd, 1000 Hz\): (\S+) of 1 s simulated, (\S+) x real time$", m) for m in messages]
     simulated = [float(f.group(1)) for f in found if f]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 # The names of chewbot.api (its __all__, checked by the tests), given here without importing it.
 API = ("ForwardDynamics", "InverseDynamics", "forward_dynamics", "forward_kinematics", "inverse_dynamics",
-       "inverse_kinematics", "load_model", "read_results")
+       "inverse_kinematics", "load_model", "read_results", "simulate")
 ERRORS = ("ChewbotError", "KinematicsError", "ParameterError", "TaskError")
 
 __all__ = sorted(["BUILTIN_MODELS", "Model", "__version__", *ERRORS, *API])

@@ -189,13 +189,14 @@ SLSQP_LABEL = f"reference: SciPy SLSQP G1, exact gradients, warm start (timed on
 
 def _simulate(model, kin):
     """chewbot simulate's loop: computed torque (Hessian, exact model) at 1 kHz along the task, plant without friction."""
-    from chewbot.simulation.controllers import Gains, ModelBasedController
+    from chewbot.simulation.controllers.law import make_controller
+    from chewbot.simulation.controllers.table import DEFAULT_CONTROLLER, controller_row
     from chewbot.simulation.plant import Plant
     from chewbot.simulation.reference import Reference
     from chewbot.simulation.simulator import simulate
 
     reference = Reference(kin.t, *kin.euler_angle_state(), kin.force, kin.side)
-    controller = ModelBasedController("computed-torque", model, reference, Gains.load(mechanism=model.mechanism))
+    controller = make_controller(controller_row(DEFAULT_CONTROLLER), model, reference)
     return simulate(Plant(model), controller, reference, rate=1000.0)
 
 
@@ -447,7 +448,8 @@ def bench_controller(passes: int = 20, core: int | None = None, progress: Progre
     timings)."""
     from chewbot.compiled.kernels import c_compiler
     from chewbot.export.controller import StepSpec, export_controller, simulation_log
-    from chewbot.simulation.run import SimulateOptions, build, compute
+    from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import build, compute
 
     cc = c_compiler()
     if cc is None:
@@ -457,8 +459,8 @@ def bench_controller(passes: int = 20, core: int | None = None, progress: Progre
     with tempfile.TemporaryDirectory() as tmp:
         for label, options, budget in STEP_CASES:
             progress(f"exporting the controller step: {label}")
-            opts = SimulateOptions(controller="computed-torque", sensor="measured", **options)
-            controller = build(opts)[6]
+            opts = resolve(sensor="measured", **options)
+            controller = build(opts).controller
             folder = export_controller(StepSpec.of(controller, 1000.0), Path(tmp) / options["method"],
                                        log=simulation_log(compute(opts)))
             subprocess.run(["make", "-s", "-C", str(folder), "example/example"], check=True, capture_output=True, env={**os.environ, "CC": cc})

@@ -7,15 +7,19 @@ from pathlib import Path
 import typer
 
 from chewbot.commands.common import FORCE_HELP, flag
+from chewbot.run.options import Switch
+from chewbot.simulation.controllers import table as controllers
+
+EXPORTABLE = [controllers.CONTROLLERS[name] for name in controllers.EXPORTABLE]
 
 
 def export_controller(
     out: Path = typer.Option(..., "--out", help="Folder to write the library to (include/, src/, example/, Makefile, README.md)."),
     model: str = typer.Option("target", "--model", help="The controller's model: a built-in model or a TOML parameter file (its numbers are folded into the code)."),
-    method: str = typer.Option("hessian", "--method", help="The inverse dynamics of computed torque: hessian, lagrange, liang, 6rss-core (minimum-norm torques) or newton-euler (the fixed-cost distribution of --goal)."),
+    method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of a model-based controller: hessian, lagrange, liang, 6rss-core (minimum-norm torques) or newton-euler (the fixed-cost distribution of --goal). Default: the formulation table's for Euler angles (hessian)."),
     goal: str | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: min-torque (G1), min-coupler-force or min-hkp-force. Default: min-torque."),
-    friction: str = typer.Option("off", "--friction", help="on|off: the model's HKP and actuator friction in newton-euler's inverse dynamics (and in the plant of the simulation that writes the example's log)."),
-    controller: str = typer.Option("computed-torque", "--controller", help="pd (PD on the crank angles, gains in N m/rad and N m s/rad) or computed-torque (inverse dynamics at the estimated state with PD on the independent coordinates)."),
+    friction: Switch = typer.Option(Switch.off, "--friction", help="on|off: the model's HKP and actuator friction in newton-euler's inverse dynamics (and in the plant of the simulation that writes the example's log)."),
+    controller: str = typer.Option(controllers.DEFAULT_CONTROLLER, "--controller", help=" or ".join(f"{r.name} ({r.help})" for r in EXPORTABLE) + ": the controllers the exported step runs; their gains in the units of the gains file's keys (docs/simulation.md)."),
     gains: Path | None = typer.Option(None, "--gains", help="TOML file of the gains (as chewbot simulate; default: the built-in gains). They are the defaults of the library's ctx->config.gains."),
     task: str = typer.Option("default", "--task", help="The reference compiled in as a table: 'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     side: str | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts (left or right). Default: left, or the side of the run whose results.csv is the --task."),
@@ -47,22 +51,23 @@ def export_controller(
     from chewbot.errors import ChewbotError
     from chewbot.files import EXPORT_FOLDER, check_output
 
-    if controller not in ("pd", "computed-torque"):
-        fail(ChewbotError(f"--controller {controller!r}: the exported step runs pd or computed-torque"), EXIT_BAD_INPUT)
-    from chewbot.simulation.run import SimulateOptions, build, input_files
+    if controller not in controllers.EXPORTABLE:
+        fail(ChewbotError(f"--controller {controller!r}: the exported step runs {' or '.join(controllers.EXPORTABLE)}"), EXIT_BAD_INPUT)
+    from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import build, input_files
 
-    options = SimulateOptions(controller=controller, model=model, task=task, side=side, method=method, goal=goal, friction=friction,
-                              rate=rate, gains=None if gains is None else str(gains), sensor="measured")
     with resolved():
-        options = options.resolved()
+        options = resolve(controller, model, task, side, method, goal, friction, rate=rate,
+                          gains_file=None if gains is None else str(gains), sensor="measured")
     with errors_reported():
         check_output(out, force, EXPORT_FOLDER, inputs=input_files(options))  # before the work, not after it
         from chewbot.export.controller import StepSpec, export_controller as write
 
         with progress(False, "export-controller") as step:
             step("models and task")
-            options, built_model, _, _, _, _, ctl, _, _ = build(options)
-            spec = StepSpec.of(ctl, rate, torque_rate)
+            parts = build(options)
+            built_model = parts.model
+            spec = StepSpec.of(parts.controller, rate, torque_rate)
             rows = None
             if log:
                 from chewbot.export.controller import simulation_log
@@ -79,6 +84,7 @@ def export_controller(
                                        "the estimator), or export without the log (--no-log)")
             step("generating C")
             write(spec, out, force=force, inputs=input_files(options), log=rows)
-    stdout.print(f"wrote {escape(str(out))} ({spec.kind}, {spec.method if spec.kind != 'pd' else 'PD'}, model {escape(built_model.name)}, "
+    uses = options.controller.needs.inverse_dynamics
+    stdout.print(f"wrote {escape(str(out))} ({spec.kind}, {spec.method if uses else 'PD'}, model {escape(built_model.name)}, "
                  f"{len(spec.t)} task samples{'' if rows is None else f', a log of {len(rows)} ticks'}); build and check it with "
                  f"make -C {escape(str(out))} check", highlight=False)

@@ -10,9 +10,12 @@ from pathlib import Path
 
 import typer
 
+from chewbot.dynamics.options import Contact
 from chewbot.kinematics.options import Side
-
-from chewbot.simulation import COMPARED, CONTROLLERS
+from chewbot.run.options import Switch
+from chewbot.simulation.controllers import table as controllers
+from chewbot.simulation import engines
+from chewbot.simulation.options import Sensor
 
 SIMULATE_STEPS = 8  # models and task, simulation, kinematics, checks, results.csv, figures, report (and the compile)
 
@@ -31,41 +34,41 @@ def _rate(value: str) -> str:
 
 
 def _controller(value: str) -> str:
-    if value not in CONTROLLERS:
-        raise typer.BadParameter(f"{value!r} is not a controller; choose one of {', '.join(CONTROLLERS)}")
+    if value not in controllers.CONTROLLERS:
+        raise typer.BadParameter(f"{value!r} is not a controller; choose one of {', '.join(controllers.NAMES)}")
     return value
 
 
 def _engine(value: str) -> str:
-    if value not in ("chewbot", "mujoco"):
-        raise typer.BadParameter(f"{value!r} is not a plant engine; choose chewbot or mujoco")
+    if value not in engines.ENGINES:
+        raise typer.BadParameter(f"{value!r} is not a plant engine; choose one of {', '.join(engines.NAMES)}")
     return value
 
 
 def simulate(
-    controller: str = typer.Option("computed-torque", "--controller", callback=_controller, help="feedforward (the inverse dynamics of the reference, no feedback), pd (independent PD on the crank angles), computed-torque (inverse dynamics at the measured state with PD on the independent coordinates), impedance (springs and dampers in the molar point's x, y, z [N/m, N*s/m] and alpha [N*m/rad] around the reference, on top of the inverse dynamics) or hybrid (with --food: position control until the observed force passes hybrid.threshold_N, then force control along z following the task's Fz [N]; docs/bite_force.md)."),
-    compare: bool = typer.Option(False, "--compare", help="Run feedforward, pd and computed-torque on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
+    controller: str = typer.Option(controllers.DEFAULT_CONTROLLER, "--controller", callback=_controller, help=controllers.help_text()),
+    compare: bool = typer.Option(False, "--compare", help=f"Run {', '.join(controllers.COMPARED)} on the same task and plant, each into OUT/CONTROLLER/, and print one table (RMS and peak tracking error, peak torque, time in saturation)."),
     task: str = typer.Option("default", "--task", help="'default' (the synthetic chewing task) or a CSV file (a results.csv of an earlier run too)."),
     model: str = typer.Option("target", "--model", help="The controller's model: a built-in model or a TOML parameter file (also the plant's unless --plant)."),
     side: Side | None = typer.Option(None, "--side", show_default=False, help="Molar where the bite force acts. Default: left, or the side of the run whose results.csv is the --task."),
-    method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of the model-based controllers (feedforward, computed-torque): hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles). Default: hessian."),
+    method: str | None = typer.Option(None, "--method", show_default=False, help="The inverse dynamics of the model-based controllers: hessian, lagrange, liang, 6rss-core or newton-euler (as chewbot run; Euler angles). Default: the formulation table's for Euler angles (hessian)."),
     goal: str | None = typer.Option(None, "--goal", show_default=False, help="newton-euler on the target: the distribution of the redundant torques (min-torque, min-coupler-force, min-hkp-force). Default: min-torque."),
-    friction: str = typer.Option("off", "--friction", help="on|off: HKP and actuator friction in the plant (the model's coefficients); the controller's model has it only with --method newton-euler."),
-    contact: str = typer.Option("bilateral", "--contact", help="bilateral|unilateral: whether the contact-pull check (the plant's N_L, N_R < 0, or below contact.preload_N) fails the run (unilateral) or is reported (bilateral). chewbot's plant keeps both contacts closed either way; MuJoCo's (--plant-engine mujoco) are unilateral."),
+    friction: Switch = typer.Option(Switch.off, "--friction", help="on|off: HKP and actuator friction in the plant (the model's coefficients); the controller's model has it only with --method newton-euler."),
+    contact: Contact = typer.Option(Contact.bilateral, "--contact", help="bilateral|unilateral: whether the contact-pull check (the plant's N_L, N_R < 0, or below contact.preload_N) fails the run (unilateral) or is reported (bilateral). chewbot's plant keeps both contacts closed either way; MuJoCo's (--plant-engine mujoco) are unilateral."),
     rate: str = typer.Option("1000", "--rate", callback=_rate, help="Control rate in Hz (torques held between ticks), or 'continuous': the controller evaluated at every integrator stage, rows at the task's samples (for verification)."),
     noise: float = typer.Option(0.0, "--noise", min=0.0, help="Standard deviation (rad) of Gaussian noise on the measured crank angles; the controller then gets its state from an estimator (docs/simulation.md). 0: it sees the plant's state."),
     seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
-    sensor: str | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
+    sensor: Sensor | None = typer.Option(None, "--sensor", show_default=False, help="What the controller is given: exact (the plant's state) or measured (its estimate from the six crank angles: Gauss-Newton forward kinematics and the filtered difference, cut-off estimator.cutoff_Hz, as the exported C step does). Default: measured with --noise or --exported, else exact."),
     exported: bool = typer.Option(False, "--exported", help="Run the controller as the exported C step (chewbot export-controller), compiled and called through ctypes at each tick (pd or computed-torque, --sensor measured); run.json records how far its torques are from the Python controller's on the same ticks (N m)."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not the controller's (built-in name or TOML file)."),
-    plant_engine: str = typer.Option("chewbot", "--plant-engine", callback=_engine, help="What simulates the plant's model: chewbot (its Newton-Euler equations, Radau IIA) or mujoco (MuJoCo's simulation of the model's MJCF, as chewbot export-model writes it; steps of 0.1 ms, unilateral condyle contacts; docs/mujoco.md). Needs a control rate in Hz."),
-    compare_engines: bool = typer.Option(False, "--compare-engines", help="Simulate the controller on both engines (chewbot and mujoco), each into OUT/ENGINE/, and print one table; the comparison's report.html shows both side by side."),
+    plant_engine: str = typer.Option(engines.DEFAULT_ENGINE, "--plant-engine", callback=_engine, help="What simulates the plant's model: " + " or ".join(f"{e.name} ({e.help})" for e in engines.ENGINES.values()) + ". Only an engine whose plant closes the loop takes --rate continuous (chewbot's)."),
+    compare_engines: bool = typer.Option(False, "--compare-engines", help=f"Simulate the controller on every engine ({', '.join(engines.NAMES)}), each into OUT/ENGINE/, and print one table; the comparison's report.html shows them side by side."),
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as --set): the model error the controller does not know; repeatable."),
     set_: list[str] = typer.Option([], "--set", metavar="KEY=VALUE", help="Override one number of the controller's model (and of the plant's, unless --plant) or of the default task (task.NAME); repeatable."),
     bite_unknown: bool = typer.Option(False, "--bite-unknown", help="The bite force acts on the plant but the controller's inverse dynamics does not know it."),
     food: str | None = typer.Option(None, "--food", show_default=False, help="A food sample on the molar of the task's side: a built-in food (peanut, cheddar, gummy, bread, artisynth-bolus) or a TOML food file (docs/food.md). The bite force is then the food's force from the plant's state (results.csv: food_compression [m], food_force [N], food_broken [1]); the task must carry no bite force, except under --controller hybrid (its Fz is the force reference)."),
     gains: Path | None = typer.Option(None, "--gains", help="TOML file of the controllers' gains (default: the built-in gains, docs/simulation.md)."),
-    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain: pd.kp_Nm_per_rad, pd.kd_Nms_per_rad, computed_torque.frequency_Hz, computed_torque.damping, estimator.cutoff_Hz, impedance.stiffness_N_per_m, impedance.damping_Ns_per_m, impedance.angle_stiffness_Nm_per_rad, impedance.angle_damping_Nms_per_rad, hybrid.frequency_Hz, hybrid.damping, hybrid.force_frequency_Hz, hybrid.force_damping, hybrid.threshold_N, hybrid.stiffness_min_N_per_m, hybrid.stiffness_max_N_per_m, hybrid.speed_limit_m_per_s, observer.cutoff_Hz (KEY[i] for the i-th entry; units in the key names); repeatable."),
+    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain of the gains file, SECTION.KEY=VALUE: a section per controller and the estimator's and observer's (docs/simulation.md lists the keys; units in the key names: pd.kp_Nm_per_rad=3 [N*m/rad], computed_torque.frequency_Hz=40 [Hz], observer.cutoff_Hz=150 [Hz]; KEY[i] for the i-th entry); repeatable."),
     out: Path = typer.Option(Path("runs/simulation"), "--out", help="Results folder to write."),
     force: bool = typer.Option(False, "--force", help="Replace the output if it exists and chewbot wrote it (anything else is never replaced)."),
     allow_violations: bool = typer.Option(False, "--allow-violations", help="Exit 0 even when a validity check fails (the checks are still written and printed)."),
@@ -101,49 +104,29 @@ def simulate(
 
       chewbot simulate --compare-engines --contact unilateral --out runs/engines
     """
-    from chewbot.commands.common import (EXIT_BAD_INPUT, check_interrupted, errors_reported, exit_after_checks, fail, progress,
-                                         resolved, set_overrides, stdout)
-    from chewbot.errors import ChewbotError
+    from chewbot.commands.common import (check_interrupted, errors_reported, exit_after_checks, progress, resolved, set_overrides,
+                                         stdout)
     from chewbot.files import check_output
     from chewbot.outputs.simulation import SIMULATION_FOLDER
-    from chewbot.simulation.run import SimulateOptions, input_files
+    from chewbot.simulation.options import resolve
+    from chewbot.simulation.run import input_files
 
     gain_overrides = set_overrides(gain, "--gain")
-    options = SimulateOptions(controller=controller, model=model, task=task, side=None if side is None else side.value, method=method, goal=goal, friction=friction,
-                              contact=contact, rate=None if rate == "continuous" else float(rate), noise_rad=noise, seed=seed,
-                              plant=plant, overrides=set_overrides(set_), plant_overrides=set_overrides(plant_set, "--plant-set"),
-                              bite_unknown=bite_unknown, gains=None if gains is None else str(gains), gain_overrides=gain_overrides,
-                              food=food, sensor=sensor, exported=exported, engine=plant_engine)
-    if noise > 0 and options.rate is None:
-        fail(ChewbotError("--noise needs a control rate: the encoders are read at its ticks, not with --rate continuous"), EXIT_BAD_INPUT)
-    if exported and compare:
-        fail(ChewbotError("--exported runs one controller (pd or computed-torque), --compare all three: choose one"), EXIT_BAD_INPUT)
     with resolved():
-        options = options.resolved(controllers=COMPARED if compare else (controller,))
-    if controller == "hybrid" and options.rate is None:
-        fail(ChewbotError("--controller hybrid switches on the force observer's estimate at the ticks of a control rate: it needs a rate, not --rate continuous"), EXIT_BAD_INPUT)
-    if compare_engines and options.rate is None:
-        fail(ChewbotError("--compare-engines needs a control rate: the MuJoCo plant runs the controller at its ticks, not with "
-                          "--rate continuous"), EXIT_BAD_INPUT)
-    if compare and compare_engines:
-        fail(ChewbotError("--compare and --compare-engines: choose one (controllers on one engine, or one controller on both)"),
-             EXIT_BAD_INPUT)
+        options = resolve(controller, model, task, side, method, goal, friction, contact, rate, noise, seed, plant,
+                          set_overrides(set_), set_overrides(plant_set, "--plant-set"), bite_unknown,
+                          None if gains is None else str(gains), gain_overrides, food, sensor, exported, plant_engine, compare,
+                          compare_engines)
     from chewbot.export.mjcf import mjcf
 
     with errors_reported():
         check_output(out, force, SIMULATION_FOLDER, inputs=input_files(options))  # before the work, not after it
-        if compare_engines:
-            from chewbot.outputs.simulation import write_comparison
-            from chewbot.simulation.run import compare_engines as run_engines
-
-            with progress(quiet, "simulate --compare-engines", total=2 * SIMULATE_STEPS) as step:
-                results = run_engines(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
-                write_comparison(results, out, force=force, progress=step)
-        elif compare:
+        if compare or compare_engines:
             from chewbot.outputs.simulation import write_comparison
             from chewbot.simulation.run import compare as run_compare
 
-            with progress(quiet, "simulate --compare", total=3 * SIMULATE_STEPS) as step:
+            label = "simulate --compare-engines" if compare_engines else "simulate --compare"
+            with progress(quiet, label, total=len(options.runs()) * SIMULATE_STEPS) as step:
                 results = run_compare(options, progress=step, check=check_interrupted, write_mjcf=mjcf)
                 write_comparison(results, out, force=force, progress=step)
         else:
@@ -155,7 +138,7 @@ def simulate(
                 from chewbot.export.controller import ExportedController as exported_step
             with progress(quiet, "simulate", total=SIMULATE_STEPS + exported) as step:
                 results = {controller: compute(options, progress=step, check=check_interrupted, exported=exported_step,
-                                                  write_mjcf=mjcf)}
+                                               write_mjcf=mjcf)}
                 write(results[controller], out, force=force, progress=step)
     if not quiet:
         _print_summary(stdout, results, out, compare or compare_engines)
@@ -178,11 +161,12 @@ def _print_summary(stdout, results: dict, out: Path, compare: bool) -> None:
                      highlight=False, markup=False)
     for label, r in results.items():
         o = r.options
-        dynamics = ("no inverse dynamics" if o.controller == "pd" else
-                    f"inverse dynamics {o.method} (goal {o.goal or 'none: minimum-norm torques'}, friction in its model "
-                    f"{'on' if o.controller_friction else 'off'}, bite force {'unknown' if o.bite_unknown else 'known'})")
-        stdout.print(f"{label}: used: controller {o.controller} at {'every integrator stage' if o.rate is None else f'{o.rate:g} Hz'} "
-                     f"({dynamics}), plant friction {o.friction}, contact {o.contact}, sensor noise {o.noise_rad:g} rad",
+        inverse = o.inverse
+        dynamics = ("no inverse dynamics" if not o.controller.needs.inverse_dynamics else
+                    f"inverse dynamics {inverse.method} (goal {inverse.goal or 'none: minimum-norm torques'}, friction in its model "
+                    f"{'on' if inverse.friction else 'off'}, bite force {'unknown' if o.bite_unknown else 'known'})")
+        stdout.print(f"{label}: used: controller {o.controller.name} at {'every integrator stage' if o.rate is None else f'{o.rate:g} Hz'} "
+                     f"({dynamics}), plant friction {'on' if o.friction else 'off'}, contact {o.contact}, sensor noise {o.noise_rad:g} rad",
                      highlight=False, markup=False)
         stopped = r.metrics["stopped"]
         if stopped is not None:

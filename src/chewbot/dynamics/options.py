@@ -23,6 +23,9 @@ class Contact(StrEnum):
 
 
 GOALS = tuple(g.value for g in Goal)
+# The formulation a run uses where it names none, per orientation parametrisation (its keys are
+# kinematics.options.Orientation's values; the rows are dynamics.registry's).
+DEFAULT_METHOD = {"euler-angles": "hessian", "euler-parameters": "newton-euler"}
 CONTACT_MODELS = tuple(c.value for c in Contact)
 
 

@@ -20,6 +20,7 @@ from typing import Callable
 
 from chewbot.dynamics import g1
 from chewbot.dynamics.formulations import core6rss, hessian, lagrange, liang, newton_euler
+from chewbot.dynamics.options import DEFAULT_METHOD
 from chewbot.dynamics.base import Dynamics
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.options import Orientation
@@ -78,8 +79,7 @@ FORMULATIONS: dict[str, Formulation] = {f.name: f for f in (
                 defaults=(("goal", "min-torque"), ("friction", True))),
 )}
 METHODS = tuple(FORMULATIONS)
-# The formulation a run uses where it names none, per orientation parametrisation.
-DEFAULT_METHOD = {EA: "hessian", EP: "newton-euler"}
+assert set(DEFAULT_METHOD) == {EA, EP} and set(DEFAULT_METHOD.values()) <= set(FORMULATIONS)
 
 
 def formulation(method: str) -> Formulation:
@@ -89,7 +89,7 @@ def formulation(method: str) -> Formulation:
     return FORMULATIONS[method]
 
 
-def inverse_dynamics(model: Model, kin: Kinematics, method: str = "hessian", *, carry: dict | None = None,
+def inverse_dynamics(model: Model, kin: Kinematics, method: str = DEFAULT_METHOD[EA], *, carry: dict | None = None,
                      check: Callable[[], None] | None = None, **options) -> Dynamics:
     """Run the formulation ``method`` on the kinematics ``kin`` of ``model`` with its keyword ``options`` (a
     misspelt one is a TypeError). ``carry``: the previous chunk's ``Dynamics.carry`` (passed on where the formulation

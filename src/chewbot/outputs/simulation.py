@@ -23,9 +23,9 @@ def simulation_json(result: SimulateResult) -> dict:
 
     return {
         "chewbot_simulation": SIMULATION_FORMAT,
-        "options": vars(result.options),
+        "options": result.record,
         "model": model_record(result.model),
-        "plant": model_record(result.plant),
+        "plant": model_record(result.plant_model),
         "task": task_record(result.task),
         **environment_record(),
         "columns": columns_record(result.table),
@@ -43,7 +43,7 @@ def write_into(result: SimulateResult, folder: Path, progress: Progress = SILENT
 
     from chewbot.outputs.record import copy_inputs, with_copies
 
-    copies = copy_inputs(folder, {"model": result.model, "plant": result.plant}, result.task)
+    copies = copy_inputs(folder, {"model": result.model, "plant": result.plant_model}, result.task)
     record, view = write_table(folder, result.table, with_copies(simulation_json(result), copies), progress=progress)
     for name, text in result.files.items():  # the MuJoCo plant's model file
         (folder / name).write_text(text, encoding="utf-8")
@@ -51,8 +51,8 @@ def write_into(result: SimulateResult, folder: Path, progress: Progress = SILENT
     progress("drawing figures")
     drawn = [
         simulation_figures.tracking_error(series, folder / "tracking_error.png", controller_label(result)),
-        dynamics_figures.torques(series, folder / "torques.png", f"applied, {result.options.controller}", result.options.contact),
-        simulation_figures.saturation(series, folder / "saturation.png", result.plant.limits.torque),
+        dynamics_figures.torques(series, folder / "torques.png", f"applied, {result.options.controller.name}", result.options.contact),
+        simulation_figures.saturation(series, folder / "saturation.png", result.plant_model.limits.torque),
         figures.task_space(series, folder / "task_space.png"),
         figures.joint_space(series, folder / "joint_space.png"),
     ]
@@ -85,9 +85,10 @@ def write_comparison(results: dict[str, SimulateResult], out: Path, force: bool 
             write_into(result, tmp / kind, progress)
         comparison_table(results).to_csv(tmp / "comparison.csv")
         comparison({k: r.table for k, r in results.items()}, tmp / "comparison.png")
+        records = [r.record for r in results.values()]
         record = {"chewbot_simulation": SIMULATION_FORMAT, "comparison": {k: r.metrics for k, r in results.items()},
-                  "options": {k: v for k, v in vars(first.options).items() if k not in ("controller", "engine") or
-                              len({getattr(r.options, k) for r in results.values()}) == 1},
+                  "options": {k: v for k, v in first.record.items() if k not in ("controller", "engine") or
+                              len({rec[k] for rec in records}) == 1},
                   "folders": {k: k for k in results}}
         (tmp / "run.json").write_text(to_json(record))
         write_comparison_report(results, tmp / "report.html", files=sorted(p.name for p in tmp.iterdir()))

@@ -62,7 +62,7 @@ def _coefficients(model: Model, task: Task, rows: np.ndarray, side: str):
     def evaluate(dq, ddq):
         sub = replace(task, t=task.t[rows], q=q, dq=dq, ddq=ddq, force=force)
         kin = solve_kinematics(model, sub)
-        return np.hstack([inverse_dynamics(model, kin, "hessian", side=side).tau, kin.ddtheta]), kin.dtheta
+        return np.hstack([inverse_dynamics(model, kin, side=side).tau, kin.ddtheta]), kin.dtheta
 
     A, _ = evaluate(zero, d1)
     B, theta_prime = evaluate(d1, d2)
@@ -76,7 +76,7 @@ def limit_report(model: Model, task: Task) -> list[str]:
     and the time, and the span of times over which it is broken."""
     lim = model.limits
     kin = solve_kinematics(model, task)
-    tau = inverse_dynamics(model, kin, "hessian", side=task.side).tau
+    tau = inverse_dynamics(model, kin, side=task.side).tau
     out = []
     for name, v, bound, unit in (("crank speed", kin.dtheta, lim.speed, "rad/s"), ("crank acceleration", kin.ddtheta, lim.acceleration, "rad/s^2"),
                                  ("torque", tau, lim.torque, "N*m")):

@@ -34,27 +34,33 @@ def _view(table: Table) -> RunView:
 def controller_label(result) -> str:
     """The controller in words: its kind, its inverse dynamics, its rate."""
     o = result.options
-    model_based = "" if o.controller == "pd" else f", inverse dynamics {o.method}" + (f" (goal {o.goal})" if o.goal else "") + (
-        ", with friction" if o.controller_friction else "")
+    inverse = o.inverse
+    model_based = "" if not o.controller.needs.inverse_dynamics else f", inverse dynamics {inverse.method}" + (
+        f" (goal {inverse.goal})" if inverse.goal else "") + (", with friction" if inverse.friction else "")
     rate = "continuous (every integrator stage)" if o.rate is None else f"{o.rate:g} Hz, torques held"
-    return f"{o.controller}{model_based}, {rate}"
+    return f"{o.controller.name}{model_based}, {rate}"
 
 
 def write_simulation_report(result, record: dict, view: RunView, path: Path, files: list[str] | None = None) -> Path:
     """Write ``report.html`` for a computed simulation from what its folder holds: run.json's ``record`` (as read
     back) and ``view``, the view of its results.csv; ``files`` names the other files of its folder."""
     figures: dict[str, dict] = {}
-    body = [_robots_section(result, view, figures), checks_section(record), _tracking_section({result.options.controller: result}),
+    o = result.options
+    body = [_robots_section(result, view, figures), checks_section(record), _tracking_section({o.controller.name: result}),
             plots_section(view, figures), _run_section(result, files or [])]
-    return _page(f"chewbot simulation: {result.options.controller} on {result.plant.name}, {result.task.name} ({result.options.side} side)",
-                 f"{controller_label(result)} · {result.table.n} rows · plant {result.options.engine}, friction {result.options.friction}", body,
+    return _page(f"chewbot simulation: {o.controller.name} on {result.plant_model.name}, {result.task.name} ({result.task.side} side)",
+                 f"{controller_label(result)} · {result.table.n} rows · plant {o.engine.name}, friction {_switch(o.friction)}", body,
                  figures, path)
 
 
+def _switch(on: bool) -> str:
+    return "on" if on else "off"
+
+
 def _robots_section(result, view: RunView, figures: dict) -> str:
-    side = result.options.side
-    figures["robot"] = robot_figure(result.plant, view, side)
-    figures["robot_reference"] = robot_figure(result.plant, _view(kinematics_table(result.reference_kinematics)), side)
+    side = result.task.side
+    figures["robot"] = robot_figure(result.plant_model, view, side)
+    figures["robot_reference"] = robot_figure(result.plant_model, _view(kinematics_table(result.reference_kinematics)), side)
     stopped = result.simulation.stopped
     note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({escape(stopped["reason"])}): the motion ends '
             "at the last pose inside.</span>" if stopped else "")
@@ -111,8 +117,8 @@ def _run_section(result, files: list[str]) -> str:
     o, sim = result.options, result.simulation
     info = result.info["simulation"]
     rows = [["controller", escape(controller_label(result)) + f" on the model {escape(result.model.name)} (<code>{escape(result.model.source)}</code>)"],
-            ["plant", f"{escape(result.plant.name)} (<code>{escape(result.plant.source)}</code>), simulated by {escape(o.engine)}, "
-                      f"friction {escape(o.friction)}"
+            ["plant", f"{escape(result.plant_model.name)} (<code>{escape(result.plant_model.source)}</code>), simulated by "
+                      f"{escape(o.engine.name)}, friction {_switch(o.friction)}"
              + (f", --plant-set {escape(', '.join(f'{k}={v:g}' for k, v in o.plant_overrides.items()))}" if o.plant_overrides else "")],
             ["bite force", "hidden from the controller (--bite-unknown)" if o.bite_unknown else "known to the controller"],
             ["sensor", f"crank encoders with noise of {o.noise_rad:g} rad (seed {o.seed})" if o.noise_rad else "the plant's state"],
@@ -137,9 +143,9 @@ def write_comparison_report(results: dict, path: Path, files: list[str] | None =
     if files:
         listed = ", ".join(f'<a href="{escape(f)}">{escape(f)}</a>' for f in files)
         body.append(f'<section id="run"><h2>Files</h2><p>{listed}</p></section>')
-    what = "controllers" if len({r.options.controller for r in results.values()}) > 1 else "plants' engines"
-    return _page(f"chewbot simulation: {what} compared on {first.plant.name}, {first.task.name}",
-                 f"plant friction {first.options.friction} · {len(results)} {what}", body, figures, path,
+    what = "controllers" if len({r.options.controller.name for r in results.values()}) > 1 else "plants' engines"
+    return _page(f"chewbot simulation: {what} compared on {first.plant_model.name}, {first.task.name}",
+                 f"plant friction {_switch(first.options.friction)} · {len(results)} {what}", body, figures, path,
                  nav=(("summary", "Tracking"), ("plots", "Errors"), ("run", "Files")))
 
 

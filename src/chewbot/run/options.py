@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
-from chewbot.dynamics.options import Contact, Goal
+from chewbot.dynamics.options import DEFAULT_METHOD, Contact, Goal
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.options import Orientation, Side
 
@@ -63,7 +63,7 @@ class RunOptions:
     task: str = "default"
     side: str | None = None
     orientation: str = Orientation.euler_angles.value
-    method: str = "hessian"
+    method: str = DEFAULT_METHOD[Orientation.euler_angles.value]
     goal: str | None = None
     friction: str | None = None
     contact: str = Contact.bilateral.value
@@ -101,7 +101,7 @@ def resolve_dynamics(method: str | None = None, orientation: str = Orientation.e
                      has_hkp: bool | None = None, model: str = "target") -> DynamicsOptions:
     """``method``, ``goal``, ``friction`` and ``contact`` completed and checked by the rules of the module docstring.
     ``has_hkp``: whether the robot is the target (None: read from ``model``'s parameter file where a rule needs it)."""
-    from chewbot.dynamics.registry import DEFAULT_METHOD, FORMULATIONS
+    from chewbot.dynamics.registry import FORMULATIONS
 
     orientation = _choice("orientation", orientation, Orientation)
     goal = _choice("goal", goal, Goal)
@@ -181,7 +181,7 @@ def complete(options: RunOptions, has_hkp: bool) -> RunOptions:
     """``options`` with the defaults that apply filled in and checked (:func:`resolve_dynamics`); ``has_hkp``: the
     model is the target. A run without inverse dynamics (``method`` None) takes neither goal nor friction."""
     if options.method is None:
-        d = resolve_dynamics("hessian", options.orientation, options.goal, options.friction, options.contact, has_hkp=has_hkp)
+        d = resolve_dynamics(DEFAULT_METHOD[options.orientation], options.orientation, options.goal, options.friction, options.contact, has_hkp=has_hkp)
         return replace(options, contact=d.contact)
     d = resolve_dynamics(options.method, options.orientation, options.goal, options.friction, options.contact, has_hkp=has_hkp)
     return replace(options, method=d.method, goal=d.goal, friction=d.friction, contact=d.contact)

@@ -1,7 +1,5 @@
-"""Closed-loop simulation: forward dynamics, controllers, the loop at the control rate.
+"""Closed-loop simulation: plants and controllers behind declared interfaces (:mod:`.interfaces`), the tables of
+controllers (:mod:`.controllers.table`) and plant engines (:mod:`.engines`), the options resolved once (:mod:`.options`),
+the loop at the control rate (:mod:`.simulator`).
 
-Nothing heavy is imported here: the command line reads :data:`CONTROLLERS` without loading CasADi."""
-
-CONTROLLERS = ("feedforward", "pd", "computed-torque", "impedance", "hybrid")
-# The controllers --compare runs side by side (those that need no food).
-COMPARED = ("feedforward", "pd", "computed-torque")
+Nothing heavy is imported here: the command line reads the tables without loading NumPy or CasADi."""

@@ -6,7 +6,8 @@ integrator step it is the food's force at the stage's state (:func:`food_stage`)
 point's gap (:mod:`chewbot.food.geometry`), its rate, the sliding velocity, and the food's own state, the
 :class:`FoodState`: ``broken`` (0/1), the Maxwell branch's force F_m (integrated exactly over the step for a linear
 change of b F_e, :func:`chewbot.food.law.maxwell_force`). The derivatives the step's Newton iteration needs are
-CasADi's, exact.
+CasADi's, exact. The food's state at a step's start is part of the step's shared inputs, laid out by name
+(:data:`STEP_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
 
 Events. The law has kinks and one jump (:mod:`chewbot.food.law`): contact (delta = 0), the teeth meeting
 (delta = h0), the adhesion clamp (F_d + F_m = -adhesion_N) and the fracture (delta / h0 = fracture_strain, which
@@ -18,13 +19,13 @@ interval continued. No step straddles a kink, so the method keeps its order, and
 not at the next tick. :attr:`FoodPlant.events` lists them.
 
 The controllers are not told the food's force: a model-based controller gets the task's bite force, which must be
-zero with a food (refused otherwise in :mod:`chewbot.simulation.run`), except for a controller named in
-:data:`FORCE_REFERENCE_CONTROLLERS`, which reads the task's force as its force reference.
+zero with a food (refused otherwise by the simulation's options), except for a controller whose row reads the task's
+force as its force reference (:attr:`chewbot.simulation.controllers.table.ControllerRow.force_reference`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -35,20 +36,21 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
 from chewbot.food.law import CASADI, N_FOOD, NUMPY, Food, breaking, elastic_force, maxwell_force, normal_force, tangential_force
-from chewbot.model.vector import N_P
-from chewbot.simulation.forward import n_coordinates, residual_function
-from chewbot.simulation.integrator import C
-from chewbot.simulation.plant import MAX_STEP, Plant, PlantState, step_kernel
+from chewbot.compiled.layout import Layout
+from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
+from chewbot.simulation.integrator import C, STAGES
+from chewbot.simulation.interfaces import PLANT_INPUTS, Column, PlantCapabilities, PlantState
+from chewbot.simulation.plant import MAX_STEP, PLANT_SHARED, Plant, Solved, Step, step_kernel
 
-# Controllers that take the task's bite force as a force reference with a food in the plant (chewbot.simulation.run
-# lets a task with a bite force through for them only). The hybrid force/position controller reads F_z.
-FORCE_REFERENCE_CONTROLLERS = ("hybrid",)
 # Step lengths of the located events are found to this (s).
 EVENT_TOLERANCE = 1e-10
 EVENTS = ("contact", "teeth", "fracture", "adhesion")
-# s of the food step after the plant's (B, friction, p): the food's vector, then its state at the step's start
-# (broken, F_m, b F_e) and B_z at home.
-N_STATE = 3
+# The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N).
+STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1)
+# W of the food's step: the torques and each stage's time since the step's start (s); s: the plant's, the food's
+# vector, its state at the step's start, and B_z at home (m).
+FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
+FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_home=1)
 
 
 @dataclass(frozen=True)
@@ -82,22 +84,20 @@ def _force_sx(f, delta, ddelta, broken, F_m, velocity):
 
 
 def food_stage(mechanism: str) -> ca.Function:
-    """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w = (tau (6), the stage's time since
-    the step's start (1)) and s = (B (3), friction, p, food (N_FOOD), broken, F_m and b F_e at the step's start,
-    B_z at home)."""
+    """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
+    s as :data:`FOOD_SHARED`."""
     m = symbols(mechanism)
 
     def build():
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
-        w, s = ca.SX.sym("w", 7), ca.SX.sym("s", 4 + N_P + N_FOOD + N_STATE + 1)
-        B, fl, p = s[:3], s[3], s[4:4 + N_P]
-        f = s[4 + N_P:4 + N_P + N_FOOD]
-        broken, F_m0, bFe0 = (s[4 + N_P + N_FOOD + i] for i in range(N_STATE))
-        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, broken, s[-1])
-        F_m = maxwell_force(CASADI, f, F_m0, bFe0, bFe, w[6])
-        _, _, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
-        r = residual_function(m)(q, v, a, N, w[:6], B, F, fl, p)
+        w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
+        s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
+        B, p, f = shared["B"], shared["p"], shared["food"]
+        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
+        F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
+        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)
+        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
         return ca.Function("food_stage", [q, v, a, N, w, s], [r])
 
     return cached_graph(m, ("food-stage",), build)
@@ -107,7 +107,7 @@ def food_step_kernel(mechanism: str) -> KernelSpec:
     """The plant's step with a food (:func:`chewbot.simulation.plant.step_kernel` on :func:`food_stage`)."""
     from chewbot.model.symbolic import c_name
 
-    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), 4)
+    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), FOOD_SHARED)
 
 
 def food_function(mechanism: str) -> ca.Function:
@@ -128,12 +128,23 @@ def food_function(mechanism: str) -> ca.Function:
     return cached_graph(m, ("food-quantities",), build)
 
 
+@dataclass(frozen=True)
+class FoodSolved(Solved):
+    """The food plant's own state: the plant's (``z``) and the food's (``food``)."""
+
+    food: FoodState = None
+
+    def at(self, z: np.ndarray) -> FoodSolved:
+        return FoodSolved(z, self.food)
+
+
 @dataclass
 class FoodPlant(Plant):
     """The plant with ``food`` on the molar of its side. :attr:`events` lists the located events
     (``{"t", "event", "delta_m"}``)."""
 
     food: Food | None = None
+    capabilities: PlantCapabilities = field(default=PlantCapabilities(food=True), init=False)
     events: list = field(default_factory=list, init=False)
     _fn: object = field(default=None, init=False, repr=False)
 
@@ -146,16 +157,12 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [food_step_kernel(self.mechanism)]
+        return [food_step_kernel(self.mechanism), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
 
     def shared(self) -> np.ndarray:
-        return np.concatenate([super().shared(), self._f, np.zeros(N_STATE), [self._z_home]])
-
-    def step_shared(self, s: np.ndarray, state: PlantState) -> np.ndarray:
-        s = s.copy()
-        k = 4 + N_P + N_FOOD
-        s[k:k + N_STATE] = (state.food.broken, state.food.F_m, state.food.bFe)
-        return s
+        """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
+        return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
+                                z_home=self._z_home)
 
     def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
         """The food's state at one plant state."""
@@ -166,15 +173,13 @@ class FoodPlant(Plant):
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        state.food = self.quantities(q, dq, 0, 0.0)
-        return state
+        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0)))
 
     def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        b = start.food.broken
+        b = start.internal.food.broken
         bFe = self.quantities(end.q, end.dq, b, 0.0).bFe
-        F_m = float(maxwell_force(NUMPY, self._f, start.food.F_m, start.food.bFe, bFe, h))
-        end.food = self.quantities(end.q, end.dq, b, F_m)
-        return end
+        F_m = float(maxwell_force(NUMPY, self._f, start.internal.food.F_m, start.internal.food.bFe, bFe, h))
+        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, b, F_m)))
 
     # ---------------------------------------------------------------------------------------------- events
 
@@ -186,74 +191,100 @@ class FoodPlant(Plant):
         adhesion = state.F_v + f.adhesion if state.delta > 0 else np.nan
         return np.array([state.delta, state.delta - f.height, fracture, adhesion])
 
-    def advance(self, state: PlantState, h: float, stage_data, kernel=None, shared=None) -> PlantState:
-        """The state after h seconds under the torques of ``stage_data`` (its bite-force rows are not used: the
-        food's force replaces them), with the food's events located (module docstring)."""
+    def advance(self, state: PlantState, h: float, inputs) -> PlantState:
+        """The state after h seconds under the torques of ``inputs`` (their bite forces are not used: the food's force
+        replaces them), with the food's events located (module docstring)."""
         if self._step is None:
-            self._step, self._shared = native(food_step_kernel(self.mechanism)), self.shared()
+            s0 = self.shared()
 
-        def data(t0, dt):
-            return np.vstack([stage_data(t0, dt)[:6], (C * dt)[None, :]])
+            def shared(state: PlantState) -> np.ndarray:  # s with the food's state at the step's start
+                s = s0.copy()
+                blocks, food = FOOD_SHARED.unpack(s), state.internal.food
+                blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+                return s
+
+            self._step = Step(native(food_step_kernel(self.mechanism)), shared)
+
+        def stage(t0: float, dt: float) -> np.ndarray:
+            return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
 
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
         for j in range(n_steps):
             stop = state.t + (end - state.t) / (n_steps - j)
             while stop - state.t > EVENT_TOLERANCE:
-                state = self._until_event(state, stop - state.t, data)
+                state = self._until_event(state, stop - state.t, stage)
         return state
 
-    def _until_event(self, state: PlantState, h: float, data) -> PlantState:
+    def _until_event(self, state: PlantState, h: float, stage) -> PlantState:
         """One step of h seconds from ``state``, or to just past the first event within it (then switched)."""
-        fn, s = self._step, self._shared
-        trial = self._interval(fn, s, state, h, data, 0)
-        g0, g1 = self.guards(state.food), self.guards(trial.food)
+        step = self._step
+        trial = self.interval(step, stage, state, h, 0)
+        g0, g1 = self.guards(state.internal.food), self.guards(trial.internal.food)
         crossed = np.flatnonzero(np.sign(g0) * np.sign(g1) < 0)
         if not crossed.size or not trial.margin > 0:
             return trial
         first, root = None, h
         for i in crossed:
             def guard(dt, i=i):
-                return self.guards(self._interval(fn, s, state, dt, data, 0).food)[i] if dt > 0 else g0[i]
+                return self.guards(self.interval(step, stage, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
 
             r = brentq(guard, 0.0, h, xtol=EVENT_TOLERANCE, rtol=4 * np.finfo(float).eps)
             if r < root or first is None:
                 first, root = int(i), r
         # just past the crossing: the step whose end has the guard's new sign
         past = min(h, root + EVENT_TOLERANCE)
-        after = self._interval(fn, s, state, past, data, 0)
-        while np.sign(self.guards(after.food)[first]) == np.sign(g0[first]) and past < h:
+        after = self.interval(step, stage, state, past, 0)
+        while np.sign(self.guards(after.internal.food)[first]) == np.sign(g0[first]) and past < h:
             past = min(h, past + EVENT_TOLERANCE * 10)
-            after = self._interval(fn, s, state, past, data, 0)
-        self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.food.delta})
+            after = self.interval(step, stage, state, past, 0)
+        self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
             b = self.food.stiffness_after_fracture
-            after.food = self.quantities(after.q, after.dq, 1, after.food.F_m * b)
+            food = self.quantities(after.q, after.dq, 1, after.internal.food.F_m * b)
+            after = replace(after, internal=replace(after.internal, food=food))
         return after
 
     # ---------------------------------------------------------------------------------------------- rows
 
-    def outputs(self, t, q, dq, force, states) -> tuple[np.ndarray, dict]:
-        """The food's force on the mandible at the rows, and the food's columns: ``compression`` (m, max(0, delta)),
+    def outputs(self, t, q, dq, force, internal) -> tuple[np.ndarray, dict]:
+        """The food's force on the mandible at the rows, and the food's quantities: ``compression`` (m, max(0, delta)),
         ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad) and ``F_m`` (N)."""
-        broken = np.array([s.broken for s in states], float)
-        F_m = np.array([s.F_m for s in states], float)
+        broken = np.array([s.food.broken for s in internal], float)
+        F_m = np.array([s.food.F_m for s in internal], float)
         delta, _, _, _, F_n, F, cos_tilt = evaluate(food_function(self.mechanism), q, dq, self._B, self._p, self._f,
                                                     broken, F_m, np.full(len(t), self._z_home))
-        columns = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
-                   "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m}
-        return F, columns
+        quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
+                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m}
+        return F, quantities
 
-    def info(self, columns: dict) -> dict:
-        """What run.json says about the food: the food, the events, the deepest compression and the lower tooth's tilt
-        there (the laws assume parallel teeth)."""
-        k = int(np.argmax(columns["delta"])) if len(columns["delta"]) else 0
-        return {"food": self.food.as_dict(), "side": self.side, "events": self.events,
-                "event_location": f"guards checked after every step; crossings by scipy.optimize.brentq on the step length to "
-                                  f"{EVENT_TOLERANCE:g} s",
-                "deepest_compression_m": float(columns["compression"][k]) if len(columns["delta"]) else 0.0,
-                "tilt_at_deepest_deg": float(np.degrees(columns["tilt"][k])) if len(columns["delta"]) else 0.0,
-                "peak_force_N": float(np.max(columns["force"])) if len(columns["force"]) else 0.0}
+    def columns(self, quantities: dict) -> list[Column]:
+        return [Column("food_compression", quantities["compression"], "m", "the food's compression max(0, h0 - g), g the bite "
+                       "point's gap along {S}'s z"),
+                Column("food_force", quantities["force"], "N", "the food's normal force on the teeth (positive pushing them apart; "
+                       "Fz = -food_force)"),
+                Column("food_broken", quantities["broken"], "1", "1 once the food has broken (its fracture strain reached)")]
+
+    def info(self, sim) -> dict:
+        """The plant's entries, and what run.json says about the food: the food, the events, the deepest compression and
+        the lower tooth's tilt there (the laws assume parallel teeth)."""
+        q = sim.quantities
+        k = int(np.argmax(q["delta"])) if len(q["delta"]) else 0
+        return {**super().info(sim),
+                "food": {"food": self.food.as_dict(), "side": self.side, "events": self.events,
+                         "event_location": f"guards checked after every step; crossings by scipy.optimize.brentq on the step "
+                                           f"length to {EVENT_TOLERANCE:g} s",
+                         "deepest_compression_m": float(q["compression"][k]) if len(q["delta"]) else 0.0,
+                         "tilt_at_deepest_deg": float(np.degrees(q["tilt"][k])) if len(q["delta"]) else 0.0,
+                         "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
+
+
+def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
+    """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
+    :class:`FoodPlant`."""
+    if food is None:
+        return Plant(model, friction=friction, side=side)
+    return FoodPlant(model, friction=friction, side=side, food=food)
 
 
 def start_gap(plant_model, side: str, q0, dq0) -> float:
@@ -261,5 +292,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FORCE_REFERENCE_CONTROLLERS", "FoodPlant", "FoodState", "food_function",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function",
            "food_stage", "food_step_kernel", "start_gap"]

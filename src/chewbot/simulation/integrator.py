@@ -37,6 +37,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from chewbot.compiled.layout import Layout
+
 # Radau IIA, three stages (Hairer & Wanner, Table IV.5.6): nodes c and matrix A.
 _S6 = np.sqrt(6.0)
 C = np.array([(4 - _S6) / 10, (4 + _S6) / 10, 1.0])
@@ -68,7 +70,9 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
     q1, v1 the state at t0 + h, z1 = (a, N) there (the last stage), residual the largest abs(r) over the stages at the
     answer (in the units of r).
     """
-    nz = n + nN
+    unknowns = Layout.of(a=n, N=nN)  # z: the accelerations and normal forces at one time; Z: every stage's, in order
+    stacked = Layout(tuple((f"{name}{k}", size) for k in range(STAGES) for name, size in unknowns.blocks))
+    nz = unknowns.size
     sx = [ca.SX.sym(nm, stage.size1_in(i), stage.size2_in(i)) for i, nm in enumerate(("q", "v", "a", "N", "w", "s"))]
     r = stage(*sx)
     jac = ca.Function(f"{name}_jacobian", sx, [r, ca.jacobian(r, sx[1]), ca.jacobian(r, ca.vertcat(sx[2], sx[3]))],
@@ -77,18 +81,21 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
     q0, v0, z0 = ca.MX.sym("q0", n), ca.MX.sym("v0", n), ca.MX.sym("z0", nz)
     W = ca.MX.sym("W", stage.size1_in(4), STAGES)
     s, h = ca.MX.sym("s", stage.size1_in(5)), ca.MX.sym("h")
-    r0, Rv, Rz = jac(q0, v0, z0[:n], z0[n:], W[:, 0], s)
+    start = unknowns.split(z0)
+    r0, Rv, Rz = jac(q0, v0, start["a"], start["N"], W[:, 0], s)
     zs = z0 - ca.solve(Rz, r0, "qr")
 
     def positions(Z, q0, v0, h):
-        acc = [Z[k * nz: k * nz + n] for k in range(STAGES)]
+        blocks = stacked.split(Z)
+        acc = [blocks[f"a{k}"] for k in range(STAGES)]
         Q = [q0 + C[k] * h * v0 + h * h * sum(A2[k, j] * acc[j] for j in range(STAGES)) for k in range(STAGES)]
         V = [v0 + h * sum(A[k, j] * acc[j] for j in range(STAGES)) for k in range(STAGES)]
         return Q, V, acc
 
     def stages(Z, q0, v0, W, s, h):
         Q, V, acc = positions(Z, q0, v0, h)
-        return ca.vertcat(*[stage(Q[k], V[k], acc[k], Z[k * nz + n:(k + 1) * nz], W[:, k], s) for k in range(STAGES)])
+        blocks = stacked.split(Z)
+        return ca.vertcat(*[stage(Q[k], V[k], acc[k], blocks[f"N{k}"], W[:, k], s) for k in range(STAGES)])
 
     def newton_matrix(Rv, Rz, h):
         """The iteration matrix from dr/dv and dr/dz per stage (one pair for all stages: the simplified iteration)."""
@@ -107,7 +114,7 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
     Z_new = x[0] - ca.mtimes(x[7], x[1])
     simplified = ca.Function(f"{name}_simplified", x, [Z_new, stages(Z_new, *x[2:7])])
     Qx, Vx, acc = positions(x[0], x[2], x[3], x[6])
-    local = [jac(Qx[k], Vx[k], acc[k], x[0][k * nz + n:(k + 1) * nz], x[4][:, k], x[5]) for k in range(STAGES)]
+    local = [jac(Qx[k], Vx[k], acc[k], stacked.split(x[0])[f"N{k}"], x[4][:, k], x[5]) for k in range(STAGES)]
     Z_newton = x[0] - ca.solve(newton_matrix([j[1] for j in local], [j[2] for j in local], x[6]), x[1], "qr")
     newton = ca.Function(f"{name}_newton", x, [Z_newton, stages(Z_newton, *x[2:7])])
     keep = ca.Function(f"{name}_keep", x, [x[0], x[1]])
@@ -118,5 +125,7 @@ def radau_step(name: str, stage: ca.Function, n: int, nN: int) -> ca.Function:
         for _ in range(count):
             Z, r = iteration(ca.norm_inf(r) <= TOLERANCE, Z, r, q0, v0, W, s, h, M_inv)
     Q, V, _ = positions(Z, q0, v0, h)
-    return ca.Function(name, [q0, v0, z0, W, s, h], [Q[-1], V[-1], Z[(STAGES - 1) * nz:], ca.norm_inf(r)],
+    last = stacked.split(Z)
+    z1 = ca.vertcat(last[f"a{STAGES - 1}"], last[f"N{STAGES - 1}"])
+    return ca.Function(name, [q0, v0, z0, W, s, h], [Q[-1], V[-1], z1, ca.norm_inf(r)],
                        ["q0", "v0", "z0", "W", "s", "h"], list(STEP_OUTPUTS))

@@ -1,9 +1,8 @@
 """A second plant: MuJoCo's simulation of the robot from its MJCF model (as ``chewbot export-model`` writes it,
 :mod:`chewbot.export.mjcf`; the text is handed in, the export layer being above this one).
 
-:class:`MujocoPlant` offers what :func:`chewbot.simulation.simulator.simulate` calls on
-:class:`chewbot.simulation.plant.Plant` (``initial``, ``advance``, ``forward``, ``kernels``), so that chewbot's
-controllers run unchanged against an engine that shares none of chewbot's equations: MuJoCo integrates the 24
+:class:`MujocoPlant` is a plant of :class:`chewbot.simulation.interfaces.Plant`, so that chewbot's controllers run
+unchanged against an engine that shares none of chewbot's equations: MuJoCo integrates the 24
 coordinates of the mandible's free body, the cranks and the couplers' universal joints, closes the six loops by
 ``connect`` constraints and presses the condyles on their planes by unilateral contacts.
 
@@ -21,24 +20,25 @@ The two sides meet in the independent coordinates (Euler angles: X, Y, alpha, be
 Between two control ticks the torques are held on the motors ``crank1..6`` and the bite force acts at the molar
 (``xfrc_applied`` on the mandible, as the force and its moment about the mass centre), averaged over each MuJoCo
 step with the Radau weights of the stage values the simulator hands out; MuJoCo steps at
-the file's timestep. The workspace margin is chewbot's (:func:`chewbot.simulation.plant.state_function`
-at the state read back): MuJoCo's planes are unbounded, and the robot is stopped where a condyle leaves its socket.
+the file's timestep. Its own state (:class:`MujocoState`) is MuJoCo's qpos and qvel. The workspace margin is
+chewbot's (:func:`chewbot.simulation.plant.state_function` at the state read back): MuJoCo's planes are unbounded,
+and the robot is stopped where a condyle leaves its socket.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from chewbot.compiled.kernels import KernelSpec, evaluate, native
+from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
 from chewbot.rotation import R_omega, R_omega_dot, euler_angles_from_matrix, matrix_from_euler_angles
 from chewbot.simulation.forward import ORIENTATION, Forward, n_coordinates
 from chewbot.simulation.integrator import A as RADAU_A
-from chewbot.simulation.plant import PlantState, SimulationError, state_function
+from chewbot.simulation.interfaces import PLANT_INPUTS, Column, PlantCapabilities, PlantState, StageInputs
+from chewbot.simulation.plant import STATE_OUTPUTS, SimulationError, plant_residual, state_function
 
 
 def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -47,6 +47,14 @@ def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).ravel())
     return q
+
+
+@dataclass(frozen=True)
+class MujocoState:
+    """The MuJoCo plant's own state: MuJoCo's ``qpos`` and ``qvel`` (its 24 coordinates and their rates)."""
+
+    qpos: np.ndarray
+    qvel: np.ndarray
 
 
 @dataclass
@@ -60,8 +68,9 @@ class MujocoPlant:
     xml: str = field(repr=False)
     friction: bool = False
     side: str = "left"
+    capabilities: PlantCapabilities = field(default=PlantCapabilities(), init=False)
     splits: int = field(default=0, init=False)  # kept for the simulator's report: MuJoCo's steps are never split
-    drift: list = field(default_factory=list, init=False, repr=False)  # (loops, HKP) of each state returned, m
+    _violations: list = field(default_factory=list, init=False, repr=False)  # (loops, HKP) of each state returned, m
 
     def __post_init__(self):
         import mujoco
@@ -197,41 +206,65 @@ class MujocoPlant:
         return loops, float(np.max(np.abs(h.p1 * T[:, 0] + T[:, 2] + h.p2)) / np.hypot(h.p1, 1.0))
 
     def _state(self, t: float) -> PlantState:
-        self.drift.append(self.violations())
+        self._violations.append(self.violations())
         q, dq, theta, dtheta = self.read_state()
-        margin = float(self._margin(q, dq, self.model.vector())[2][0])
-        full = np.concatenate([self.data.qpos, self.data.qvel])
-        return PlantState(t, q, dq, full, theta, dtheta, margin)
+        margin = float(dict(zip(STATE_OUTPUTS, self._margin(q, dq, self.model.vector())))["margin"][0])
+        return PlantState(t, q, dq, theta, dtheta, margin, MujocoState(self.data.qpos.copy(), self.data.qvel.copy()))
 
-    def advance(self, state: PlantState, h: float, stage_data: Callable[[float, float], np.ndarray],
-                kernel=None, shared: np.ndarray | None = None) -> PlantState:
-        """The state after h seconds under ``stage_data(t0, dt)`` (W = torques and bite forces at the Radau stages of
-        a step from t0 to t0 + dt; the torques held), in MuJoCo steps of the file's timestep.
-        ``state`` must be the last one this plant returned (MuJoCo's full state is carried in ``state.z``)."""
+    def advance(self, state: PlantState, h: float, inputs: StageInputs) -> PlantState:
+        """The state after h seconds under ``inputs(t0, dt)`` (W = torques and bite forces at the Radau stages of a step
+        from t0 to t0 + dt; the torques held), in MuJoCo steps of the file's timestep. ``state`` must be the last one
+        this plant returned."""
         import mujoco
 
-        if kernel is not None:
-            raise SimulationError("the MuJoCo plant runs a controller between its ticks only (a control rate, not continuous)")
-        nq = self.mj.nq
-        self.data.qpos[:], self.data.qvel[:] = state.z[:nq], state.z[nq:]
+        self.data.qpos[:], self.data.qvel[:] = state.internal.qpos, state.internal.qvel
         dt = self.mj.opt.timestep
         steps = max(1, int(round(h / dt)))
         if abs(steps * dt - h) > 1e-9 * max(h, 1.0):
             raise SimulationError(f"the MuJoCo plant steps {dt:g} s: the control interval {h:g} s is not a multiple of it")
         t = state.t
+        tau, force = (PLANT_INPUTS.slices()[name] for name in ("tau", "F_B"))
         for _ in range(steps):
-            W = stage_data(t, dt)
-            self._load(W[:6, 0], W[6:9] @ RADAU_A[-1])
+            W = inputs(t, dt)
+            self._load(W[tau, 0], W[force] @ RADAU_A[-1])
             mujoco.mj_step(self.mj, self.data)
             t += dt
         if not np.all(np.isfinite(self.data.qpos)):
             raise SimulationError(f"MuJoCo's simulation diverged near t = {state.t:.6g} s")
         return self._state(state.t + h)
 
-    def outputs(self, t: np.ndarray, q: np.ndarray, dq: np.ndarray, force: np.ndarray, states: list) -> tuple[np.ndarray, None]:
-        """The bite force at the rows (the task's, given as ``force``) and no columns of its own: the MuJoCo plant
-        holds no food (:meth:`chewbot.simulation.plant.Plant.outputs`)."""
-        return force, None
+    def outputs(self, t: np.ndarray, q: np.ndarray, dq: np.ndarray, force: np.ndarray, internal: list) -> tuple[np.ndarray, dict]:
+        """The bite force at the rows (the task's, given as ``force``) and no quantities of its own: the MuJoCo plant
+        holds no food."""
+        return force, {}
+
+    def columns(self, quantities: dict) -> list[Column]:
+        return []
+
+    def drift(self, kinematics, rows: int) -> dict[str, np.ndarray]:
+        """MuJoCo's own constraint violations at the first ``rows`` states (:meth:`violations`): chewbot's kinematics of
+        q closes every constraint, MuJoCo's state need not."""
+        d = np.asarray(self._violations)[:rows]
+        return {"drift_chains": d[:, 0], **({"drift_hkp": d[:, 1]} if self.model.has_hkp else {})}
+
+    def info(self, sim) -> dict:
+        """run.json's ``simulation.plant`` of a MuJoCo simulation: the engine, its version and the solver settings read
+        from the model."""
+        import mujoco
+
+        o = self.mj.opt
+        return {"simulation": {"plant": {
+            "engine": "mujoco", "mujoco_version": mujoco.__version__, "model": self.model.name, "file": self.model.source,
+            "mjcf": "robot.xml", "friction": self.friction,
+            "contact": "unilateral: a sphere on a plane per condyle (MuJoCo contact pairs), N_L, N_R >= 0" if self.model.has_hkp else None,
+            "solver": {"timestep_s": float(o.timestep), "integrator": mujoco.mjtIntegrator(o.integrator).name,
+                       "solver": mujoco.mjtSolver(o.solver).name, "iterations": int(o.iterations), "tolerance": float(o.tolerance),
+                       "cone": mujoco.mjtCone(o.cone).name, "impratio": float(o.impratio), "noslip_iterations": int(o.noslip_iterations),
+                       "equality_solref": self.mj.eq_solref[0].tolist(), "equality_solimp": self.mj.eq_solimp[0].tolist()},
+            "residual": "residual column: chewbot's equations of motion at MuJoCo's accelerations and normal forces"}}}
+
+    def files(self) -> dict[str, str]:
+        return {"robot.xml": self.xml}
 
     def forward(self, q, dq, tau, force) -> Forward:
         """MuJoCo's accelerations and contact normal forces at states (q, dq) (N, n) under torques (N, 6) and bite
@@ -249,18 +282,9 @@ class MujocoPlant:
             ddq[k] = self.accelerations()
             if self.model.has_hkp:
                 N[k] = self.normal_forces()
-        residual = chewbot_residual(self.model, q, dq, ddq, N, tau, force, self.side, self.friction)
-        return Forward(ddq, N, residual)
+        return Forward(ddq, N, plant_residual(self.model, q, dq, ddq, N, tau, force, self.side, self.friction))
 
 
-def chewbot_residual(model: Model, q, dq, ddq, N, tau, force, side: str, friction: bool) -> np.ndarray:
-    """max abs(tau_NE(q, dq, ddq, N) - tau) of chewbot's Newton-Euler equations at given accelerations and normal
-    forces (N m), per sample."""
-    from chewbot.simulation.plant import held_stage
-
-    fn = held_stage(model.mechanism)
-    w = np.hstack([tau, force])
-    s = np.concatenate([model.molar(side), [float(friction)], model.vector()])
-    r = evaluate(fn, q, dq, ddq, N, w, s)[0]
-    return np.max(np.abs(r), axis=1)
-
+def build(model: Model, friction: bool, side: str, food=None, write_mjcf=None) -> MujocoPlant:
+    """MuJoCo's plant (the engine table's builder) of the MJCF text ``write_mjcf(model, friction)``."""
+    return MujocoPlant(model, write_mjcf(model, friction), friction=friction, side=side)

@@ -21,7 +21,7 @@ import numpy as np
 from chewbot.compiled.kernels import native
 from chewbot.dynamics.bite_force import residual_kernel, solve_states
 from chewbot.model import Model
-from chewbot.simulation.plant import state_function
+from chewbot.simulation.plant import STATE_OUTPUTS, state_function
 
 
 @dataclass
@@ -42,6 +42,10 @@ class ForceObserver:
     _raw: np.ndarray = field(default=None, init=False, repr=False)
     _state: object = field(default=None, init=False, repr=False)
     _kernel: object = field(default=None, init=False, repr=False)
+
+    def kernels(self) -> list:
+        """The compiled kernel it uses (the estimator's residual), compiled before the loop."""
+        return [residual_kernel(self.model.mechanism)]
 
     def start(self, t: float, q, dq) -> None:
         self._t, self._q, self._dq = t, np.array(q, float), np.array(dq, float)
@@ -66,7 +70,7 @@ class ForceObserver:
         q, dq = np.asarray(q, float), np.asarray(dq, float)
         if h > 0:
             qm, dqm, ddq = (q + self._q) / 2, (dq + self._dq) / 2, (dq - self._dq) / h
-            theta = self._state(qm, dqm, self.model.vector())[0]
+            theta = dict(zip(STATE_OUTPUTS, self._state(qm, dqm, self.model.vector())))["theta"]
             u, _, _ = solve_states(self.model, np.asarray(theta).reshape(1, 6), qm[None], dqm[None], ddq[None],
                                    np.asarray(tau, float)[None], side=self.side, contact=self.contact,
                                    friction=self.friction, kernel=self._kernel)

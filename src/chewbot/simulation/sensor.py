@@ -29,8 +29,8 @@ from chewbot.compiled.kernels import KernelSpec, native
 from chewbot.kinematics.functions import closure_function
 from chewbot.model import Model
 from chewbot.model.symbolic import c_name
-from chewbot.simulation.controllers import State
 from chewbot.simulation.forward import ORIENTATION, n_coordinates
+from chewbot.simulation.interfaces import State
 
 FK_ITERATIONS = 3
 

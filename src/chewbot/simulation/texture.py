@@ -20,9 +20,13 @@ from chewbot.food.law import Food, load_food
 from chewbot.food.tpa import Protocol, TpaError, protocol, tpa_measures
 from chewbot.model import Model
 from chewbot.model.params import load_model
-from chewbot.simulation.run import SimulateOptions, SimulateResult, compute
+from chewbot.simulation.controllers.table import DEFAULT_CONTROLLER, controller_row
+from chewbot.simulation.options import resolve
+from chewbot.simulation.run import SimulateResult, compute
 
 
+# The test's position controller: chewbot simulate's default, computed torque.
+TPA_CONTROLLER = controller_row(DEFAULT_CONTROLLER)
 # A texture analyser's crosshead is stiff: the test's computed-torque controller has its error dynamics at this
 # frequency. Not told the food's force, it yields about 1 mm per 160 N along z at the molar (gains.toml's 30 Hz: 1 mm
 # per 14 N, half a millimetre under the cheddar); --gain computed_torque.frequency_Hz=... overrides it.
@@ -66,7 +70,7 @@ class TpaResult:
         return {"chewbot_tpa": 1, "options": vars(self.options), "food": self.food.as_dict(),
                 "protocol": {"start_gap_mm": self.protocol.start_gap * 1e3, "deepest_gap_mm": self.protocol.deepest_gap * 1e3,
                              "speed_mm_s": self.protocol.speed * 1e3, "pause_s": self.protocol.pause,
-                             "duration_s": self.protocol.duration, "controller": "computed-torque",
+                             "duration_s": self.protocol.duration, "controller": TPA_CONTROLLER.name,
                              "pinned": "alpha = 0"},
                 "largest_height_mm": {self.options.side: self.largest_height * 1e3},
                 "deepest_compression_mm": info.get("deepest_compression_m", 0.0) * 1e3,
@@ -95,17 +99,17 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     p = replace(protocol(food.height, options.compression, options.speed, options.pause), rate=options.rate)
     t = p.times()
     task = molar_path_task(model, options.side, t, *p.path(t), name=f"texture test of the {food.name}")
-    gains = {"computed_torque.frequency_Hz": TPA_FREQUENCY_HZ, **options.gain_overrides}
-    sim_options = SimulateOptions(controller="computed-torque", model=options.model, side=options.side, rate=options.rate,
-                                  gain_overrides=gains, food=options.food)
+    gains = {f"{TPA_CONTROLLER.gains}.frequency_Hz": TPA_FREQUENCY_HZ, **options.gain_overrides}
+    sim_options = resolve(TPA_CONTROLLER, model=options.model, side=options.side, rate=options.rate, gain_overrides=gains,
+                          food=options.food)
     result = compute(sim_options, progress=step, check=check, task=task)
     sim = result.simulation
-    g_plant = food.height - sim.food["delta"]
-    plant = tpa_measures(sim.t, g_plant, sim.food["force"])
+    g_plant = food.height - sim.quantities["delta"]
+    plant = tpa_measures(sim.t, g_plant, sim.quantities["force"])
     step("bite force from the torques")
-    curve, estimator = estimate_from_log(result.plant, simulated_log(result), options.side)
+    curve, estimator = estimate_from_log(result.plant_model, simulated_log(result), options.side)
     estimated_measures = tpa_measures(curve["t"], curve["gap"], curve["force"])
-    curves = {"t": sim.t, "gap_plant": g_plant, "force_plant": sim.food["force"], "gap_estimated": curve["gap"],
+    curves = {"t": sim.t, "gap_plant": g_plant, "force_plant": sim.quantities["force"], "gap_estimated": curve["gap"],
               "force_estimated": curve["force"], "force_estimated_se": curve["se"]}
     return TpaResult(options, food, p, result, plant, estimated_measures, curves, h_max, estimator)
 

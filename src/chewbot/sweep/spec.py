@@ -24,7 +24,7 @@ from typing import Annotated, Generic, Literal, TypeVar
 from pydantic import AfterValidator, ConfigDict, Field, field_validator, model_validator
 
 from chewbot.config import Plausible, Strict, did_you_mean, either, key_error, quoted, read_text, validate
-from chewbot.dynamics.options import CONTACT_MODELS, GOALS
+from chewbot.dynamics.options import CONTACT_MODELS, DEFAULT_METHOD, GOALS
 from chewbot.errors import ChewbotError
 from chewbot.kinematics.options import ORIENTATIONS
 from chewbot.run.options import Switch
@@ -80,7 +80,7 @@ class Spec:
     task: str = "default"
     side: str | None = None
     orientation: str = "euler-angles"
-    method: str | None = "hessian"
+    method: str | None = DEFAULT_METHOD["euler-angles"]
     goal: str | None = None
     friction: str | None = None
     contact: str = "bilateral"

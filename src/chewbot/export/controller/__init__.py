@@ -5,7 +5,7 @@ does around its controller with the crank sensor (:mod:`chewbot.simulation.senso
 the encoder offsets, forward kinematics (Gauss-Newton warm-started from the last estimate, a fixed number of steps,
 :func:`chewbot.simulation.sensor.gauss_newton_sx`), the rates by the filtered backward difference, the reference at t
 (the task compiled in as a table, quintic Hermite between its samples as :class:`chewbot.simulation.reference.Reference`,
-or set by the caller each tick), the control law (:func:`chewbot.simulation.controllers.control_function`: PD on the
+or set by the caller each tick), the control law (:func:`chewbot.simulation.controllers.law.control_function`: PD on the
 cranks, or computed torque with the inverse dynamics of the chosen formulation and distribution), saturation, a
 torque-rate limit, and the checks of the status word with their safe behaviour (docs/realtime.md, "The exported
 controller step").

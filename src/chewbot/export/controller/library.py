@@ -20,7 +20,8 @@ from chewbot.export.controller.layout import CONTEXT, structures
 from chewbot.export.controller.sources import STRICT_FLAGS, dimensions, filled, write_sources
 from chewbot.export.controller.step import PREFIX, STATUS_BITS, StepSpec, fk_function, law_function
 from chewbot.model import Model
-from chewbot.simulation.controllers import ModelBasedController, State
+from chewbot.simulation.controllers.law import CompiledLaw
+from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
 
 
 @dataclass(frozen=True)
@@ -138,13 +139,14 @@ class StepLibrary:
 @dataclass
 class ExportedController:
     """A simulation's controller that runs the exported C step (``chewbot simulate --exported``) on the measured crank
-    angles of the state it is given (:attr:`chewbot.simulation.controllers.State.theta`) and returns its commanded
+    angles of the state it is given (:attr:`chewbot.simulation.interfaces.State.theta`) and returns its commanded
     torques (``tau_cmd``: before saturation; the simulator saturates them as it does the Python controller's). It
     evaluates the Python controller ``python`` on the same tick's estimate too and keeps both, so a run states how
     far the two are apart tick by tick (:meth:`comparison`)."""
 
-    python: ModelBasedController
+    python: CompiledLaw
     rate: float
+    capabilities: ControllerCapabilities = field(default=ControllerCapabilities(), init=False)
     library: StepLibrary | None = None
     c_torques: list = field(default_factory=list)
     py_torques: list = field(default_factory=list)
@@ -175,6 +177,16 @@ class ExportedController:
         self.py_torques.append(self.python(t, state))
         self.statuses.append(int(self.library._status.value))
         return tau
+
+    def kernels(self) -> list:
+        return self.python.kernels()
+
+    def columns(self, t: np.ndarray) -> list[Column]:
+        return []
+
+    def info(self) -> dict:
+        """run.json's ``simulation.exported``: :meth:`comparison`."""
+        return {"exported": self.comparison()}
 
     def comparison(self) -> dict:
         """The exported step's torques against the Python controller's on the same ticks (N m)."""

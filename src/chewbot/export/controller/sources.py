@@ -24,6 +24,7 @@ from chewbot.export.controller.step import (
     CONDITIONING_MIN, DISTRIBUTION_STEP_TOLERANCE, EXPORT_FORMAT, FK_RESIDUAL_TOLERANCE, FK_STEP_TOLERANCE, MAX_HOLD_TICKS, PREFIX,
     STATUS, STATUS_BITS, TRANSMISSION_MIN, WATCHDOG_PERIODS, StepSpec, fk_function, home_angles, law_function)
 from chewbot.files import EXPORT_FOLDER, VERSION, atomic_folder, to_json
+from chewbot.simulation.controllers.table import controller_row
 from chewbot.simulation.reference import HERMITE_COEFFICIENTS as HERMITE
 from chewbot.simulation.sensor import FK_ITERATIONS
 
@@ -72,9 +73,8 @@ def coordinate_names(spec: StepSpec) -> list[str]:
 
 
 def gain_description(spec: StepSpec) -> str:
-    if spec.kind == "pd":
-        return "kp (N m/rad) of the six cranks, then kd (N m s/rad)"
-    return "kp (1/s^2) of each coordinate, then kd (1/s): ddq = ddq_ref + kd e_dot + kp e"
+    """The gains vector in words: its controller's gains section's (:mod:`chewbot.simulation.controllers`)."""
+    return controller_row(spec.kind).module().Gains.VECTOR
 
 
 def dimensions(spec: StepSpec, fk: ca.Function, law: ca.Function) -> dict[str, int]:
@@ -92,7 +92,7 @@ def filled(spec: StepSpec) -> Mapping[str, str]:
 
 def header(spec: StepSpec, fk: ca.Function, law: ca.Function) -> str:
     return render("chewbot_ctrl.h", version=VERSION, model=spec.model.name, mechanism=spec.model.mechanism,
-                  law=f"{spec.kind}{'' if spec.kind == 'pd' else ' with ' + spec.method}", coordinates=", ".join(coordinate_names(spec)),
+                  law=f"{spec.kind}{' with ' + spec.method if spec.uses_inverse_dynamics else ''}", coordinates=", ".join(coordinate_names(spec)),
                   status_bits="\n".join(f"#define CHEWBOT_CTRL_{name} 0x{value:04x}u" for name, value in STATUS_BITS.items()),
                   structs=c_typedefs(filled(spec)), **dimensions(spec, fk, law))
 
@@ -115,7 +115,7 @@ def readme(spec: StepSpec, fk: ca.Function, law: ca.Function, log_rows: int) -> 
     return render(
         "README.md",
         model=spec.model.name, mechanism=spec.model.mechanism, kind=spec.kind,
-        method=spec.method if spec.kind != "pd" else "(none: PD on the crank angles)", goal=spec.goal or "-",
+        method=spec.method if spec.uses_inverse_dynamics else "(none: PD on the crank angles)", goal=spec.goal or "-",
         friction="with" if spec.friction else "without", n=str(spec.n), coords=", ".join(coordinate_names(spec)),
         gains=gain_description(spec), rows=str(len(spec.t)), t0=f"{spec.t[0]:g}", t1=f"{spec.t[-1]:g}", cutoff=f"{spec.cutoff:g}",
         rate=f"{spec.rate:g}", limit=f"{spec.model.limits.torque:g}", rate_limit=f"{spec.torque_rate_limit:g}",

@@ -20,7 +20,10 @@ from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forc
 from chewbot.dynamics.g1 import distribution_function
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
 from chewbot.model import Model
-from chewbot.simulation.controllers import ModelBasedController, control_function
+from chewbot.dynamics.registry import formulation
+from chewbot.simulation.controllers.law import CompiledLaw, control_function
+from chewbot.simulation.controllers.table import EXPORTABLE, controller_row
+from chewbot.simulation.options import ControllerDynamics
 from chewbot.simulation.forward import ORIENTATION, n_coordinates, workspace_margin_sx
 from chewbot.simulation.plant import state_function
 from chewbot.simulation.sensor import gauss_newton_sx
@@ -103,15 +106,21 @@ class StepSpec:
     torque_rate_limit: float = 0.0
 
     @classmethod
-    def of(cls, controller: ModelBasedController, rate: float, torque_rate_limit: float = 0.0) -> StepSpec:
+    def of(cls, controller: CompiledLaw, rate: float, torque_rate_limit: float = 0.0) -> StepSpec:
         """The step of a simulation's built-in controller (its model, law, gains and reference)."""
-        if controller.kind not in ("pd", "computed-torque"):
-            raise ValueError(f"the exported step runs pd or computed-torque, not {controller.kind}")
-        r = controller.reference
-        return cls(controller.model, controller.kind, controller.method, controller.goal, bool(controller.friction),
-                   controller.gains.vector(controller.kind), controller.gains.cutoff, float(rate), r.side,
+        parts = controller.parts
+        if not parts.row.exportable:
+            raise ValueError(f"the exported step runs {' or '.join(EXPORTABLE)}, not {parts.row.name}")
+        r, inverse = controller.reference, parts.inverse
+        return cls(controller.model, parts.row.name, inverse.method, inverse.goal, bool(inverse.friction),
+                   parts.gains_vector(), parts.gains["estimator"].cutoff_Hz, float(rate), r.side,
                    np.asarray(r.t, float), r.q, r.dq, r.ddq, controller.known_force(np.asarray(r.force, float)),
                    float(torque_rate_limit))
+
+    @property
+    def uses_inverse_dynamics(self) -> bool:
+        """Its controller's law evaluates the inverse dynamics (its row)."""
+        return controller_row(self.kind).needs.inverse_dynamics
 
     @property
     def n(self) -> int:
@@ -124,7 +133,7 @@ class StepSpec:
     @property
     def distributes(self) -> bool:
         """The law distributes the target's torques by Newton-Euler's fixed-cost solver (limits checked)."""
-        return self.kind == "computed-torque" and self.method == "newton-euler" and self.model.has_hkp
+        return self.uses_inverse_dynamics and "goal" in formulation(self.method).sample_options and self.model.has_hkp
 
 
 def fk_function(model: Model) -> ca.Function:
@@ -158,7 +167,8 @@ def law_function(spec: StepSpec) -> ca.Function:
     q, dq, q_ref, dq_ref, ddq_ref = (ca.SX.sym(name, n) for name in ("q", "dq", "q_ref", "dq_ref", "ddq_ref"))
     F, gains = ca.SX.sym("F_B", 3), ca.SX.sym("gains", len(spec.gains))
     B = ca.DM(model.molar(spec.side))
-    tau = control_function(spec.kind, mech, spec.method, spec.goal, spec.friction)(q, dq, q_ref, dq_ref, ddq_ref, F, gains, B, p)
+    law = control_function(controller_row(spec.kind), mech, ControllerDynamics(spec.method, spec.goal, spec.friction))
+    tau = law(q, dq, q_ref, dq_ref, ddq_ref, F, gains, B, p)
     ref_margin = state_function(mech)(q_ref, dq_ref, p)[2]
     kin = kinematics_kernel(mech, ORIENTATION).graph()
     coefficients = coefficients_kernel(mech, ORIENTATION).graph()
