@@ -109,7 +109,7 @@ def texture_test(food: str, plant: tuple = (), speed_mm_s: float = 4.0, friction
 def hardness(result, force: np.ndarray) -> float:
     """The hardness (N) of a force curve along the plant's gap of a texture test's simulation."""
     q, dq, _ = result.kinematics.euler_angle_state()
-    return tpa_measures(result.simulation.t, gap(result.plant, "left", q, dq)["gap"], force)["hardness_N"]
+    return tpa_measures(result.simulation.t, gap(result.plant_model, "left", q, dq)["gap"], force)["hardness_N"]
 
 
 # The issue's table (docs/bite_force.md): each log from chewbot's plant with one thing off, on the cheddar at the
@@ -134,7 +134,7 @@ def table_row(case, folder: Path, calibrate: bool) -> dict:
 
     name, plant, friction, noise, with_friction, calibrable = case
     r, log = texture_test("cheddar", tuple(sorted(plant.items())), 2.0, friction, 2.0, noise)
-    F = r.simulation.food["force"]
+    F = r.simulation.quantities["force"]
     models = {"nominal": load_model("target")}
     if calibrate and calibrable:
         _, path = excitation(str(folder))

@@ -181,7 +181,7 @@ def test_the_estimates_derivative_with_respect_to_the_models_numbers_is_exact(fo
     from chewbot.identification.log import RobotLog
 
     r, log = texture_test("cheddar", speed_mm_s=4.0, friction="on")
-    rows = np.flatnonzero(r.simulation.food["force"] > 1.0)[::10]  # in contact
+    rows = np.flatnonzero(r.simulation.quantities["force"] > 1.0)[::10]  # in contact
     sub = RobotLog("part", log.t[rows], log.theta[rows], r.kinematics.dtheta[rows], r.kinematics.ddtheta[rows], log.tau[rows],
                    log.force[rows], log.lines[rows])
     keys = ["friction.hkp_coulomb", "friction.actuator_coulomb", "cranks.inertia_g_mm2[5]", "mandible.inertia_g_mm2[1][3]"]
@@ -226,7 +226,7 @@ def _coverage(folder, seed: int, food: str = "cheddar") -> dict:
     model, _ = identified_model(plant_log(path, plant, 1e-3, seed), folder / f"drawn{seed}.toml")
     r, log = texture_test(food, tuple(sorted(plant.items())))
     log = noisy(log, 1e-3, 1000 + seed)
-    F = r.simulation.food["force"]
+    F = r.simulation.quantities["force"]
     out = {}
     for label, m in (("calibrated", model), ("nominal", load_model("target"))):
         est = estimate_log(m, log)
@@ -271,8 +271,8 @@ def test_a_brittle_foods_fracture_leaves_no_spike_in_the_estimate():
     forces before and after the step, within 5 % of the peak; without the event and the held torques (the estimator
     before) it is not."""
     r, log = texture_test("peanut", speed_mm_s=4.0, friction="on")
-    F = r.simulation.food["force"]
-    broken = np.flatnonzero(np.diff(r.simulation.food["broken"]) > 0) + 1
+    F = r.simulation.quantities["force"]
+    broken = np.flatnonzero(np.diff(r.simulation.quantities["broken"]) > 0) + 1
     assert broken.size == 1
     est = estimate_log(load_model("target"), log)
     events = [e["sample"] for e in est.info["events"]]
