@@ -148,7 +148,7 @@ def test_the_bed_law_and_its_exact_derivative():
     import casadi as ca
 
     b = Bolus(_rr_bolus(2.0, 1.2)).bed(PEANUT)
-    h0, area, modulus, strain = b
+    h0, area, modulus, strain, _ = b
     g = ca.SX.sym("g")
     dF = ca.Function("dF", [g], [ca.jacobian(bed_force(CASADI, ca.DM(b), g), g)])
     for gap in np.linspace(0.02, 0.98, 9) * h0:

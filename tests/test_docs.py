@@ -134,6 +134,9 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return [out or "robot.xml"]
     if sub == "tpa":
         return [f"{out}/tpa.json"] + ([] if "--log" in args else [f"{out}/results.csv", f"{out}/task.csv"])
+    if sub == "chew":
+        return [f"{out}/{name}" for name in ("cycles.csv", "psd.csv", "results.csv", "run.json", "chew.html")] + (
+            [f"{out}/bolus_tpa.csv"] if "--tpa-at" in args else [])
     if sub == "bench":
         return [out] if out else []
     if sub == "report":

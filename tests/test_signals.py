@@ -192,3 +192,13 @@ def test_sigint_in_the_excitation_design_leaves_no_output(tmp_path):
     _wait_for(proc, flag.exists)
     _stop(proc, signal.SIGINT, EXIT_INTERRUPTED)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flag"]
+
+
+def test_sigint_while_chewing_leaves_no_output(tmp_path):
+    """`chew` stopped as its simulation starts: exit 130, one line, no folder."""
+    flag = tmp_path / "flag"
+    proc = _start(["chew", "--food", "peanut", "--cycles", "1", "--out", "out"], tmp_path,
+                  **{TEST_PAUSE_VARIABLE: f"simulation:{flag}"})
+    _wait_for(proc, flag.exists)
+    _stop(proc, signal.SIGINT, EXIT_INTERRUPTED)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flag"]

@@ -32,7 +32,7 @@ from chewbot.simulation.controllers import gains as gains_module
 from chewbot.simulation.controllers import table
 from chewbot.simulation.controllers.gains import Gains, Section
 from chewbot.simulation.controllers.law import make_controller
-from chewbot.simulation.food import FOOD_INPUTS, FOOD_SHARED, FoodPlant, _food_sx, _force_sx, food_stage
+from chewbot.simulation.food import FOOD_INPUTS, FOOD_SHARED, FoodPlant, _force_sx, food_geometry_sx, food_stage
 from chewbot.simulation.forward import n_coordinates, residual_function
 from chewbot.simulation.interfaces import PLANT_INPUTS, ControllerCapabilities, PlantCapabilities
 from chewbot.simulation.mujoco_plant import MujocoPlant
@@ -307,7 +307,7 @@ def test_the_steps_built_from_layouts_equal_those_of_the_former_offsets():
     w, s = ca.SX.sym("w", 7), ca.SX.sym("s", 4 + N_P + N_FOOD + 3 + 1)
     B, fl, p, f = s[:3], s[3], s[4:4 + N_P], s[4 + N_P:4 + N_P + N_FOOD]
     broken, F_m0, bFe0 = (s[4 + N_P + N_FOOD + i] for i in range(3))
-    delta, ddelta, bFe, velocity, _ = _food_sx(mech, q, v, B, p, f, broken, s[-1])
+    delta, ddelta, bFe, velocity, _ = food_geometry_sx(mech, q, v, B, p, f, broken, s[-1])
     F = _force_sx(f, delta, ddelta, broken, maxwell_force(CASADI, f, F_m0, bFe0, bFe, w[6]), velocity)[2]
     old = ca.Function("old", [q, v, a, N, w, s], [R(q, v, a, N, w[:6], B, F, fl, p)])
     food = FoodPlant(model, friction=True, food=load_food("cheddar"))
@@ -335,7 +335,7 @@ def test_the_options_are_frozen_and_typed():
     assert o.record("right") == {**SimulationOptions(controller=table.CONTROLLERS["pd"]).record("right"), "friction": "on"}
     assert set(o.record("left")) == {"controller", "model", "task", "side", "method", "goal", "friction", "contact", "rate",
                                      "noise_rad", "seed", "plant", "overrides", "plant_overrides", "bite_unknown", "gains",
-                                     "gain_overrides", "food", "sensor", "exported", "engine"}
+                                     "gain_overrides", "food", "sensor", "exported", "engine", "bolus"}
 
 
 @pytest.mark.parametrize("options, words", [

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import typer
 
-from chewbot.commands import bench, cache, estimate_force, excite, export_c, export_controller, export_model, fit_comminution, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
+from chewbot.commands import bench, cache, chew, estimate_force, excite, export_c, export_controller, export_model, fit_comminution, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
 from chewbot.commands.common import stdout
 
 app = typer.Typer(
@@ -74,6 +74,7 @@ app.command("identify")(identify.identify)
 app.command("estimate-force")(estimate_force.estimate_force)
 app.command("tpa")(tpa.tpa)
 app.command("fit-comminution")(fit_comminution.fit_comminution)
+app.command("chew")(chew.chew)
 app.command("simulate")(simulate.simulate)
 app.command("sweep")(sweep.sweep)
 app.command("models")(models.models)

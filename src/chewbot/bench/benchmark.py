@@ -39,7 +39,8 @@ from chewbot.progress import SILENT, Progress
 SLSQP_SAMPLES = 50  # consecutive samples from t = 2 s (inside a bite); SLSQP costs milliseconds each
 BOTH = ("target", "6rss")
 EA, EP = "euler-angles", "euler-parameters"
-RUN_CASES = {"run, hessian": ["run"], "run, newton-euler G1 with friction": ["run", "--method", "newton-euler"]}
+RUN_CASES = {"run, hessian": ["run"], "run, newton-euler G1 with friction": ["run", "--method", "newton-euler"],
+             "chew, peanut, 25 cycles": ["chew", "--food", "peanut", "--cycles", "25"]}
 LONG_SAMPLES = (10_000, 100_000, 1_000_000)
 
 
@@ -282,8 +283,9 @@ def _chewbot(*args: str) -> list[str]:
 
 
 def bench_commands(repeats: int = 7, progress: Progress = SILENT) -> dict[str, Timing]:
-    """Wall time of ``chewbot run`` on the default task (Hessian; Newton–Euler G1 with friction), all outputs,
-    warm kernel cache, and of ``chewbot --help``: separate processes, interleaved."""
+    """Wall time of ``chewbot run`` on the default task (Hessian; Newton–Euler G1 with friction), of ``chewbot chew``
+    (the peanut, 25 cycles), all outputs, warm kernel cache, and of ``chewbot --help``: separate processes,
+    interleaved."""
     with tempfile.TemporaryDirectory() as tmp:
         runs = {label: partial(_quiet, _chewbot(*args, "--out", str(Path(tmp) / f"run{k}"), "--force", "-q"))
                 for k, (label, args) in enumerate(RUN_CASES.items())}
@@ -665,7 +667,7 @@ def benchmark(repeats: int = 11, calls: int = 20000, long: bool = False, progres
     """Run every table of the benchmark and return them as Markdown, with the machine and its load."""
     started = load()
     t0 = time.perf_counter()
-    progress("chewbot run and --help")
+    progress("chewbot run, chew and --help")
     commands = bench_commands(max(3, repeats // 2), progress)
     progress("the formulations on the whole task")
     task = bench_task(repeats, progress=progress)

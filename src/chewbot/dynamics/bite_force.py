@@ -282,10 +282,10 @@ def covariance(model: Model, H, G, r, free, residual, dq, ddq, rate_sd, accelera
 
 
 def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
-                 friction: bool = True, kernel=None) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """The answer u (n, 5) of :func:`estimate_states`, which unknowns are free (n, 5), and (r, G) there, without
-    the statistics (what the force observer needs at each tick). ``kernel``: the compiled :func:`residual_kernel`
-    where the caller holds it."""
+                 friction: bool = True, kernel=None, residuals: bool = True) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+    """The answer u (n, 5) of :func:`estimate_states`, which unknowns are free (n, 5), and (r, G) there (None without
+    ``residuals``: the force observer's tick needs u alone), without the statistics. ``kernel``: the compiled
+    :func:`residual_kernel` where the caller holds it."""
     check_contact(contact)
     if not model.has_hkp:
         raise ValueError(f"{model.name}: the bite-force estimator needs the target robot (six torques, five unknowns); "
@@ -297,7 +297,7 @@ def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", co
     fn = kernel if kernel is not None else native(residual_kernel(model.mechanism))
     B, p, fl = model.molar(side), model.vector(), 1.0 if friction else 0.0
     u, free = solve(lambda u, signs: evaluate(fn, theta, q, dq, ddq, B, u, tau, signs, fl, p), n, contact, fl)
-    return u, free, tuple(evaluate(fn, theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p))
+    return u, free, tuple(evaluate(fn, theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p)) if residuals else None
 
 
 def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, np.ndarray]:

@@ -70,8 +70,8 @@ _REFERENCE_SIZE = 1e-3  # m: the size at which strength_at_1mm_MPa is given
 _TINY = 1e-300  # floors that keep logarithms and powers (and their derivatives) finite at zero
 
 # The particle bed as the plant's graphs take it (:func:`bed_force`): loose height h0 (m), table area A (m^2),
-# modulus E0 (Pa), compaction strain eps_c.
-BED_PARAMETERS = ("h0", "area", "modulus", "compaction_strain")
+# modulus E0 (Pa), compaction strain eps_c, Hunt-Crossley damping alpha (s/m; :func:`bed_normal_force`).
+BED_PARAMETERS = ("h0", "area", "modulus", "compaction_strain", "damping")
 
 
 @dataclass(frozen=True)
@@ -180,12 +180,12 @@ def stroke(xp, c, mass, gap, force, B=None):
 
 
 def bed(xp, c, mass):
-    """The particle bed on the table: the values of :data:`BED_PARAMETERS` (h0 m, A m^2, E0 Pa, eps_c)."""
+    """The particle bed on the table: the values of :data:`BED_PARAMETERS` (h0 m, A m^2, E0 Pa, eps_c, alpha s/m)."""
     _, _, share = _coverage(xp, c, mass)
     area = c["table_area_mm2"]
     layer = share[0]  # the smallest class's share counts all the particles: the bed is one layer of the mixture
     h0 = xp.sum(mass) * layer / c["density_kg_per_m3"] / (area * (1 - c["bed_porosity"]))
-    return h0, area, c["bed_modulus_kPa"], c["bed_compaction_strain"]
+    return h0, area, c["bed_modulus_kPa"], c["bed_compaction_strain"], c["bed_damping_s_per_m"]
 
 
 def _named(b) -> SimpleNamespace:
@@ -198,6 +198,13 @@ def bed_force(xp, b, gap):
     p = _named(b)
     eps = xp.fmax(1 - gap / p.h0, 0.0)
     return p.area * p.modulus * p.compaction_strain * (xp.exp(eps / p.compaction_strain) - 1)
+
+
+def bed_normal_force(xp, b, gap, rate):
+    """The bed's force (N) at ``gap`` (m) closing at ``rate`` = -dg/dt (m/s), with its Hunt-Crossley damping:
+    max(0, F(g) (1 + 3/2 alpha rate)), F :func:`bed_force` (a bed pushes, never pulls). The robot's plant uses it; the
+    ideal stroke is quasi-static (:func:`bed_force`)."""
+    return xp.fmax(bed_force(xp, b, gap) * (1 + 1.5 * _named(b).damping * rate), 0.0)
 
 
 def bed_gap(xp, b, force):
@@ -314,5 +321,5 @@ def chew(c: ComminutionTable, cycles: int, closing_force: float = CLOSING_FORCE_
 
 
 __all__ = ["BED_PARAMETERS", "CLASSES", "CLOSING_FORCE_N", "MIN_GAP_MM", "SIEVE", "SUBCLASSES", "Bolus", "Chewing", "SizeClasses",
-           "StrokeRecord", "bed", "bed_force", "bed_gap", "bed_work", "breakage", "chew", "comminution_of", "fragments",
+           "StrokeRecord", "bed", "bed_force", "bed_gap", "bed_normal_force", "bed_work", "breakage", "chew", "comminution_of", "fragments",
            "ideal_stroke", "selection", "stroke"]

@@ -13,7 +13,8 @@ value has its hard limits and a plausible range, and :meth:`ComminutionTable.si`
   Rosin-Rammler law truncated at the parent's size, median ``fragment_size`` x the parent's, spread
   ``fragment_spread``;
 * the particle bed: ``bed_porosity`` when loose, ``bed_modulus_kPa`` when first compressed and
-  ``bed_compaction_strain``, the strain over which its stiffness grows e-fold;
+  ``bed_compaction_strain``, the strain over which its stiffness grows e-fold, ``bed_damping_s_per_m`` its
+  Hunt-Crossley damping while it is compressed (the robot's plant);
 * ``fitted``: the keys a fit (``chewbot fit-comminution``) has set.
 
 This module imports no other part of the food layer, so that the food reader (:mod:`chewbot.food.law`) can hand the
@@ -47,6 +48,7 @@ _RANGES = {
     "bed_porosity": (0.1, 0.9, "porosities of loose particle beds"),
     "bed_modulus_kPa": (1.0, 1e6, "moduli of food particle beds at first compression"),
     "bed_compaction_strain": (0.02, 1.0, "strains over which a bed's stiffness grows e-fold"),
+    "bed_damping_s_per_m": (0.1, 100.0, "Hunt-Crossley damping of food particle beds (75 s/m: no rebound at 2 cm/s)"),
 }
 
 
@@ -87,6 +89,7 @@ class ComminutionTable(Strict):
     bed_porosity: _field("bed_porosity", gt=0, lt=1)
     bed_modulus_kPa: _field("bed_modulus_kPa", gt=0)
     bed_compaction_strain: _field("bed_compaction_strain", gt=0)
+    bed_damping_s_per_m: _field("bed_damping_s_per_m", ge=0)
     fitted: list[str] = []
 
     @field_validator("fitted")

@@ -18,14 +18,16 @@ recording itself, so that the prior (and the search from it) does not depend on 
 
 * Rigid body (:func:`rigid_prior`): the opening rotation axis (the principal direction of the frames' rotation
   vectors, signed like the largest rotation from the first frame: the rest frame is at or near the closed end, so
-  that the farthest turn from it opens) is the condylar axis, +y of {M}; it passes through the point that
-  the motions from the most closed frame to the frames opened by less than :data:`HINGE_DEG` leave fixed (least
-  squares: the initial opening is a rotation about the condylar axis, Posselt 1952), moved along the axis to the
-  markers' middle (a cluster on the chin, a bite fork: on the midline). The turn about that axis carries the
-  condyles' glide (the principal direction of that point's path) onto the robot's condylar path, its HKP plane's
-  line of steepest descent, forward and down; where the condyles glide less than :data:`MIN_GLIDE_MM` the turn is
-  the file's ``[tracker]`` rotation's. The most closed frame (the smallest opening rotation) is intercuspal
-  contact: the robot's home pose.
+  that the farthest turn from it opens; then that of the first :data:`HINGE_DEG` of each opening) is the condylar
+  axis, +y of {M}. Where it lies (:func:`condylar_axis`): on the plane the condyles glide on (the axis line whose
+  path stays nearest to one plane: the robot's condyles slide on one), at the height of the centre of rotation of
+  the smallest openings (a Posselt hinge turns about the condylar axis; where the condyles translate from the start
+  that height is not seen, and the centre of rotation lies below them by their glide per radian), on the midline
+  (the markers' middle: a cluster on the chin, a bite fork). The turn about the axis carries the condyles' glide
+  onto the robot's condylar path, its HKP plane's line of steepest descent, forward and down (the subject's
+  eminence onto the robot's plane); where the condyles glide less than :data:`MIN_GLIDE_MM` the turn is the file's
+  ``[tracker]`` rotation's. The most closed frame (the smallest opening rotation) is intercuspal contact: the
+  robot's home pose.
 * Point path (:func:`point_prior`): with three points or more, they are a face-bow triangle (the incisal point
   and the two condylar points, Bonwill's triangle, moved in parallel): its apex (the vertex whose two edges are
   most nearly equal) is the incisal point, the opposite edge is the condylar axis, and the triangle is turned
@@ -58,14 +60,21 @@ MIN_LEVER_RATIO = 0.25
 # one are intercuspal contact (their mean pose).
 CLOSED_DEG = 0.3
 CLOSED_MM = 0.3
-# Frames opened from the most closed one by more than 0.5 deg and less than this locate the hinge axis.
-HINGE_DEG = 9.5
+# Frames opened from the most closed one by more than 0.5 deg and less than this give the opening axis' direction.
+HINGE_DEG = 6.0
 MIN_HINGE_DEG = 0.5
-# Hinge frames at least this far apart in opening make a pair (small turns give noisy fixed points).
-PAIR_DEG = 3.0
+# The opening's centre of rotation: the frames opened by MIN_HINGE_DEG to this, in pairs at least SMALL_PAIR_DEG
+# apart (0.05 mm of marker noise on a cluster 40 mm wide: about 1 mm per pair, averaged over hundreds of pairs).
+SMALL_OPENING_DEG = 2.5
+SMALL_PAIR_DEG = 0.5
+# ... and turning about an axis within this of the opening axis (not swinging sideways); a band's centre of rotation
+# needs MIN_PAIRS such pairs.
+PAIR_AXIS_DEG = 5.0
+MIN_PAIRS = 20
 MIN_GLIDE_MM = 1.0
-# The share of the frames farthest from the glide's line left out of its second fit.
-TRIM = 0.1
+# The plane of the condyles: alternations at most, and the step of the axis' point (mm) that ends them.
+PLANE_ITERATIONS = 50
+PLANE_STEP_MM = 1e-4
 # Two vertices' pairs of edges differing by less than this share of the edges are equally isosceles.
 ISOSCELES = 0.02
 
@@ -118,15 +127,6 @@ def _turn_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(cross / max(np.linalg.norm(cross), 1e-300) * np.arctan2(np.linalg.norm(cross), a @ b)).as_matrix()
 
 
-def _principal(v: np.ndarray) -> np.ndarray:
-    """The principal direction (unit) of the vectors v (N, 3) about 0, robustly: fitted again without the
-    :data:`TRIM` share of them farthest from the first fit's line (frames filled across a spike, a glitch)."""
-    g = np.linalg.svd(v, full_matrices=False)[2][0]
-    off = np.linalg.norm(v - np.outer(v @ g, g), axis=1)
-    keep = off <= np.quantile(off, 1 - TRIM)
-    return np.linalg.svd(v[keep], full_matrices=False)[2][0]
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
@@ -150,7 +150,7 @@ class RigidPrior:
     """The anatomical registration of a rigid-body recording: ``R_B``, ``t_B`` the pose of {M} in the tracker's
     frame at the first frame; the tracker ``rotation``, ``origin`` (p_S = rotation p_T + origin); the most closed
     frame (at home), the axis (tracker frame), the condylar point on it (m, tracker frame, first frame), the glide
-    (mm) and what was assumed where the data did not say."""
+    (mm), how the condylar axis was found, and what was assumed where the data did not say."""
 
     R_B: np.ndarray
     t_B: np.ndarray
@@ -160,6 +160,7 @@ class RigidPrior:
     axis: np.ndarray
     condyles: np.ndarray
     glide_mm: float
+    how: str
     notes: tuple[str, ...]
 
 
@@ -180,59 +181,156 @@ def rigid_prior(model: Model, positions: np.ndarray, file_rotation: np.ndarray, 
     a = a if a @ phi[k] > 0 else -a  # the rest frame is at or near the closed end: the farthest turn from it opens
     for _ in range(2):  # the axis of all frames first (chewing's sideways swing tilts it), then the hinge's
         R_c, p_c, closed = _intercuspal(R_Y, p_Y, phi @ a)
-        # the motions from intercuspal contact: rotation R_Y[k] R_c^T, translation p_k - R p_c
-        Rr = np.einsum("nij,kj->nik", R_Y, R_c)
-        tr = p_Y - np.einsum("nij,j->ni", Rr, p_c)
-        rho = Rotation.from_matrix(Rr).as_rotvec()
+        rho = Rotation.from_matrix(np.einsum("nij,kj->nik", R_Y, R_c)).as_rotvec()  # the turns from intercuspal contact
         opening = rho @ a
-        # the hinge: frames opening (the angle growing) from intercuspal contact by MIN_HINGE_DEG to HINGE_DEG, where
-        # a mandible turns about its condylar axis (chewing swings sideways while it closes)
+        # the first part of each opening (the angle growing), where a Posselt hinge turns about the condylar axis
+        # (chewing swings sideways while it closes)
         hinge = (opening > MIN_HINGE_DEG * DEG) & (opening < HINGE_DEG * DEG) & (np.gradient(opening) > 0)
         if hinge.sum() < 3:
-            hinge = opening > MIN_HINGE_DEG * DEG
             break
         a_h = np.linalg.svd(rho[hinge] - rho[hinge].mean(axis=0), full_matrices=False)[2][0]  # their spread, not offset
         a = a_h if a_h @ a > 0 else -a_h
         phi = rho  # the second pass measures openings from intercuspal contact
     opening = rho @ a
+    middle = c.mean(axis=0)  # the markers' middle (first frame): a chin cluster or a bite fork sits on the midline
     notes = []
     if body is not None:
         R_B, t_B = (v[0] for v in kabsch(body, c[None]))
         condyles = R_B @ (0.5 * (model.hkp.T_L + model.hkp.T_R)) + t_B
-        glide = 0.0
+        glide, how = 0.0, "the markers where [markers] puts them"
     else:
-        # the point that the motions between hinge frames (opened at least MIN_HINGE_DEG apart) leave fixed:
-        # R_jk x + t_jk = x, R_jk = R_k R_j^T, t_jk = p_k - R_jk p_j (all pairs: no frame is the reference)
-        rows = np.flatnonzero(hinge)
-        j, k2 = (rows[i] for i in np.triu_indices(rows.size, 1))
-        keep = np.abs(opening[k2] - opening[j]) > PAIR_DEG * DEG
-        j, k2 = j[keep], k2[keep]
-        R_jk = np.einsum("nij,nkj->nik", R_Y[k2], R_Y[j])
-        t_jk = p_Y[k2] - np.einsum("nij,nj->ni", R_jk, p_Y[j])
-        point = np.linalg.lstsq((np.eye(3) - R_jk).reshape(-1, 3), t_jk.reshape(-1), rcond=None)[0]
-        middle = R_c @ c.mean(axis=0) + p_c  # the markers' middle at intercuspal contact
-        point = point + a * (a @ (middle - point))  # on the midline
-        path = np.einsum("nij,j->ni", Rr, point) + tr - point
-        path = path - a * (path @ a)[:, None]
-        glide = float(np.linalg.norm(path, axis=1).max() / MM)
-        if glide >= MIN_GLIDE_MM:
-            g = _principal(path[~hinge])
-            g = g if g @ path[int(np.argmax(opening))] > 0 else -g
+        axis = condylar_axis(R_Y, p_Y, a, closed, opening, middle, half_width(model))
+        how = axis.how
+        glide = axis.glide_mm
+        if axis.glide is not None:
             # {M} at the most closed frame, in the tracker's frame: y on the axis, the glide on the condylar path
-            M_closed = _frame(g, a) @ _frame(condylar_path(model), np.array([0.0, 1.0, 0.0])).T
+            M_closed = _frame(axis.glide, a) @ _frame(condylar_path(model), np.array([0.0, 1.0, 0.0])).T
         else:
             turn = _turn_onto(file_rotation.T @ np.array([0.0, 1.0, 0.0]), a)
             M_closed = turn @ file_rotation.T
             notes.append(f"the condyles glide {glide:.2g} mm (< {MIN_GLIDE_MM:g}): the turn about the condylar axis is the file's "
                          "[tracker] rotation's")
-        condyles = R_c.T @ (point - p_c)  # the condyles' midpoint at the first frame
+        condyles = axis.point  # the condyles' midpoint at the first frame
         # {M} at the first frame; O_M where the condyles' midpoint lies on the axis
         R_B = R_c.T @ M_closed
         t_B = condyles - R_B @ (0.5 * (model.hkp.T_L + model.hkp.T_R))
     # intercuspal contact at home: its pose X = T Y_c B = I
     rotation = (R_c @ R_B).T
     origin = -rotation @ (R_c @ t_B + p_c)
-    return RigidPrior(R_B, t_B, rotation, origin, closed, a, condyles, glide, tuple(notes))
+    return RigidPrior(R_B, t_B, rotation, origin, closed, a, condyles, glide, how, tuple(notes))
+
+
+@dataclass(frozen=True)
+class CondylarAxis:
+    """Where a rigid-body recording puts the condylar axis (:func:`condylar_axis`): the condyles' midpoint at the
+    first frame (m, tracker frame), the direction of their glide at intercuspal contact (unit, tracker frame; None
+    where they glide less than :data:`MIN_GLIDE_MM`), how far they glide (mm) and how the axis was found."""
+
+    point: np.ndarray
+    glide: np.ndarray | None
+    glide_mm: float
+    how: str
+
+
+def condylar_axis(R_Y: np.ndarray, p_Y: np.ndarray, a_s: np.ndarray, closed: int, opening: np.ndarray, middle: np.ndarray,
+                  half: float) -> CondylarAxis:
+    """The condylar axis of a rigid-body motion (R_Y, p_Y: from the first frame, tracker frame; ``a_s`` the opening
+    axis at intercuspal contact, frame ``closed``, in the tracker's frame; ``opening`` (N,) rad from intercuspal
+    contact; ``middle``: the markers' middle at the first frame; ``half``: half the model's intercondylar distance).
+
+    1. *The opening's centre of rotation*: the point that the motions between frames opened by
+       :data:`MIN_HINGE_DEG` to :data:`SMALL_OPENING_DEG` leave fixed (least squares over the pairs of them at least
+       :data:`SMALL_PAIR_DEG` apart that turn about the opening axis, in the opening half of each cycle), on the
+       midline. Where the opening starts with a hinge phase (Posselt 1952), it is the condylar axis.
+    2. *The plane of the condyles*: the robot's condyles slide on one plane, and so do a subject's on a straight
+       eminence, whatever the distance between them. The axis line (through a point P along the axis, sampled at
+       +-``half``) whose path over every frame lies nearest to one plane: P and the plane alternately by least squares
+       from the centre of rotation (:data:`PLANE_ITERATIONS`). The plane's normal and the axis give the glide's
+       direction (forward: where the condyles go as the jaw opens), and the axis' place along the glide (seen at
+       first order by the opening's turn: a point off the axis along the glide leaves the plane by the turn times
+       its offset).
+    3. *The axis' height across the glide* (along the plane's normal) is not seen at first order by any motion that
+       keeps the condyles on their plane (turns about the axis or the normal, shifts along the plane): it is kept at
+       the opening's centre of rotation. Where the condyles translate from the start of the opening that centre
+       lies below them by their glide per radian of opening (14-35 mm in people), and the axis with it.
+    """
+    Rc = R_Y[closed]
+    a = Rc.T @ a_s  # the axis in the first frame's coordinates
+    growing = np.gradient(opening) > 0
+    centre = None
+    for hi, least in ((SMALL_OPENING_DEG, MIN_PAIRS), (HINGE_DEG, MIN_PAIRS), (np.inf, 1)):  # wider where too few frames
+        rows = np.flatnonzero(growing & (opening > MIN_HINGE_DEG * DEG) & (opening < hi * DEG))
+        centre = _fixed_point(R_Y, p_Y, rows, opening, SMALL_PAIR_DEG * DEG, a, middle, least)
+        if centre is not None:
+            break
+    if centre is None:
+        raise RecordingError("the recording never opens from intercuspal contact about one axis: no condylar axis to find")
+    point, normal = _plane_axis(R_Y, p_Y, a, centre, middle, half)
+    path = _moved(R_Y, p_Y, point) - _moved(R_Y, p_Y, point)[closed]
+    path = path - np.outer(path @ a_s, a_s)
+    n_s = normal - a_s * (a_s @ normal)
+    n_s = n_s / np.linalg.norm(n_s)
+    e = np.cross(a_s, n_s)
+    e = e if np.corrcoef(path @ e, opening)[0, 1] > 0 else -e  # forward: where the condyles go as the jaw opens
+    glide_mm = float(np.linalg.norm(path, axis=1).max() / MM)
+    # the axis' height across the glide: the centre of rotation's (step 3)
+    up = Rc.T @ np.cross(e, a_s)
+    point = point + up * ((centre - point) @ up)
+    if glide_mm < MIN_GLIDE_MM:
+        return CondylarAxis(_on_midline(centre, a, middle), None, glide_mm, "the condylar axis through the opening's centre "
+                            "of rotation (the condyles do not glide)")
+    return CondylarAxis(_on_midline(point, a, middle), e, glide_mm, "the condylar axis on the plane its condyles glide on, "
+                        "at the height of the centre of rotation of the smallest openings")
+
+
+def _moved(R_Y: np.ndarray, p_Y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(N, 3) where the point x of the first frame is in every frame."""
+    return np.einsum("nij,j->ni", R_Y, x) + p_Y
+
+
+def _on_midline(x: np.ndarray, a: np.ndarray, middle: np.ndarray) -> np.ndarray:
+    """x moved along the axis direction a to the markers' middle."""
+    return x + a * (a @ (middle - x))
+
+
+def _fixed_point(R_Y, p_Y, rows, opening, apart, a, middle, least: int = 0) -> np.ndarray | None:
+    """The point (first frame's coordinates) that the motions between the frames ``rows`` at least ``apart`` (rad) in
+    opening leave fixed, by least squares over every such pair that turns about ``a`` (no frame is the reference), on
+    the midline along ``a``; None where fewer than :data:`MIN_PAIRS` pairs (``least`` where given) are left."""
+    j, k = (rows[i] for i in np.triu_indices(rows.size, 1))
+    keep = np.abs(opening[k] - opening[j]) > apart
+    j, k = j[keep], k[keep]
+    # in the first frame's coordinates: the motion from frame j to k is x -> R_j^T (R_k x + p_k - p_j) for a body point
+    R_jk = np.einsum("nji,njk->nik", R_Y[j], R_Y[k])
+    t_jk = np.einsum("nji,nj->ni", R_Y[j], p_Y[k] - p_Y[j])
+    # pairs that turn about the opening axis only: a sideways swing has its centre of rotation elsewhere
+    turn = Rotation.from_matrix(R_jk).as_rotvec()
+    about = np.abs(turn @ a) >= np.cos(np.radians(PAIR_AXIS_DEG)) * np.linalg.norm(turn, axis=1)
+    R_jk, t_jk = R_jk[about], t_jk[about]
+    if len(R_jk) < (least or MIN_PAIRS):
+        return None
+    A = np.vstack([(np.eye(3) - R_jk).reshape(-1, 3), a[None]])
+    return np.linalg.lstsq(A, np.r_[t_jk.reshape(-1), a @ middle], rcond=None)[0]
+
+
+def _plane_axis(R_Y, p_Y, a, start, middle, half) -> tuple[np.ndarray, np.ndarray]:
+    """The axis line through P along ``a`` (first frame's coordinates) whose two points P +- half a stay nearest to
+    one plane over every frame, and that plane's unit normal (tracker frame): alternately the plane (the smallest
+    principal direction of the points' paths) and P (linear least squares, on the midline), from ``start``."""
+    P = start
+    for _ in range(PLANE_ITERATIONS):
+        paths = np.concatenate([_moved(R_Y, p_Y, P + s * half * a) for s in (-1.0, 1.0)])
+        mean = paths.mean(axis=0)
+        n = np.linalg.svd(paths - mean, full_matrices=False)[2][2]
+        rows = np.vstack([np.tile(np.einsum("i,nij->nj", n, R_Y), (2, 1)), a[None]])
+        rhs = np.r_[np.concatenate([n @ mean - p_Y @ n - s * half * np.einsum("i,nij,j->n", n, R_Y, a) for s in (-1.0, 1.0)]),
+                    a @ middle]
+        P_new = np.linalg.lstsq(rows, rhs, rcond=None)[0]
+        done = np.linalg.norm(P_new - P) < PLANE_STEP_MM * MM
+        P = P_new
+        if done:
+            break
+    return P, n
 
 
 def _intercuspal(R_Y: np.ndarray, p_Y: np.ndarray, opening: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

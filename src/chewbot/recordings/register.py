@@ -14,7 +14,9 @@ robot's condylar path, the most closed frame at home; with a ``[markers]`` table
 **Share.** The largest uniform scale s <= 1 of the registered motion (displacement of O_M and rotation angle
 relative to the first frame, :func:`chewbot.recordings.rigid.scale_motion`) at which every frame is reached within
 ``--max-residual`` by an admissible pose (:func:`chewbot.recordings.fit.fit_to_robot`: condyles in their sockets,
-every transmission angle at least ``--min-transmission``). Found by bisection (:data:`BISECTIONS`).
+every transmission angle at least ``--min-transmission``). Found by bisection (:data:`BISECTIONS`); at each step the
+frames that failed at the last failing scale are fitted first, alone, and the whole recording only where they all
+pass (a failing step then costs the fit of a few frames, not of all).
 
 **Search** (:func:`search`, shared with the point paths' :mod:`chewbot.recordings.register_point`). The share at
 the prior comes first: where it is 1 the prior is the registration, nothing the data say moves it. Otherwise the
@@ -137,8 +139,8 @@ def box(n_turn: int, n_shift: int, free: bool = True) -> list[tuple[float, float
 
 
 def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, float, object, bool]:
-    """The search of the module docstring, for any registration: ``verdict(x, s)`` -> (every frame passes (N,),
-    the fit) at the unknowns x (0: the prior) and the scale s; ``objective(x, s)`` -> (value, gradient);
+    """The search of the module docstring, for any registration: ``verdict(x, s, rows=None)`` -> (each frame
+    passes (N,) or each of ``rows``, the fit) at the unknowns x (0: the prior) and the scale s; ``objective(x, s)`` -> (value, gradient);
     ``bounds`` of x (L-BFGS-B). Returns x, the share, its fit and whether the prior was refined."""
     n = len(bounds)
 
@@ -146,14 +148,18 @@ def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, 
         ok, fit = verdict(x, 1.0)
         if ok.all():
             return 1.0, fit
-        hi, best = 1.0, None
+        hi, best, failing = 1.0, None, np.flatnonzero(~ok)
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
+            ok_few = verdict(x, mid, failing)[0]  # the frames that failed last first: one failing decides
+            if not ok_few.all():
+                hi, failing = mid, failing[~ok_few]
+                continue
             ok_mid, fit_mid = verdict(x, mid)
             if ok_mid.all():
                 lo, best = mid, fit_mid
             else:
-                hi = mid
+                hi, failing = mid, np.flatnonzero(~ok_mid)
         if best is None and lo > 0:  # no scale above the one it started from passed: that one's fit
             best = verdict(x, lo)[1]
         return lo, best
@@ -236,8 +242,8 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         target, J = reg.targets(x, frames(s, rows), const(s))
         return target, J
 
-    def verdict(x, s):
-        target, _ = poses(x, s, np.arange(N))
+    def verdict(x, s, rows=None):
+        target, _ = poses(x, s, np.arange(N) if rows is None else rows)
         fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg)
         ok = fit.admissible & (fit.position_error_mm <= tolerances[0]) & (fit.orientation_error_deg <= tolerances[1])
         return ok, fit
@@ -272,8 +278,8 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     rms = float(np.sqrt(np.nanmean(fit.position_error_mm**2 * weights[0] ** 2 + fit.orientation_error_deg**2 * weights[1] ** 2)))
     notes = list(prior.notes)
     if markers is None:
-        notes.append(f"prior: the opening axis {np.round(prior.axis, 3).tolist()} (tracker frame) on the condylar axis, the "
-                     f"condyles gliding {prior.glide_mm:.3g} mm on the robot's condylar path, frame {prior.closed + 1} (the most "
+        notes.append(f"prior: the opening axis {np.round(prior.axis, 3).tolist()} (tracker frame) on the condylar axis ({prior.how}), "
+                     f"the condyles gliding {prior.glide_mm:.3g} mm on the robot's condylar path, frame {prior.closed + 1} (the most "
                      "closed) at home")
     else:
         notes.append(f"prior: the markers where [markers] puts them, frame {prior.closed + 1} (the most closed) at home")

@@ -90,8 +90,8 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
     def unknowns(x):
         return np.r_[x[:3], rest + x[3:]]
 
-    def verdict(x, s):
-        target, _ = graphs.targets(unknowns(x), d, const(s))
+    def verdict(x, s, rows=None):
+        target, _ = graphs.targets(unknowns(x), d if rows is None else d[rows], const(s))
         fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_import, min_transmission_deg)
         return fit.admissible & (fit.position_error_mm <= tolerance_mm), fit
 

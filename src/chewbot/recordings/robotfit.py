@@ -59,7 +59,7 @@ MIN_LEVER_MM = 10.0
 # elsewhere, or kept where it stalled if admissible (chewbot.recordings.fit).
 SQP_ITERATIONS = 40
 _SQP = {
-    "qpsol": "qrqp", "convexify_strategy": "eigen-clip",  # "regularize" slows it tenfold here; clipping keeps 3 iterations
+    "qpsol": "qrqp", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                       "constr_viol_tol": 1e-13},

@@ -18,20 +18,22 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class EngineRow:
     """One engine: ``name`` (``--plant-engine``), ``help``, ``module`` (of its plant's ``build``, in this package:
-    chewbot's is :mod:`chewbot.simulation.food`, which builds the plant with a food or without); ``closes_loop``: its
+    chewbot's is :mod:`chewbot.simulation.bolus`, which builds the plant without a food, with one, or with a food that
+breaks into a bolus); ``closes_loop``: its
     plant integrates a controller's law inside its steps (``--rate continuous``); ``food``: its plant can hold a food
-    (``--food``); ``mjcf``: it simulates the model's MJCF text (``write_mjcf``, handed down from the export layer)."""
+    (``--food``); ``bolus``: its plant can break its food into a bolus (``chewbot chew``); ``mjcf``: it simulates the model's MJCF text (``write_mjcf``, handed down from the export layer)."""
 
     name: str
     help: str
     module: str
     closes_loop: bool = False
     food: bool = False
+    bolus: bool = False
     mjcf: bool = False
 
 
 ENGINES: dict[str, EngineRow] = {e.name: e for e in (
-    EngineRow("chewbot", "its Newton-Euler equations, Radau IIA", "food", closes_loop=True, food=True),
+    EngineRow("chewbot", "its Newton-Euler equations, Radau IIA", "bolus", closes_loop=True, food=True, bolus=True),
     EngineRow("mujoco", "MuJoCo's simulation of the model's MJCF, as chewbot export-model writes it; steps of 0.1 ms, "
               "unilateral condyle contacts; docs/mujoco.md", "mujoco_plant", mjcf=True),
 )}
@@ -46,10 +48,12 @@ def engine_row(name: str) -> EngineRow:
     return ENGINES[name]
 
 
-def make_plant(engine: EngineRow, model, friction: bool, side: str, food=None, write_mjcf=None):
+def make_plant(engine: EngineRow, model, friction: bool, side: str, food=None, write_mjcf=None, bolus: bool = False):
     """The plant of ``engine`` on ``model`` (its module's ``build``), with ``food`` on the molar of ``side`` where the
-    engine holds one; ``write_mjcf(model, friction)``: the MJCF writer (:func:`chewbot.export.mjcf.mjcf`), for an
+    engine holds one (with ``bolus``: breaking into a bolus, where the engine can); ``write_mjcf(model, friction)``: the MJCF writer (:func:`chewbot.export.mjcf.mjcf`), for an
     engine that simulates MJCF. The options have refused what the engine cannot do."""
     assert food is None or engine.food, f"the {engine.name} plant holds no food"
+    assert not bolus or (engine.bolus and food is not None), f"the {engine.name} plant breaks no bolus"
     assert write_mjcf is not None or not engine.mjcf, f"the {engine.name} engine needs write_mjcf (chewbot.export.mjcf.mjcf)"
-    return importlib.import_module(f"{__package__}.{engine.module}").build(model, friction, side, food=food, write_mjcf=write_mjcf)
+    return importlib.import_module(f"{__package__}.{engine.module}").build(model, friction, side, food=food, write_mjcf=write_mjcf,
+                                                                                 bolus=bolus)

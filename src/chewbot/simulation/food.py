@@ -67,7 +67,7 @@ class FoodState:
     F_n: float
 
 
-def _food_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
+def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home):
     """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e, the bite point's velocity,
     cos of the lower tooth's tilt."""
     point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
@@ -86,21 +86,30 @@ def _force_sx(f, delta, ddelta, broken, F_m, velocity):
 def food_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
     s as :data:`FOOD_SHARED`."""
+    return stage_with_food(mechanism, "food_stage", FOOD_SHARED,
+                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)[2])
+
+
+def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
+    """A stage residual of the plant with a food: (q, v, a, N, w, s) -> r, w laid out as :data:`FOOD_INPUTS` and s as
+    ``shared`` (:data:`FOOD_SHARED` and what ``force`` reads beyond it); ``force(f, delta, ddelta, F_m, velocity,
+    blocks)`` the food's force on the mandible (3,) from the food's vector, the compression and its rate, the Maxwell
+    branch's force over the stage, the bite point's velocity and the blocks of s."""
     m = symbols(mechanism)
 
     def build():
         n, nN = n_coordinates(mechanism), n_unknowns(mechanism)
         q, v, a, N = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("N", nN)
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
-        s, shared = FOOD_SHARED.symbols("s", ca.SX.sym)
-        B, p, f = shared["B"], shared["p"], shared["food"]
-        delta, ddelta, bFe, velocity, _ = _food_sx(mechanism, q, v, B, p, f, shared["broken"], shared["z_home"])
-        F_m = maxwell_force(CASADI, f, shared["F_m"], shared["bFe"], bFe, stage["elapsed"])
-        _, _, F = _force_sx(f, delta, ddelta, shared["broken"], F_m, velocity)
-        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, shared["friction"], p)
-        return ca.Function("food_stage", [q, v, a, N, w, s], [r])
+        s, blocks = shared.symbols("s", ca.SX.sym)
+        B, p, f = blocks["B"], blocks["p"], blocks["food"]
+        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"])
+        F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
+        F = force(f, delta, ddelta, F_m, velocity, blocks)
+        r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
+        return ca.Function(name, [q, v, a, N, w, s], [r])
 
-    return cached_graph(m, ("food-stage",), build)
+    return cached_graph(m, (name,), build)
 
 
 def food_step_kernel(mechanism: str) -> KernelSpec:
@@ -119,13 +128,27 @@ def food_function(mechanism: str) -> ca.Function:
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
         broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = _food_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
+        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, velocity)
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, z_home], [delta, ddelta, bFe, F_v, F_n, F, cos_tilt],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "z_home"],
                            ["delta", "ddelta", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
 
     return cached_graph(m, ("food-quantities",), build)
+
+
+def food_quantities_kernel(mechanism: str) -> KernelSpec:
+    """:func:`food_function` compiled: the food's state at each step's end is one call of it."""
+    from chewbot.model.symbolic import c_name
+
+    name = f"food_quantities_{c_name(mechanism)}"
+
+    def build(params):
+        fn = food_function(mechanism)
+        inputs = fn.sx_in()
+        return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
+
+    return KernelSpec(name, build, (mechanism, "food-quantities"), mechanism)
 
 
 @dataclass(frozen=True)
@@ -157,18 +180,30 @@ class FoodPlant(Plant):
         self._p = self.model.vector()
 
     def kernels(self) -> list[KernelSpec]:
-        return [food_step_kernel(self.mechanism), forward_kernel(self.mechanism), plant_outputs_kernel(self.mechanism)]
+        return [self.step_kernel(), food_quantities_kernel(self.mechanism), forward_kernel(self.mechanism),
+                plant_outputs_kernel(self.mechanism)]
+
+    def step_kernel(self) -> KernelSpec:
+        """The compiled step it advances by (:func:`food_step_kernel`)."""
+        return food_step_kernel(self.mechanism)
 
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
                                 z_home=self._z_home)
 
+    def shared_at(self, s0: np.ndarray, state: PlantState) -> np.ndarray:
+        """s of a step from ``state``: ``s0`` (:meth:`shared`) with the food's state at the step's start."""
+        s = s0.copy()
+        blocks, food = FOOD_SHARED.split(s), state.internal.food
+        blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
+        return s
+
     def quantities(self, q, dq, broken: float, F_m: float) -> FoodState:
         """The food's state at one plant state."""
         if self._fn is None:
-            self._fn = food_function(self.mechanism)
-        delta, _, bFe, F_v, F_n, _, _ = self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home)
+            self._fn = native(food_quantities_kernel(self.mechanism))
+        delta, _, bFe, F_v, F_n, _, _ = (x[0] for x in self._fn(q, dq, self._B, self._p, self._f, broken, F_m, self._z_home))
         return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n))
 
     def initial(self, t: float, q, dq) -> PlantState:
@@ -183,6 +218,10 @@ class FoodPlant(Plant):
 
     # ---------------------------------------------------------------------------------------------- events
 
+    def guards_at(self, internal: FoodSolved) -> np.ndarray:
+        """The guard functions at the plant's own state (:meth:`guards` of its food's)."""
+        return self.guards(internal.food)
+
     def guards(self, state: FoodState) -> np.ndarray:
         """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed)."""
         f = self.food
@@ -196,14 +235,7 @@ class FoodPlant(Plant):
         replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
-
-            def shared(state: PlantState) -> np.ndarray:  # s with the food's state at the step's start
-                s = s0.copy()
-                blocks, food = FOOD_SHARED.unpack(s), state.internal.food
-                blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
-                return s
-
-            self._step = Step(native(food_step_kernel(self.mechanism)), shared)
+            self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
 
         def stage(t0: float, dt: float) -> np.ndarray:
             return FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(t0, dt))["tau"], elapsed=C * dt)
@@ -220,14 +252,14 @@ class FoodPlant(Plant):
         """One step of h seconds from ``state``, or to just past the first event within it (then switched)."""
         step = self._step
         trial = self.interval(step, stage, state, h, 0)
-        g0, g1 = self.guards(state.internal.food), self.guards(trial.internal.food)
+        g0, g1 = self.guards_at(state.internal), self.guards_at(trial.internal)
         crossed = np.flatnonzero(np.sign(g0) * np.sign(g1) < 0)
         if not crossed.size or not trial.margin > 0:
             return trial
         first, root = None, h
         for i in crossed:
             def guard(dt, i=i):
-                return self.guards(self.interval(step, stage, state, dt, 0).internal.food)[i] if dt > 0 else g0[i]
+                return self.guards_at(self.interval(step, stage, state, dt, 0).internal)[i] if dt > 0 else g0[i]
 
             r = brentq(guard, 0.0, h, xtol=EVENT_TOLERANCE, rtol=4 * np.finfo(float).eps)
             if r < root or first is None:
@@ -235,7 +267,7 @@ class FoodPlant(Plant):
         # just past the crossing: the step whose end has the guard's new sign
         past = min(h, root + EVENT_TOLERANCE)
         after = self.interval(step, stage, state, past, 0)
-        while np.sign(self.guards(after.internal.food)[first]) == np.sign(g0[first]) and past < h:
+        while np.sign(self.guards_at(after.internal)[first]) == np.sign(g0[first]) and past < h:
             past = min(h, past + EVENT_TOLERANCE * 10)
             after = self.interval(step, stage, state, past, 0)
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
@@ -279,9 +311,8 @@ class FoodPlant(Plant):
                          "peak_force_N": float(np.max(q["force"])) if len(q["force"]) else 0.0}}
 
 
-def build(model, friction: bool, side: str, food: Food | None = None, write_mjcf=None) -> Plant:
-    """chewbot's engine (the engine table's builder): its :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a
-    :class:`FoodPlant`."""
+def build(model, friction: bool, side: str, food: Food | None = None) -> Plant:
+    """chewbot's :class:`~chewbot.simulation.plant.Plant`, or with ``food`` a :class:`FoodPlant`."""
     if food is None:
         return Plant(model, friction=friction, side=side)
     return FoodPlant(model, friction=friction, side=side, food=food)
@@ -292,5 +323,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function",
-           "food_stage", "food_step_kernel", "start_gap"]
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_function", "food_geometry_sx", "food_quantities_kernel",
+           "food_stage", "food_step_kernel", "stage_with_food", "start_gap"]

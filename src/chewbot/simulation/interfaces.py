@@ -71,10 +71,12 @@ class Column(NamedTuple):
 class PlantCapabilities:
     """What a plant can do. ``closes_loop``: it integrates a controller's law (a CasADi function) at every stage of
     its integrator's steps (``--rate continuous``; :class:`LoopPlant`); ``food``: its bite force is a food's, from
-    its own state (the task's bite force is not applied)."""
+    its own state (the task's bite force is not applied); ``bolus``: its food breaks into a bolus of particles, whose
+    bed is the food's force once it has broken (:class:`chewbot.simulation.bolus.BolusPlant`)."""
 
     closes_loop: bool = False
     food: bool = False
+    bolus: bool = False
 
 
 @dataclass(frozen=True)

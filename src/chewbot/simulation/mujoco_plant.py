@@ -285,6 +285,6 @@ class MujocoPlant:
         return Forward(ddq, N, plant_residual(self.model, q, dq, ddq, N, tau, force, self.side, self.friction))
 
 
-def build(model: Model, friction: bool, side: str, food=None, write_mjcf=None) -> MujocoPlant:
+def build(model: Model, friction: bool, side: str, food=None, write_mjcf=None, bolus: bool = False) -> MujocoPlant:
     """MuJoCo's plant (the engine table's builder) of the MJCF text ``write_mjcf(model, friction)``."""
     return MujocoPlant(model, write_mjcf(model, friction), friction=friction, side=side)

@@ -73,7 +73,7 @@ class ForceObserver:
             theta = dict(zip(STATE_OUTPUTS, self._state(qm, dqm, self.model.vector())))["theta"]
             u, _, _ = solve_states(self.model, np.asarray(theta).reshape(1, 6), qm[None], dqm[None], ddq[None],
                                    np.asarray(tau, float)[None], side=self.side, contact=self.contact,
-                                   friction=self.friction, kernel=self._kernel)
+                                   friction=self.friction, kernel=self._kernel, residuals=False)
             self._raw = u[0]
             b = np.exp(-2 * np.pi * self.cutoff * h)
             self._u = b * self._u + (1 - b) * self._raw

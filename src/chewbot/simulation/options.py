@@ -20,7 +20,7 @@ the contact model; ``--set`` keys that change nothing):
 * a controller's needs (its row): a food to press on, the target's task coordinates, the inverse dynamics (``--method``,
   ``--goal``, ``--bite-unknown`` apply only to controllers that use it; a controller given the observer's force knows
   no other, so ``--bite-unknown`` does not apply to it either);
-* ``--food`` needs an engine that holds a food;
+* ``--food`` needs an engine that holds a food; a bolus (``chewbot chew``) a food and an engine that breaks it;
 * an option none of the controllers that run uses (a gain of another controller, the estimator's cut-off without the
   measured sensor) is an error naming what would use it;
 * ``--plant-set`` changes the plant's model only: the default task's keys (``task.NAME``) go with ``--set``;
@@ -101,7 +101,8 @@ class SimulationOptions:
     ``plant_overrides`` of the plant's model only (``--plant-set``); ``bite_unknown``; ``gains_file`` and
     ``gain_overrides``; ``food`` (built-in name or file); ``measured``: the controller is given the estimate from the
     crank angles (else the plant's state); ``exported``: the controller runs as the exported C step; ``compare`` and
-    ``compare_engines``: the simulations that run (:meth:`runs`)."""
+    ``compare_engines``: the simulations that run (:meth:`runs`); ``bolus``: the food breaks into a bolus whose particle
+    bed is its force once broken (``chewbot chew``)."""
 
     controller: ControllerRow = field(default_factory=lambda: controller_row(DEFAULT_CONTROLLER))
     model: str = "target"
@@ -125,6 +126,7 @@ class SimulationOptions:
     engine: EngineRow = field(default_factory=lambda: engine_row(DEFAULT_ENGINE))
     compare: bool = False
     compare_engines: bool = False
+    bolus: bool = False
 
     def runs(self) -> dict[str, SimulationOptions]:
         """The simulations these options run, by label: one, or one per compared controller or engine."""
@@ -142,7 +144,7 @@ class SimulationOptions:
                 "plant": self.plant_file, "overrides": dict(self.overrides), "plant_overrides": dict(self.plant_overrides),
                 "bite_unknown": self.bite_unknown, "gains": self.gains_file, "gain_overrides": dict(self.gain_overrides),
                 "food": self.food, "sensor": (Sensor.measured if self.measured else Sensor.exact).value, "exported": self.exported,
-                "engine": self.engine.name}
+                "engine": self.engine.name, "bolus": self.bolus}
 
 
 def _row(value, rows: dict, option: str):
@@ -170,7 +172,7 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
             plant_overrides: dict[str, float] | None = None, bite_unknown: bool = False, gains_file: str | None = None,
             gain_overrides: dict[str, float] | None = None, food: str | None = None, sensor: Sensor | str | None = None,
             exported: bool = False, engine: EngineRow | str = DEFAULT_ENGINE, compare: bool = False,
-            compare_engines: bool = False, *, has_hkp: bool | None = None) -> SimulationOptions:
+            compare_engines: bool = False, bolus: bool = False, *, has_hkp: bool | None = None) -> SimulationOptions:
     """The options of a simulation, complete and consistent (the module docstring's rules); :class:`OptionError`
     names the option that does not apply. ``rate``: Hz, or None or "continuous"; ``friction``: the plant's, a bool or
     "on"/"off"; ``sensor``: :class:`Sensor` or its value, or None (the default of the rules). ``has_hkp``: whether the
@@ -263,6 +265,11 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
             if given:
                 raise OptionError(option, f"applies to the model-based controllers ({model_based}), not {names} (no "
                                   "inverse dynamics in their laws)")
+    if bolus and food is None:
+        raise OptionError("food", "is required: the bolus is a food's, broken into particles")
+    for e in engines:
+        if bolus and not e.bolus:
+            raise OptionError("plant-engine", f"the {e.name} plant does not break a food into a bolus")
     if food is not None:
         for e in engines:
             if not e.food:
@@ -294,4 +301,4 @@ def resolve(controller: ControllerRow | str = DEFAULT_CONTROLLER, model: str = "
     inverse = ControllerDynamics(d.method, _enum("goal", d.goal, Goal), friction and "friction" in formulation(d.method).options)
     return SimulationOptions(row, model, task, side, inverse, bool(friction), Contact(d.contact), rate, float(noise_rad), int(seed),
                              plant_file, overrides, plant_overrides, bool(bite_unknown), gains_file, gain_overrides, food,
-                             measured, bool(exported), engine, bool(compare), bool(compare_engines))
+                             measured, bool(exported), engine, bool(compare), bool(compare_engines), bool(bolus))

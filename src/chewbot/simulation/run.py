@@ -141,7 +141,7 @@ def build(options: SimulationOptions, task: Task | None = None, write_mjcf=None,
     reference = Reference.from_task(model, task)
     gains = Gains.load(options.gains_file, model.mechanism, options.gain_overrides)
     food = None if options.food is None else load_food_for(options, plant_model, task, reference)
-    plant = make_plant(options.engine, plant_model, options.friction, task.side, food, write_mjcf)
+    plant = make_plant(options.engine, plant_model, options.friction, task.side, food, write_mjcf, options.bolus)
     row = options.controller
     controller = ControllerParts(row, model, reference, gains, options.inverse, not options.bite_unknown).build()
     sensor = CrankSensor(model, options.noise_rad, gains["estimator"].cutoff_Hz, options.seed) if options.measured else None
