@@ -120,7 +120,10 @@ def test_unilateral_contact_is_the_bounded_least_squares():
 def test_an_ill_conditioned_sample_is_named():
     G = np.tile(np.eye(6, 5), (3, 1, 1))
     G[1, :, 4] = G[1, :, 3] + 1e-6 * np.eye(6)[5]  # N_R's column nearly N_L's
-    e = summarise(np.array([0.0, 0.001, 0.002]), np.zeros((3, 5)), np.full((3, 6), 1e-3), G, np.ones((3, 5), bool))
+    torque = 1e-6 * np.linalg.inv(np.einsum("nki,nkj->nij", G, G))  # sigma = 1e-3 N*m on each torque
+    zero = np.zeros((3, 5, 5))
+    parts = {"torque": torque, "rates": zero, "parameters": zero, "sigma": 1e-3, "dof": 3, "sigma_source": "given"}
+    e = summarise(np.array([0.0, 0.001, 0.002]), np.zeros((3, 5)), np.full((3, 6), 1e-3), G, np.ones((3, 5), bool), parts)
     assert e.ill_conditioned.tolist() == [1]
     assert "1 (t = 0.001 s)" in e.warnings[0]
     assert e.se[1, 3] > 100 * e.se[0, 3]
@@ -140,8 +143,12 @@ def test_estimate_force_writes_one_row_per_log_sample_with_units(tmp_path):
     r = runner.invoke(app, ["estimate-force", str(log), "--model", "target", "--out", str(out), "--quiet"])
     assert r.exit_code == 0, r.output
     table = Table.read_csv(out)
-    assert list(table.columns) == ["t", "Fx", "Fy", "Fz", "N_L", "N_R", "sFx", "sFy", "sFz", "sN_L", "sN_R", "residual"]
+    unknowns = ["Fx", "Fy", "Fz", "N_L", "N_R"]
+    assert list(table.columns) == ["t", *unknowns, *[f"s{u}" for u in unknowns],
+                                   *[f"{u}_{end}95" for u in unknowns for end in ("low", "high")], "residual"]
     assert table.units["Fz"] == "N" and table.units["residual"] == "N*m" and table.units["t"] == "s"
+    assert table.units["Fz_low95"] == "N" and table.units["Fz_high95"] == "N"
+    np.testing.assert_allclose(table["Fz_high95"] - table["Fz"], 1.959963984540054 * table["sFz"], rtol=1e-9, atol=1e-12)
     assert np.allclose(table["t"], kin.t, rtol=0, atol=1e-12)
     assert np.sqrt(np.mean((table["Fz"] - kin.force[:, 2]) ** 2)) < 0.02 * 80
     # never over a file without --force; with it, over its own output

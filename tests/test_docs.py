@@ -120,6 +120,8 @@ def expected_outputs(args: tuple[str, ...]) -> list[str]:
         return ([out, f"{stem}.residuals.csv"] if sub == "track-incisor" or "--no-residuals" not in args else [out]) + found
     if sub == "identify":
         return [out, out[: -len(".toml")] + ".identification.csv"]
+    if sub == "excite":
+        return [out, out + ".chewbot.json"]
     if sub == "sweep":
         return [f"{out}/run.json"]
     if sub == "study":

@@ -185,6 +185,15 @@ def test_sigint_in_the_identification_leaves_no_output(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flag", "log.csv"]
 
 
+def test_sigint_in_the_excitation_design_leaves_no_output(tmp_path):
+    """`excite` stopped as its design starts: exit 130, one line, no task written."""
+    flag = tmp_path / "flag"
+    proc = _start(["excite", "--duration", "2", "--out", "exc.csv"], tmp_path, **{TEST_PAUSE_VARIABLE: f"fit:{flag}"})
+    _wait_for(proc, flag.exists)
+    _stop(proc, signal.SIGINT, EXIT_INTERRUPTED)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flag"]
+
+
 def test_sigint_while_chewing_leaves_no_output(tmp_path):
     """`chew` stopped as its simulation starts: exit 130, one line, no folder."""
     flag = tmp_path / "flag"

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import typer
 
-from chewbot.commands import bench, cache, chew, estimate_force, export_c, export_controller, export_model, fit_comminution, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
+from chewbot.commands import bench, cache, chew, estimate_force, excite, export_c, export_controller, export_model, fit_comminution, identify, import_motion, models, report, run, simulate, study, sweep, tpa, track_incisor
 from chewbot.commands.common import stdout
 
 app = typer.Typer(
@@ -69,6 +69,7 @@ app.command("export-model")(export_model.export_model)
 app.command("study")(study.study)
 app.command("track-incisor")(track_incisor.track_incisor)
 app.command("import-motion")(import_motion.import_motion)
+app.command("excite")(excite.excite)
 app.command("identify")(identify.identify)
 app.command("estimate-force")(estimate_force.estimate_force)
 app.command("tpa")(tpa.tpa)

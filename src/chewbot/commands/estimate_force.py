@@ -26,8 +26,8 @@ def estimate_force(
     side: Side = typer.Option(Side.left, "--side", help="Molar where the food is (left or right): the point the estimated force acts at."),
     contact: Contact = typer.Option(Contact.bilateral, "--contact", help="bilateral: the normal forces N_L, N_R (N) of either sign; unilateral: N_L, N_R >= 0 N (bounded least squares)."),
     friction: Switch = typer.Option(Switch.on, "--friction", help="on|off: the model's HKP and actuator friction in the equations (off: the frictionless model)."),
-    window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the Savitzky-Golay window that estimates the rates the log does not give (as chewbot identify)."),
-    out: Path = typer.Option(..., "--out", help="The CSV to write: t [s], Fx, Fy, Fz, N_L, N_R [N], their standard errors sFx..sN_R [N], residual [N*m]."),
+    window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the longest Savitzky-Golay window that estimates the rates the log does not give (shorter where the motion needs it), e.g. --window 0.1 for a noisy log."),
+    out: Path = typer.Option(..., "--out", help="The CSV to write: t [s], Fx, Fy, Fz, N_L, N_R [N], their standard errors sFx..sN_R [N], their 95 % intervals Fx_low95, Fx_high95 .. N_R_high95 [N], residual [N*m]."),
     force: bool = flag("--force", help=FORCE_HELP),
     quiet: bool = flag("--quiet", "-q", help="Print nothing but errors and warnings."),
 ) -> None:
@@ -36,8 +36,9 @@ def estimate_force(
     At every sample the six measured torques give five unknowns (Fx, Fy, Fz at the molar of --side, in {S}, and
     N_L, N_R) by least squares on the Newton-Euler model with its friction (Gauss-Newton on the sign pattern of the
     normal forces, docs/bite_force.md); the motion is the log's, its rates smoothed where not given. Writes
-    FORCE.csv with one row per log sample, standard errors from the pooled residual, and the residual; warns where
-    the problem is ill-conditioned (naming the samples).
+    FORCE.csv with one row per log sample, standard errors (the torque error, the smoothed rates' error and, for a
+    calibrated model, its [uncertainty]), 95 % intervals and the residual; warns where the problem is
+    ill-conditioned (naming the samples).
 
     Examples:
 
@@ -75,3 +76,11 @@ def estimate_force(
                      f"(standard error {result.se[peak, 2]:.3g} N); pooled torque error sigma = {result.sigma:.3g} N*m; "
                      f"rates {result.info['rates']['first']}/{result.info['rates']['second']}; crank torques from the log's "
                      f"{result.info['reads']}", highlight=False, markup=False)
+        parts = result.info.get("standard_error_rms_N", {})
+        if parts:
+            stdout.print("RMS standard error of Fz [N] from: " + ", ".join(f"{k} {v['Fz']:.3g}" for k, v in parts.items())
+                         + (" (the model's [uncertainty])" if m.uncertainty is not None else " (the model has no [uncertainty])"),
+                         highlight=False, markup=False)
+        if result.info.get("events"):
+            stdout.print("steps of the force (not smoothed across) at t = "
+                         + ", ".join(f"{e['t_s']:.6g} s" for e in result.info["events"]), highlight=False, markup=False)

@@ -25,22 +25,27 @@ def identify(
     out: Path = typer.Option(..., "--out", help="The model file to write (TOML); the table of estimates goes beside it, *.identification.csv."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the logged bite force acts."),
     window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the Savitzky-Golay window that estimates the rates the log does not give."),
-    fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.mass_g, mandible.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad); repeatable."),
+    fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.inertia_g_mm2, cranks.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad); repeatable."),
+    free: list[str] = typer.Option([], "--free", metavar="KEY", help="Estimate this key too, which the model file gives by default: mandible.mass_g (the weighed mass, in g; a log of torques identifies it as long as no drive's torque constant is estimated with it); repeatable."),
     max_relative_se: float = typer.Option(MAX_RELATIVE_SE, "--max-relative-se", min=0.0, help="A parameter whose standard error exceeds this fraction of its magnitude is not identifiable from the log and is held at the start (the largest first, then the fit is repeated)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if chewbot wrote them."),
 ) -> None:
-    """Estimate the friction and the mandible's inertia from a robot log (crank angles and measured torques).
+    """Estimate the friction, the crank inertias and the mandible's inertia from a robot log (crank angles and measured torques).
 
-    Recovers the mandible's motion from the crank angles, fits the HKP and actuator friction and the inertia that the
-    torques identify by bounded nonlinear least squares (the HKP normal forces of every sample eliminated), prints
-    the estimates with standard errors, the condition number and what the log cannot identify, and writes the model
-    with the estimates in place (listed under `identified`) and the table beside it.
+    Recovers the mandible's motion from the crank angles, fits the HKP and actuator friction, each crank's total
+    axial inertia and the mandible's inertia that the torques identify by bounded nonlinear least squares (the HKP
+    normal forces of every sample eliminated; the mandible's mass is the model file's, the weighed one, unless
+    --free), prints the identified combinations with standard errors, the condition number and what the log cannot
+    identify, and writes the model with the estimates in place (listed under `identified`), their covariance and the
+    torque error the model leaves in its [uncertainty] section, and the table beside it.
 
     Examples:
 
       chewbot identify robot_log.csv --model target --out identified.toml && chewbot check-model identified.toml
 
-      chewbot identify log.csv --model my_robot.toml --out my_robot_identified.toml --fix mandible.mass_g
+      chewbot identify runs/excited/results.csv --model target --out calibrated.toml   (a simulated excitation: chewbot excite, then chewbot simulate --task)
+
+      chewbot identify log.csv --model my_robot.toml --out my_robot_identified.toml --fix cranks.inertia_g_mm2 --free mandible.mass_g
     """
     from chewbot.commands.common import check_interrupted, console, errors_reported, progress, stdout
     from chewbot.identification.identifier import STEPS, identify as run_identify
@@ -59,15 +64,17 @@ def identify(
         data = read_log(log)
         with progress(False, "identify", total=STEPS) as step:
             result = run_identify(m, data, side=side, window_s=window, fix=tuple(fix), max_relative_se=max_relative_se,
-                                  progress=step, check=check_interrupted)
+                                  progress=step, check=check_interrupted, free=tuple(free))
         args = [str(log), "--model", model, "--out", str(out), "--side", side, "--window", f"{window:g}",
-                *[a for key in fix for a in ("--fix", key)], "--max-relative-se", f"{max_relative_se:g}"]
+                *[a for key in fix for a in ("--fix", key)], *[a for key in free for a in ("--free", key)],
+                "--max-relative-se", f"{max_relative_se:g}"]
         about = f"chewbot identify {shlex.join(args)}"
         summary = result.summary()
         comments = {key: f"identified: {_with_se(result, key)}" for key in result.identified}
         header = [marker_line("#", f"the model {m.source} with the values estimated by {about}"),
                   *[f"# {line}" for line in summary]]
-        text = model_text(Path(m.source).read_text("utf-8"), result.values(), result.identified, header, comments)
+        text = model_text(Path(m.source).read_text("utf-8"), result.values(), result.identified, header, comments,
+                          result.uncertainty())
         with atomic_files([out, table], force, inputs, about={table: {"about": f"estimates of {about}", "summary": summary}}) as (tmp_model, tmp_table):
             tmp_model.write_text(text, encoding="utf-8")
             tmp_table.write_text(table_text(result.rows()), encoding="utf-8")

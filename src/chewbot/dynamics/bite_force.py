@@ -20,12 +20,26 @@ N >= 0 (unilateral: the bounded least squares, the best over the faces of the bo
 :mod:`chewbot.dynamics.distribution` solves its bounds). Every step runs on all samples at once (one compiled
 kernel call over the samples: no loop per sample); the derivatives are CasADi's exact ones.
 
-**Uncertainty.** Linearised at the answer, u has the covariance sigma^2 (G'G)^-1, G = dr/du (6 x 5, N m per N,
-i.e. m), where sigma is the torques' error (N m, the same on each actuator). sigma is pooled from the residuals
-of all samples: sigma^2 = sum_k |r_k|^2 / sum_k (6 - m_k), m_k the unknowns free at sample k (5, fewer where a
-unilateral bound holds). The standard errors are the square roots of the diagonal. The residual |r_k| (N m)
-measures what the model does not explain at sample k: noise, rate errors, model errors. A sample where G's
-condition number exceeds :data:`MAX_CONDITION` is named in the warnings: its forces are poorly determined.
+**Uncertainty.** Linearised at the answer, u moves by du = H^-1 G' dtau for a change dtau of the measured torques
+(H = d(G'r)/du, the exact derivative of the optimality condition, G = dr/du: 6 x 5, N m per N), and by
+du = -H^-1 d(G'r)/dp dp for a change dp of the model's numbers (the implicit function theorem, CasADi's exact
+derivatives: :func:`sensitivity_kernel`). Three sources of error go through it (:func:`covariance`):
+
+* the torque error: its covariance Sigma_tau (N^2 m^2), the model's ``uncertainty.torque_cov`` (the calibration's
+  residuals: the sensors' noise and what the model misses) plus s^2 1, s^2 what the log's own residuals have in
+  excess of it, pooled over the samples (each sample's residual has 6 - m_k degrees of freedom, m_k the unknowns
+  free there: 5, fewer where a unilateral bound holds): a log noisier than the calibration's, or a model that fits
+  this motion worse, widens the interval. Without a calibration s is the pooled torque error itself; a given
+  ``sigma`` replaces both (Sigma_tau = sigma^2 1);
+* the rates' error, where they were smoothed: each coordinate's rate and acceleration moved by their standard
+  deviation (:class:`chewbot.task.smoothing.LocalFits`) both ways, the residual's change through the whole
+  nonlinear model (a crank turning slower than its rate's error has a Coulomb friction of unknown direction: the
+  change is then the whole friction, not its slope);
+* the model's numbers: the covariance of the keys of its ``[uncertainty]`` (:class:`chewbot.model.Uncertainty`).
+
+The standard errors are the square roots of the diagonal of the sum; the 95 % interval is u +- 1.96 of them. The
+residual abs(r_k) (N m) measures what the model does not explain at sample k. A sample where G's condition number
+exceeds :data:`MAX_CONDITION` is named in the warnings: its forces are poorly determined.
 """
 
 from __future__ import annotations
@@ -92,16 +106,43 @@ def residual_kernel(mechanism: str) -> KernelSpec:
     return KernelSpec(name, build, (mechanism,), mechanism)
 
 
+def sensitivity_kernel(mechanism: str) -> KernelSpec:
+    """Per-sample kernel (theta, q, dq, ddq, B, u, tau_m, friction, p, dp) -> H = d(G'r)/du (5 x 5, m^2) and g_p =
+    d(G'r)/dp . dp (5, N m^2 per unit of dp): the derivatives of the estimate's optimality condition G'r = 0
+    (G = dr/du) on the smoothed model (signs 0) with respect to the unknowns and along a change ``dp`` of the
+    model's numbers (forward mode). du/dp . dp = -H^-1 g_p."""
+    name = f"bite_force_sensitivity_{c_name(mechanism)}"
+
+    def build(params):
+        residual = residual_kernel(mechanism).graph(params)
+        ins = [ca.SX.sym(residual.name_in(i), residual.sparsity_in(i)) for i in range(residual.n_in())]
+        named = dict(zip(residual.name_in(), ins))
+        r, G = residual(*[ca.DM.zeros(2) if k == "signs" else v for k, v in named.items()])
+        g = ca.mtimes(G.T, r)
+        p = named["p"]
+        dp = ca.SX.sym("dp", p.numel())
+        inputs = [v for k, v in named.items() if k != "signs"]
+        return ca.Function(name, [*inputs, dp], [ca.jacobian(g, named["u"]), ca.jtimes(g, p, dp)],
+                           [k for k in named if k != "signs"] + ["dp"], ["H", "g_p"], {"cse": True})
+
+    return KernelSpec(name, build, (mechanism,), mechanism)
+
+
+# The 95 % interval: the estimate +- this many standard errors (the normal distribution's 97.5 % quantile).
+Z95 = 1.959963984540054
+
+
 @dataclass(frozen=True, eq=False)
 class ForceEstimate:
     """The estimate along the samples (arrays samples first, SI).
 
     ``t`` (n,) s; ``F_B`` (n, 3) N, the food's force on the mandible at the molar in {S}; ``N`` (n, 2) N, the normal
     forces N_L, N_R of the planes on the condyles (> 0: pushing); ``se`` (n, 5) N, the standard errors of
-    (Fx, Fy, Fz, N_L, N_R); ``residual`` (n,) N m, abs(r) at the answer; ``sigma`` N m, the pooled torque error
-    (module docstring) and ``dof`` its degrees of freedom; ``condition`` (n,) the condition number of G;
-    ``ill_conditioned`` the samples above :data:`MAX_CONDITION`; ``warnings`` what a person should read;
-    ``info`` how it was solved (for a record)."""
+    (Fx, Fy, Fz, N_L, N_R), all sources together; ``residual`` (n,) N m, abs(r) at the answer; ``sigma`` N m, the
+    pooled torque error the log has beyond the sources (module docstring) and ``dof`` its degrees of freedom;
+    ``condition`` (n,) the condition number of G; ``ill_conditioned`` the samples above :data:`MAX_CONDITION`;
+    ``warnings`` what a person should read; ``info`` how it was solved (for a record); ``se_parts``: the standard
+    errors (n, 5) of each source alone (``torque``, ``rates``, ``parameters``)."""
 
     t: np.ndarray
     F_B: np.ndarray
@@ -114,6 +155,7 @@ class ForceEstimate:
     ill_conditioned: np.ndarray
     warnings: list[str] = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    se_parts: dict = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -124,36 +166,119 @@ class ForceEstimate:
         """(n, 5): Fx, Fy, Fz, N_L, N_R."""
         return np.hstack([self.F_B, self.N])
 
+    def interval(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 95 % intervals of (Fx, Fy, Fz, N_L, N_R): low and high, (n, 5) N each."""
+        return self.u - Z95 * self.se, self.u + Z95 * self.se
+
     def table(self) -> Table:
-        """FORCE.csv's columns: t, Fx, Fy, Fz, N_L, N_R, their standard errors sFx .. sN_R, the residual."""
+        """FORCE.csv's columns: t, Fx, Fy, Fz, N_L, N_R, their standard errors sFx .. sN_R, their 95 % intervals
+        Fx_low95, Fx_high95 .. N_R_high95, the residual."""
         table = Table()
         table.add("t", self.t, "s", "time of the log's sample")
         table.add_block(UNKNOWNS[:3], self.F_B, "N", "estimated force of the food on the mandible at the molar, {S}")
         table.add_block(UNKNOWNS[3:], self.N, "N", "estimated normal force of the plane on the condyle (> 0: pushes)")
-        table.add_block([f"s{u}" for u in UNKNOWNS], self.se, "N", "standard error, sigma^2 (G'G)^-1 with the pooled sigma")
+        table.add_block([f"s{u}" for u in UNKNOWNS], self.se, "N",
+                        "standard error: torque error, rates' error and the model's uncertainty (docs/bite_force.md)")
+        low, high = self.interval()
+        for j, name in enumerate(UNKNOWNS):
+            table.add(f"{name}_low95", low[:, j], "N", f"95 % interval of {name}: estimate - 1.96 standard errors")
+            table.add(f"{name}_high95", high[:, j], "N", f"95 % interval of {name}: estimate + 1.96 standard errors")
         table.add("residual", self.residual, "N*m", "abs(tau_model - tau_measured) at the estimate")
         return table
 
 
 def estimate(model: Model, kin: Kinematics, tau: np.ndarray, *, side: str | None = None, contact: str = "bilateral",
-             friction: bool = True, sigma: float | None = None) -> ForceEstimate:
+             friction: bool = True, sigma: float | None = None, rate_sd: np.ndarray | None = None,
+             acceleration_sd: np.ndarray | None = None) -> ForceEstimate:
     """The bite force F_B and the normal forces N along the motion ``kin`` of ``model`` from the measured torques
     ``tau`` (n, 6) N m (module docstring). ``side``: the molar where the food is (default: ``kin.side``);
     ``contact``: ``bilateral`` (N of either sign) or ``unilateral`` (N >= 0); ``friction``: the model's friction
     in the equations (off: the frictionless model); ``sigma``: the torques' standard deviation (N m) if known, else
-    pooled from the residuals."""
+    pooled from the residuals; ``rate_sd``, ``acceleration_sd`` (n, dof): the standard deviations of the motion's
+    rates in Euler angles where they were estimated (None: exact). The model's ``uncertainty`` is used where it
+    has one."""
     q, dq, ddq = kin.euler_angle_state()
     return estimate_states(model, kin.t, kin.theta, q, dq, ddq, tau, side=side or kin.side, contact=contact,
-                           friction=friction, sigma=sigma)
+                           friction=friction, sigma=sigma, rate_sd=rate_sd, acceleration_sd=acceleration_sd)
 
 
 def estimate_states(model: Model, t, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
-                    friction: bool = True, sigma: float | None = None) -> ForceEstimate:
+                    friction: bool = True, sigma: float | None = None, rate_sd: np.ndarray | None = None,
+                    acceleration_sd: np.ndarray | None = None) -> ForceEstimate:
     """:func:`estimate` on the states themselves: times ``t`` (n,), crank angles ``theta`` (n, 6), the independent
     coordinates in Euler angles ``q`` (n, 4) and their rates ``dq``, ``ddq``, torques ``tau`` (n, 6)."""
-    u, free, (r, G) = solve_states(model, theta, q, dq, ddq, tau, side=side, contact=contact, friction=friction)
-    return summarise(t, u, r, G, free, sigma, info={"contact": contact, "friction": bool(friction), "side": side,
-                                                     "equations": "newton-euler"})
+    fn = native(residual_kernel(model.mechanism))
+    u, free, (r, G) = solve_states(model, theta, q, dq, ddq, tau, side=side, contact=contact, friction=friction, kernel=fn)
+    B, p, fl = model.molar(side), model.vector(), 1.0 if friction else 0.0
+
+    def residual(dq_, ddq_):
+        return evaluate(fn, theta, q, dq_, ddq_, B, u, tau, np.zeros(2), fl, p)[0]
+
+    sens = native(sensitivity_kernel(model.mechanism))
+    H = evaluate(sens, theta, q, dq, ddq, B, u, tau, fl, p, np.zeros_like(p))[0].reshape(-1, 5, 5)
+    parts = covariance(model, H, G, r, free, residual, dq, ddq, rate_sd, acceleration_sd, sigma,
+                       lambda dp: evaluate(sens, theta, q, dq, ddq, B, u, tau, fl, p, dp)[1])
+    return summarise(t, u, r, G, free, parts, info={"contact": contact, "friction": bool(friction), "side": side,
+                                                    "equations": "newton-euler"})
+
+
+def covariance(model: Model, H, G, r, free, residual, dq, ddq, rate_sd, acceleration_sd, sigma, along) -> dict:
+    """The covariances (n, 5, 5) of u from each source (module docstring): ``torque``, ``rates``, ``parameters``, and
+    ``sigma`` (the torque error the log has beyond them, N m) with its degrees of freedom ``dof``.
+
+    ``H`` (n, 5, 5), ``G`` (n, 6, 5), ``r`` (n, 6) at the answer, ``free`` (n, 5) its free unknowns; ``residual(dq,
+    ddq)`` the residual at the answer with other rates; ``along(dp)`` -> g_p of :func:`sensitivity_kernel`."""
+    n = r.shape[0]
+    A = np.zeros((n, 5, 6))  # du = A dtau, on the free unknowns
+    P = np.zeros((n, 6, 6))  # the projector onto the free columns of G
+    for pattern in np.unique(free, axis=0):
+        rows = np.all(free == pattern, axis=1)
+        Hf = H[rows][:, pattern][:, :, pattern]
+        Gf = G[rows][:, :, pattern]
+        A[np.ix_(rows, pattern, np.arange(6))] = np.linalg.solve(Hf, np.swapaxes(Gf, 1, 2))
+        P[rows] = Gf @ np.linalg.pinv(Gf)
+    Q = np.eye(6) - P
+    # the rates: each coordinate's rate and acceleration moved by its standard deviation, both ways
+    C_r = np.zeros((n, 6, 6))
+    for sd, which in ((rate_sd, 0), (acceleration_sd, 1)):
+        if sd is None:
+            continue
+        for j in range(sd.shape[1]):
+            step = np.zeros_like(dq)
+            step[:, j] = sd[:, j]
+            up = residual(dq + step, ddq) if which == 0 else residual(dq, ddq + step)
+            down = residual(dq - step, ddq) if which == 0 else residual(dq, ddq - step)
+            d = (up - down) / 2
+            C_r += d[:, :, None] * d[:, None, :]
+    # the model's numbers
+    C_p = np.zeros((n, 5, 5))
+    unc = model.uncertainty
+    if unc is not None:
+        D = unc.directions(model.vector().size)
+        du = []
+        for j in range(D.shape[1]):
+            g_p = along(D[:, j])
+            step = np.zeros((n, 5))
+            for pattern in np.unique(free, axis=0):
+                rows = np.all(free == pattern, axis=1)
+                step[np.ix_(rows, pattern)] = -np.linalg.solve(H[rows][:, pattern][:, :, pattern],
+                                                               g_p[rows][:, pattern][..., None])[..., 0]
+            du.append(step)
+        du = np.stack(du, axis=2)  # (n, 5, k)
+        C_p = du @ unc.cov @ np.swapaxes(du, 1, 2)
+    base = np.zeros((6, 6)) if unc is None or unc.torque_cov is None else unc.torque_cov
+    dof = int(np.sum(6 - free.sum(axis=1)))
+    excess = np.einsum("ij,ij->i", r, r) - np.einsum("nij,ji->n", Q, base)
+    if sigma is not None:
+        s, base = float(sigma), np.zeros((6, 6))
+    else:
+        s = float(np.sqrt(max(excess.sum(), 0.0) / dof)) if dof > 0 else float("nan")
+    torque = base + (s if np.isfinite(s) else 0.0) ** 2 * np.eye(6)
+    At = np.swapaxes(A, 1, 2)
+    return {"torque": A @ torque @ At, "rates": A @ C_r @ At, "parameters": C_p, "sigma": s, "dof": dof,
+            "sigma_source": "given" if sigma is not None else
+            ("the model's torque error and the log's excess" if unc is not None and unc.torque_cov is not None
+             else "pooled residuals")}
 
 
 def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", contact: str = "bilateral",
@@ -245,19 +370,20 @@ def _lstsq(G: np.ndarray, b: np.ndarray, free: np.ndarray) -> np.ndarray:
     return x
 
 
-def summarise(t, u, r, G, free, sigma: float | None = None, info: dict | None = None) -> ForceEstimate:
-    """A :class:`ForceEstimate` of the answer u (n, 5) with its residuals r (n, 6) and G (n, 6, 5): the pooled sigma,
-    standard errors, condition numbers and warnings (module docstring)."""
+def summarise(t, u, r, G, free, parts: dict, info: dict | None = None) -> ForceEstimate:
+    """A :class:`ForceEstimate` of the answer u (n, 5) with its residuals r (n, 6), G (n, 6, 5) and the covariances of
+    :func:`covariance` (``parts``): standard errors, condition numbers and warnings (module docstring)."""
     n = u.shape[0]
-    dof = int(np.sum(6 - free.sum(axis=1)))
     res2 = np.einsum("ij,ij->i", r, r)
-    pooled = float(np.sqrt(res2.sum() / dof)) if dof > 0 else float("nan")
-    s = pooled if sigma is None else float(sigma)
     sv = np.linalg.svd(G, compute_uv=False) if n else np.zeros((0, 5))
     with np.errstate(divide="ignore", invalid="ignore"):
         condition = sv[:, 0] / sv[:, -1]
-        cov = np.linalg.pinv(np.einsum("nki,nkj->nij", G, G)) if n else np.zeros((0, 5, 5))
-    se = s * np.sqrt(np.clip(np.einsum("nii->ni", cov), 0.0, None))
+
+    def se(cov):
+        return np.sqrt(np.clip(np.einsum("nii->ni", cov), 0.0, None))
+
+    sources = ("torque", "rates", "parameters")
+    total = sum(parts[k] for k in sources)
     bad = np.flatnonzero(~(condition <= MAX_CONDITION))
     warnings = []
     if bad.size:
@@ -265,7 +391,9 @@ def summarise(t, u, r, G, free, sigma: float | None = None, info: dict | None = 
         warnings.append(f"{bad.size} sample(s) ill-conditioned (condition number of dtau/du above {MAX_CONDITION:g}): "
                         f"{listed}{' ...' if bad.size > 10 else ''}; their forces are poorly determined")
     info = dict(info or {})
-    info.update({"sigma_Nm": s, "sigma_source": "pooled residuals" if sigma is None else "given", "dof": dof,
-                 "pattern_steps": PATTERN_STEPS, "polish_steps": POLISH_STEPS, "max_condition": MAX_CONDITION})
-    return ForceEstimate(np.asarray(t, float), u[:, :3].copy(), u[:, 3:].copy(), se, np.sqrt(res2), s, dof, condition, bad,
-                         warnings, info)
+    info.update({"sigma_Nm": parts["sigma"], "sigma_source": parts["sigma_source"], "dof": parts["dof"],
+                 "pattern_steps": PATTERN_STEPS, "polish_steps": POLISH_STEPS, "max_condition": MAX_CONDITION,
+                 "standard_error_rms_N": {k: dict(zip(UNKNOWNS, np.sqrt(np.mean(se(parts[k]) ** 2, axis=0)).tolist()))
+                                          for k in sources} if n else {}})
+    return ForceEstimate(np.asarray(t, float), u[:, :3].copy(), u[:, 3:].copy(), se(total), np.sqrt(res2), parts["sigma"],
+                         parts["dof"], condition, bad, warnings, info, {k: se(parts[k]) for k in sources})

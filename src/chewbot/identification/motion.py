@@ -44,13 +44,21 @@ MAX_ANGLE_RESIDUAL = 1e-2
 @dataclass(frozen=True, eq=False)
 class LogMotion:
     """The motion recovered from a log: ``kin`` (:class:`Kinematics`, Euler angles), the RMS residual of the angle
-    fit per sample (rad), and how the rates were obtained (``rates``: ``"smoothed"`` or ``"logged"`` per order)."""
+    fit per sample (rad), and how the rates were obtained (``rates``: ``"smoothed"`` or ``"logged"`` per order).
+    ``tau`` (n, 6) N m: the torques that go with the motion (the log's; with ``held``, their average that matches
+    the smoothed accelerations); ``rate_sd``, ``acceleration_sd`` (n, dof): the standard deviations of the
+    coordinates' smoothed rates (:class:`chewbot.task.smoothing.LocalFits`; 0 where logged); ``cuts``: the samples
+    the smoothing does not reach across."""
 
     kin: Kinematics
     angle_residual: np.ndarray
     rates: dict
     window_samples: int
     speed_noise: float  # rad/s: standard deviation of the crank rates' error (0 where the log gives the rates)
+    tau: np.ndarray | None = None
+    rate_sd: np.ndarray | None = None
+    acceleration_sd: np.ndarray | None = None
+    cuts: tuple[int, ...] = ()
 
     @property
     def min_speed(self) -> float:
@@ -127,8 +135,12 @@ def _lstsq(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     return np.linalg.solve(R, np.einsum("nki,nk->ni", Q, r)[..., None])[..., 0]
 
 
-def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S) -> LogMotion:
-    """The mandible's motion along a log (see the module docstring), as :class:`LogMotion`."""
+def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float = smoothing.WINDOW_S,
+               cuts: tuple[int, ...] = (), held: bool = False) -> LogMotion:
+    """The mandible's motion along a log (see the module docstring), as :class:`LogMotion`. ``cuts``: samples the
+    rates' smoothing does not reach across (events: the force jumps there); ``held``: the log's torques are held
+    between samples (a digital controller's), and are averaged to match the smoothed accelerations
+    (:func:`chewbot.task.smoothing.held_weights`)."""
     q, res = fit_poses(model, log.theta, lambda i: f"{log.source}: {log.where(i)}")
     coords = TARGET_COORDS if model.has_hkp else FULL_COORDS
     needs_filter = log.dtheta is None or log.ddtheta is None
@@ -146,14 +158,20 @@ def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float 
     zeros = np.zeros_like(q)
     out = dict(zip(KINEMATICS_OUTPUTS, evaluate(fn, q, zeros, zeros, p)))
     J = out["J_theta1_angles"]
+    tau, rate_sd, acc_sd = log.tau, zeros, zeros
     if log.dtheta is None:
-        dq, ddq = smoothing.derivatives(log.t, q, window_s)
+        fits = smoothing.local_fits(log.t, q, window_s, cuts, log.tau if held else None)
+        dq, ddq, rate_sd, acc_sd = fits.rate, fits.acceleration, fits.rate_sd, fits.acceleration_sd
     else:
         dq = _lstsq(J, log.dtheta)
-        ddq = smoothing.derivatives(log.t, dq, window_s)[0] if log.ddtheta is None else None
+        if log.ddtheta is None:
+            fits = smoothing.local_fits(log.t, dq, window_s, cuts, log.tau if held else None)
+            ddq, acc_sd = fits.rate, fits.rate_sd
     if log.ddtheta is not None:
         bias = dict(zip(KINEMATICS_OUTPUTS, evaluate(fn, q, dq, zeros, p)))["ddtheta"]  # theta_ddot at q_ddot = 0
         ddq = _lstsq(J, log.ddtheta - bias)
+    elif held:
+        tau = fits.held
     task = Task(name=log.source, t=log.t, coords=coords, q=q, dq=dq, ddq=ddq, force=log.force, side=side,
                 source=log.source, lines=log.lines)
     try:
@@ -170,4 +188,5 @@ def log_motion(model: Model, log: RobotLog, side: str = "left", window_s: float 
         sigma = np.sqrt(np.mean(res**2) * 6 / dof) if dof else 0.0
         gain = np.linalg.norm(savgol_coeffs(window, smoothing.POLYORDER, deriv=1, delta=smoothing.uniform_step(log.t)))
         speed_noise = float(sigma * gain)
-    return LogMotion(kin, np.sqrt(np.mean(res**2, axis=1)), rates, window, speed_noise)
+    return LogMotion(kin, np.sqrt(np.mean(res**2, axis=1)), rates, window, speed_noise, tau, rate_sd, acc_sd,
+                     tuple(cuts) if needs_filter else ())

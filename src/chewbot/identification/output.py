@@ -28,15 +28,18 @@ def _format(value: float) -> float:
 
 
 def model_text(source_text: str, values: dict[str, object], identified: list[str], header: list[str],
-               comments: dict[str, str]) -> str:
+               comments: dict[str, str], uncertainty: dict[str, object] | None = None) -> str:
     """The start model's TOML text with ``values`` (file key -> number or nested list) in place, their keys in
-    ``identified`` and out of ``assumed``, ``comments`` (file key -> text) beside them and ``header`` lines on top
-    (the marker line first)."""
+    ``identified`` and out of ``assumed``, ``comments`` (file key -> text) beside them, ``header`` lines on top
+    (the marker line first) and ``uncertainty`` as its ``[uncertainty]`` section (the start file's replaced;
+    none where it is empty)."""
     doc = tomlkit.parse(without_marker(source_text))
     for key, value in values.items():
         section, leaf = key.split(".")
-        item = tomlkit.item([[_format(v) for v in row] for row in value] if isinstance(value, list) else _format(value))
-        if isinstance(value, list):
+        nested = isinstance(value, list) and isinstance(value[0], list)
+        item = tomlkit.item([[_format(v) for v in row] for row in value] if nested else
+                            [_format(v) for v in value] if isinstance(value, list) else _format(value))
+        if nested:
             item.multiline(True)
         doc[section][leaf] = item
         if key in comments and not isinstance(value, list):
@@ -55,7 +58,37 @@ def model_text(source_text: str, values: dict[str, object], identified: list[str
         doc["identified"] = array
     else:
         _insert_after(doc, "assumed" if "assumed" in doc else "gravity_m_per_s2", "identified", array)
+    if "uncertainty" in doc:
+        del doc["uncertainty"]
+    if uncertainty:
+        doc.add(tomlkit.nl())
+        doc.add("uncertainty", _uncertainty_table(uncertainty))
     return "".join(line + "\n" for line in header) + tomlkit.dumps(doc)
+
+
+def _uncertainty_table(uncertainty: dict[str, object]):
+    """The ``[uncertainty]`` table: arrays of numbers to 10 digits, matrices one row a line."""
+    table = tomlkit.table()
+    table.comment("written by chewbot identify: how well the values above are known (docs/models.md)")
+    notes = {"keys": "the estimated keys, as --set names them",
+             "standard_error": "one per key, in the key's unit",
+             "correlation": "of the keys' estimates (1)",
+             "torque_error_Nm": "the torque error the model leaves, per actuator (N*m): sensors' noise and what it misses",
+             "torque_error_correlation": "of that torque error between the actuators (1)"}
+    for key, value in uncertainty.items():
+        if value and isinstance(value[0], list):
+            item = tomlkit.array()
+            for row in value:
+                item.append([_format(v) for v in row])
+            item.multiline(True)
+        else:
+            item = tomlkit.array()
+            item.extend([v if isinstance(v, str) else _format(v) for v in value])
+            if key == "keys":
+                item.multiline(True)
+        table.add(tomlkit.comment(notes[key]))
+        table.add(key, item)
+    return table
 
 
 def _insert_after(doc, after: str, key: str, value) -> None:

@@ -33,7 +33,7 @@ from chewbot.model.symbolic import SymbolicModel, c_name
 ORIENTATION = "euler-angles"
 
 
-def _with_x(p: ca.SX, x: ca.SX) -> ca.SX:
+def with_x(p: ca.SX, x: ca.SX) -> ca.SX:
     """The symbol p with the entries that x sets replaced by their expressions of x."""
     entries = p_entries()
     return ca.vertcat(*[entries[k](x) if k in entries else p[k] for k in range(N_P)])
@@ -67,7 +67,7 @@ def jacobian_kernel(mechanism: str) -> KernelSpec:
     def build(params):  # its own p, with x in place of the identified entries
         coefficients = coefficients_kernel(mechanism, ORIENTATION).graph()
         p, x = ca.SX.sym("p", N_P), ca.SX.sym("x", N_X)
-        m = SymbolicModel(mechanism, _with_x(p, x))
+        m = SymbolicModel(mechanism, with_x(p, x))
         nN = n_unknowns(mechanism)
         ins = [ca.SX.sym(coefficients.name_in(i), coefficients.sparsity_in(i)) for i in range(6)]
         N, tau_m = ca.SX.sym("N", nN), ca.SX.sym("tau_measured", 6)

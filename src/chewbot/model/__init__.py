@@ -2,6 +2,6 @@
 mirror (:mod:`chewbot.model.vector`), the parameter files (:mod:`chewbot.model.params`), and the drive train's law
 (:mod:`chewbot.model.drive`)."""
 
-from chewbot.model.model import Contact, Drive, Friction, HKPGeometry, Limits, MechanismMixin, Model
+from chewbot.model.model import Contact, Drive, Friction, HKPGeometry, Limits, MechanismMixin, Model, Uncertainty
 
-__all__ = ["Contact", "Drive", "Friction", "HKPGeometry", "Limits", "MechanismMixin", "Model"]
+__all__ = ["Contact", "Drive", "Friction", "HKPGeometry", "Limits", "MechanismMixin", "Model", "Uncertainty"]

@@ -21,6 +21,7 @@ TOML file). Arrays are read-only; a model is hashable by identity and safe to sh
 | ``hkp`` | | | the HKP planes, sockets and condyle centres (:class:`HKPGeometry`) |
 | ``friction``, ``limits``, ``contact`` | | | :class:`Friction`, :class:`Limits`, :class:`Contact` |
 | ``drive`` | | | :class:`Drive` (each crank's motor and gearhead), or None: no drive (the torques act on the cranks) |
+| ``uncertainty`` | | | the covariance of identified values and of the torque error (:class:`Uncertainty`), or None |
 
 :meth:`Model.vector` gives the numbers the CasADi graphs take as their input ``p``, in the fixed layout of
 :mod:`chewbot.model.vector`. The model holds nothing else: what is built from it (graphs, compiled kernels) is kept in
@@ -128,6 +129,30 @@ class Drive:
         return self.rotor_inertia * self.gear_ratio**2
 
 
+@dataclass(frozen=True, eq=False)
+class Uncertainty:
+    """How well a calibrated model is known (the file's ``[uncertainty]``, written by ``chewbot identify``).
+
+    ``keys``: parameter-file keys (1-based entries, e.g. ``cranks.inertia_g_mm2[3]``); ``entries``: the entries of
+    p each one sets (two for an off-diagonal entry of the mandible's inertia); ``cov`` (k, k): their covariance in
+    SI (the units of p); ``torque_cov`` (6, 6) N^2 m^2: the covariance of the torque error the model leaves (the
+    torque sensors' noise and what the model does not explain, from the identification's residuals), or None."""
+
+    keys: tuple[str, ...]
+    entries: tuple[tuple[int, ...], ...]
+    cov: np.ndarray
+    torque_cov: np.ndarray | None = None
+
+    def __post_init__(self):
+        _freeze(self)
+
+    def directions(self, n_p: int) -> np.ndarray:
+        """(n_p, k): the change of p per unit (SI) change of each key."""
+        D = np.zeros((n_p, len(self.keys)))
+        for j, entries in enumerate(self.entries):
+            D[list(entries), j] = 1.0
+        return D
+
 
 class MechanismMixin:
     """What follows from the mechanism's name, shared by :class:`Model` and its symbolic counterpart
@@ -195,6 +220,7 @@ class Model(MechanismMixin):
     overrides: dict = field(default_factory=dict)  # the --set values applied to the file, as given
     identified: tuple[str, ...] = ()  # keys estimated from robot logs (the file's `identified`)
     drive: Drive | None = None  # the file's [drive]; None: no drive train
+    uncertainty: Uncertainty | None = None  # the file's [uncertainty]: how well the identified values are known
     p: np.ndarray = field(init=False, repr=False)  # the parameter vector, derived from the fields above
 
     def __post_init__(self):

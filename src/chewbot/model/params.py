@@ -24,7 +24,7 @@ from pydantic import AfterValidator, BaseModel, Field, field_validator
 
 from chewbot.config import Plausible, Strict, key_error, read_text, unknown_key, validate
 from chewbot.errors import ParameterError
-from chewbot.model.model import Contact, Drive, Friction, HKPGeometry, Limits, Model
+from chewbot.model.model import Contact, Drive, Friction, HKPGeometry, Limits, Model, Uncertainty
 from chewbot.units import factor
 
 BUILTIN_MODELS = ("target", "6rss", "target-as-printed", "6rss-as-printed")
@@ -40,6 +40,7 @@ ROTATION_TOLERANCE = 2e-3
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 Six3 = Annotated[list[Vec3], Field(min_length=6, max_length=6)]
+Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 Range = Annotated[list[float], Field(min_length=2, max_length=2)]
 PositiveSix = Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=6, max_length=6)]  # one per chain
 
@@ -158,6 +159,19 @@ class DriveSection(Strict):
     encoder_counts_per_rev: Annotated[float, Field(gt=0), AfterValidator(_whole), Plausible(4.0, 1e7, "1", "incremental encoders' counts per revolution")]
 
 
+class UncertaintySection(Strict):
+    """How well the identified values are known (``chewbot identify`` writes it): ``keys``, parameter-file keys with
+    1-based entries; ``standard_error``, one per key in that key's unit; ``correlation``, their correlation matrix
+    (1); optionally the torque error the model leaves, ``torque_error_Nm`` (its standard deviation per actuator)
+    with ``torque_error_correlation`` (6 x 6, 1)."""
+
+    keys: list[str] = Field(min_length=1)
+    standard_error: list[Annotated[float, Field(ge=0)]]
+    correlation: list[list[float]]
+    torque_error_Nm: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=6, max_length=6)] | None = None
+    torque_error_correlation: Annotated[list[Six], Field(min_length=6, max_length=6)] | None = None
+
+
 class ParameterFile(Strict):
     """The whole TOML file, as written (papers' units)."""
 
@@ -180,6 +194,7 @@ class ParameterFile(Strict):
     limits: LimitsSection
     contact: ContactSection = ContactSection()
     drive: DriveSection | None = None
+    uncertainty: UncertaintySection | None = None
 
 
 def builtin_model_path(name: str) -> Path:
@@ -307,6 +322,7 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
     for key in sorted({k for k in f.identified if f.identified.count(k) > 1}):
         fail("identified", f"{key!r} is listed twice")
 
+    uncertainty = None if f.uncertainty is None else _uncertainty(f.uncertainty, fail)
     density = f.couplers.density_g_per_mm3 * factor("g/mm^3")
     area = f.couplers.area_mm2 * factor("mm^2")
     fr, lim = f.friction, f.limits
@@ -363,7 +379,64 @@ def model_from_dict(raw: dict, source: str = "<dict>", sha256: str = "", label: 
             torque_constant=f.drive.torque_constant_mNm_per_A * factor("mN*m/A"),
             encoder_counts=f.drive.encoder_counts_per_rev,
         ),
+        uncertainty=uncertainty,
     )
+
+
+# A correlation matrix as written (10 significant digits) is symmetric, has a unit diagonal and is positive
+# semidefinite to this tolerance.
+CORRELATION_TOLERANCE = 1e-8
+
+
+def _correlation(C: list[list[float]], k: int, key: str, fail) -> np.ndarray:
+    """A k x k correlation matrix, checked (symmetric, unit diagonal, entries in [-1, 1], positive semidefinite)."""
+    if len(C) != k or any(len(row) != k for row in C):
+        fail(key, f"must be {k} x {k} (one row and column per key), not {len(C)} rows of {[len(r) for r in C]}")
+    R = np.array(C, dtype=float)
+    if not np.isfinite(R).all():
+        fail(key, "must be finite numbers")
+    if np.abs(R - R.T).max() > CORRELATION_TOLERANCE:
+        fail(key, "not symmetric")
+    if np.abs(np.diag(R) - 1).max() > CORRELATION_TOLERANCE:
+        fail(key, "its diagonal must be 1 (a key's correlation with itself)")
+    if np.abs(R).max() > 1 + CORRELATION_TOLERANCE:
+        fail(key, "a correlation lies in [-1, 1]")
+    if np.linalg.eigvalsh((R + R.T) / 2).min() < -CORRELATION_TOLERANCE * k:
+        fail(key, "not positive semidefinite: no covariance has these correlations")
+    return (R + R.T) / 2
+
+
+def _uncertainty(u: UncertaintySection, fail) -> Uncertainty:
+    """The SI :class:`Uncertainty` of a file's [uncertainty] (errors name the key and entry)."""
+    from chewbot.model.vector import file_key_entries
+
+    k = len(u.keys)
+    if len(u.standard_error) != k:
+        fail("uncertainty.standard_error", f"has {len(u.standard_error)} entries for {k} keys: one per key")
+    entries, scales = [], []
+    for i, key in enumerate(u.keys):
+        try:
+            e, scale = file_key_entries(key)
+        except KeyError:
+            fail(f"uncertainty.keys[{i + 1}]", f"{key!r} is not a numeric key of the parameter file (write section.key, "
+                 "with 1-based [i] for array entries, e.g. cranks.inertia_g_mm2[3])")
+        if e in entries:
+            fail(f"uncertainty.keys[{i + 1}]", f"{key!r} is listed twice")
+        entries.append(e)
+        scales.append(scale)
+    if not all(math.isfinite(v) for v in u.standard_error):
+        fail("uncertainty.standard_error", "must be finite numbers")
+    R = _correlation(u.correlation, k, "uncertainty.correlation", fail)
+    se = np.array(u.standard_error) * np.array(scales)
+    torque = None
+    if (u.torque_error_Nm is None) != (u.torque_error_correlation is None):
+        fail("uncertainty.torque_error_Nm", "comes with uncertainty.torque_error_correlation: give both or neither")
+    if u.torque_error_Nm is not None:
+        sd = np.array(u.torque_error_Nm, dtype=float)
+        if not np.isfinite(sd).all():
+            fail("uncertainty.torque_error_Nm", "must be finite numbers")
+        torque = sd[:, None] * _correlation(u.torque_error_correlation, 6, "uncertainty.torque_error_correlation", fail) * sd
+    return Uncertainty(tuple(u.keys), tuple(entries), se[:, None] * R * se, torque)
 
 
 # ------------------------------------------------------------------------------------------ overrides

@@ -135,6 +135,26 @@ def parameter_index(key: str) -> int:
     return k
 
 
+# Blocks that hold a symmetric matrix: a file key of an off-diagonal entry sets both (as --set does).
+SYMMETRIC = ("mandible_inertia",)
+
+
+def file_key_entries(key: str) -> tuple[tuple[int, ...], float]:
+    """The entries of p that the parameter-file key ``key`` (1-based indices, e.g. ``"cranks.inertia_g_mm2[3]"``)
+    sets, and the factor from the file's unit to SI: one entry, or two for an off-diagonal entry of a symmetric
+    block (:data:`SYMMETRIC`). A ``KeyError`` names a key that is no file key of p."""
+    k = parameter_index(key)
+    block = next((b for b in BLOCKS if b.key is not None and START[b.name] <= k < START[b.name] + b.size), None)
+    if block is None or not re.sub(r"\s+", "", key).startswith(block.key):
+        raise KeyError(f"{key!r} is not a key of the parameter file that sets a number of the model")
+    entries = (k,)
+    if block.name in SYMMETRIC:
+        r, c = divmod(k - START[block.name], block.shape[1])
+        if r != c:
+            entries += (START[block.name] + c * block.shape[1] + r,)
+    return entries, block.scale
+
+
 def model_vector(model) -> np.ndarray:
     """p of ``model`` (read-only): every block of :data:`BLOCKS` in SI, in order."""
     p = np.empty(N_P)

@@ -100,15 +100,16 @@ def run_kernels(model: Model, options: RunOptions) -> list:
     return kernels
 
 
-def inputs(options: RunOptions) -> tuple[RunOptions, Model, Task]:
+def inputs(options: RunOptions, task: Task | None = None) -> tuple[RunOptions, Model, Task]:
     """The model and the task of a run, and its options complete (:func:`chewbot.run.options.complete`) with the side
-    in effect (as run.json records them)."""
+    in effect (as run.json records them). ``task``: a task built in memory instead of ``options.task``."""
     from chewbot.model.params import load_model, split_overrides
 
     model_overrides, task_overrides = split_overrides(options.overrides)
     model = load_model(options.model, model_overrides)
     options = complete(options, model.has_hkp)
-    task = load_task(options.task, model, options.side, task_overrides)
+    if task is None:
+        task = load_task(options.task, model, options.side, task_overrides)
     return replace(options, side=task.side), model, task
 
 
@@ -366,13 +367,14 @@ def _joined(parts: list, cls):
     return cls(**values)
 
 
-def compute(options: RunOptions, progress: Progress = SILENT, chunk: int | None = CHUNK_SAMPLES, check: Callable[[], None] | None = None) -> RunResult:
+def compute(options: RunOptions, progress: Progress = SILENT, chunk: int | None = CHUNK_SAMPLES,
+            check: Callable[[], None] | None = None, task: Task | None = None) -> RunResult:
     """Compute a run in memory (no files), ``chunk`` samples at a time (None: the task in one piece; the results
-    are the same)."""
+    are the same). ``task``: a task built in memory instead of ``options.task``."""
     from chewbot.kinematics.motion import Kinematics
 
     progress("task")
-    options, model, task = inputs(options)
+    options, model, task = inputs(options, task)
     totals = Totals(model, options)
     parts = []
     for part in chunks(model, task, options, chunk, progress, check):
