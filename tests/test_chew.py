@@ -119,9 +119,8 @@ def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     broken = q["broken"] > 0
     g = gap(MODEL, "left", sim.q[broken], sim.dq[broken])
     c = comminution_of(PEANUT)
-    si = c.si()
-    rows_bed = np.column_stack([q["h0_bed"][broken], np.full((broken.sum(), 4), [si["table_area_mm2"], si["bed_modulus_kPa"],
-                                                                               si["bed_compaction_strain"], si["bed_damping_s_per_m"]])])
+    beds = {b[0]: b for b in (r.bolus.bed(c) for r in two_cycles.records)}  # each bolus's bed by its height
+    rows_bed = [beds[h0] for h0 in q["h0_bed"][broken]]
     expected = [bed_normal_force(NUMPY, b, x, -v) for b, x, v in zip(rows_bed, g["gap"], g["rate"])]
     assert np.allclose(q["force"][broken], expected, rtol=1e-12, atol=1e-9)
     assert [r.strokes for r in two_cycles.records[1:]] == [1, 1]
