@@ -132,6 +132,21 @@ def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     assert all(ch.passed is not False for ch in two_cycles.checks if ch.severity == "failure")
 
 
+def test_the_bolus_tpa_softens_with_the_share_of_cycles(two_cycles):
+    """The bolus TPA (--tpa-at) on the robot's two-cycle sequence: the hardness falls from the intact kernel's (its
+    bulk law) to the bed's after one cycle and after two; each bed's hardness is its law's force at half its height
+    (the first bite's peak of a quasi-static law, 1e-9 relative: the TPA's sampled path passes through it)."""
+    from chewbot.simulation.chewing import bolus_tpa
+
+    tpa = bolus_tpa(two_cycles, [0, 50, 100])
+    hardness = [t["measures"]["hardness_N"] for t in tpa]
+    assert [t["cycle"] for t in tpa] == [0, 1, 2] and hardness[0] > hardness[1] > hardness[2] > 0, hardness
+    c = comminution_of(PEANUT)
+    for t in tpa[1:]:
+        b = two_cycles.records[t["cycle"]].bolus.bed(c)
+        assert t["measures"]["hardness_N"] == pytest.approx(bed_force(NUMPY, b, 0.5 * b[0]), rel=1e-9)
+
+
 def test_the_damped_bed_force():
     """Hunt-Crossley on the bed: the quasi-static law at rest, F (1 + 3/2 alpha rate) while closing, never pulling
     while opening fast; a thin bed squeezed to g = 0 pushes back with A E0 eps_c (e^(1/eps_c) - 1), finite."""

@@ -35,9 +35,13 @@ from a class to the same or smaller ones, and its breakage matrix's columns sum 
 **The particle bed** (:func:`bed`, :func:`bed_force`): the share of the bolus that lies on the table, V (1 - e^-C) / C
 (V its volume), forms a bed of loose height h0 = V (1 - e^-C) / (C A (1 - phi0)), phi0 its loose porosity. Closed to
 a gap g < h0 it is compacted by eps = 1 - g / h0 (laterally confined: the volumetric strain), and pushes back with
-F = A E0 eps_c (e^(eps / eps_c) - 1): a modulus E0 when first loaded, stiffening e-fold every eps_c of strain as
-the pores close, and finite when the teeth meet (eps = 1: a thin bed, squeezed out, bounded). Written once for NumPy
-and CasADi (:data:`chewbot.food.law.NUMPY`, :data:`~chewbot.food.law.CASADI`), with its exact inverse
+F = A E eps_c (e^(eps / eps_c) - 1): a modulus E when first loaded, stiffening e-fold every eps_c of strain as
+the pores close, and finite when the teeth meet (eps = 1: a thin bed, squeezed out, bounded). The bed softens as the
+bolus is comminuted: every fracture opens the food's cells to a depth delta (``paste_depth_mm``) under the new
+surface, whose contents and the saliva they take up make a paste, a share f of the bolus's mass
+(:func:`paste_fraction`, 1 - (1 - 2 delta / x)^3 of a particle of size x); the dry share 1 - f carries the load, so
+E = E0 (1 - f)^n, E0 ``bed_modulus_kPa`` the dry bed's of the first coarse fragments, n ``paste_exponent``. Written
+once for NumPy and CasADi (:data:`chewbot.food.law.NUMPY`, :data:`~chewbot.food.law.CASADI`), with its exact inverse
 (:func:`bed_gap`).
 
 **The ideal stroke** (:func:`ideal_stroke`): the teeth close on the bed until its force reaches ``closing_force`` or
@@ -71,7 +75,7 @@ _DRY_FLOOR = 1e-6  # the least dry share 1 - f of a bed (a bolus of fines alone 
 _TINY = 1e-300  # floors that keep logarithms and powers (and their derivatives) finite at zero
 
 # The particle bed as the plant's graphs take it (:func:`bed_force`): loose height h0 (m), table area A (m^2),
-# modulus E0 (Pa), compaction strain eps_c, Hunt-Crossley damping alpha (s/m; :func:`bed_normal_force`).
+# modulus E (Pa, softened: :func:`bed`), compaction strain eps_c, Hunt-Crossley damping alpha (s/m; :func:`bed_normal_force`).
 BED_PARAMETERS = ("h0", "area", "modulus", "compaction_strain", "damping")
 
 
