@@ -135,7 +135,8 @@ def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
 def test_the_bolus_tpa_softens_with_the_share_of_cycles(two_cycles):
     """The bolus TPA (--tpa-at) on the robot's two-cycle sequence: the hardness falls from the intact kernel's (its
     bulk law) to the bed's after one cycle and after two; each bed's hardness is its law's force at half its height
-    (the first bite's peak of a quasi-static law, 1e-9 relative: the TPA's sampled path passes through it)."""
+    (the first bite's peak of a quasi-static law), reached to 1e-6 from below: the TPA's peak is the largest force of
+    its sampled path, whose nearest sample to the turn falls short of it by about 3e-9 of the force here."""
     from chewbot.simulation.chewing import bolus_tpa
 
     tpa = bolus_tpa(two_cycles, [0, 50, 100])
@@ -144,7 +145,8 @@ def test_the_bolus_tpa_softens_with_the_share_of_cycles(two_cycles):
     c = comminution_of(PEANUT)
     for t in tpa[1:]:
         b = two_cycles.records[t["cycle"]].bolus.bed(c)
-        assert t["measures"]["hardness_N"] == pytest.approx(bed_force(NUMPY, b, 0.5 * b[0]), rel=1e-9)
+        peak = bed_force(NUMPY, b, 0.5 * b[0])
+        assert peak * (1 - 1e-6) <= t["measures"]["hardness_N"] <= peak * (1 + 1e-12)
 
 
 def test_the_damped_bed_force():
