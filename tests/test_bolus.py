@@ -22,8 +22,8 @@ from typer.testing import CliRunner
 
 from chewbot.cli import app
 from chewbot.commands.common import EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_INTERRUPTED, EXIT_OUTPUT, TEST_PAUSE_VARIABLE
-from chewbot.food.bolus import (CLASSES, SIEVE, Bolus, bed_force, bed_gap, bed_work, breakage, chew,
-                                comminution_of, fragments, ideal_stroke, selection, stroke)
+from chewbot.food.bolus import (CLASSES, SIEVE, Bolus, bed, bed_force, bed_gap, bed_work, breakage, chew,
+                                comminution_of, fragments, ideal_stroke, paste_fraction, selection, stroke)
 from chewbot.food.comminution import PARAMETERS, ComminutionTable
 from chewbot.food.comminution_fit import (Sieving, SievingError, fit_checks, fit_comminution, fitted_food_text,
                                           predicted_graph, read_sieving)
@@ -81,11 +81,12 @@ def test_a_stroke_conserves_the_mass():
 
 
 def test_a_stroke_moves_mass_only_to_smaller_sizes():
-    """Every cumulative fraction below a size grows or stays: the distribution only gets finer."""
+    """Every cumulative fraction below a size grows or stays: the distribution only gets finer (to the rounding of a
+    cumulative sum of the classes, about the number of classes times the unit roundoff of the total)."""
     rng = np.random.default_rng(5)
     mass = _random_bolus(rng)
     after, _, _ = stroke(NUMPY, PEANUT.si(), mass, 0.3e-3, 100.0)
-    assert np.all(np.cumsum(after) >= np.cumsum(mass) - 1e-18)
+    assert np.all(np.cumsum(after) >= np.cumsum(mass) - CLASSES.n * np.finfo(float).eps * mass.sum())
 
 
 def test_selection_follows_gap_size_and_crowding():
@@ -131,9 +132,11 @@ def test_the_laws_are_the_same_in_numpy_and_casadi():
     mass = _random_bolus(rng)
     m = ca.SX.sym("m", CLASSES.n)
     g, F = ca.SX.sym("g"), ca.SX.sym("F")
-    f = ca.Function("f", [m, g, F], [*stroke(CASADI, c, m, g, F), *ideal_stroke(CASADI, c, m, F, g)])
+    f = ca.Function("f", [m, g, F], [*stroke(CASADI, c, m, g, F), *ideal_stroke(CASADI, c, m, F, g), *bed(CASADI, c, m),
+                                     paste_fraction(CASADI, c, m)])
     for gap, force in ((0.1e-3, 100.0), (2e-3, 30.0), (0.0, 0.0)):
-        ours = [*stroke(NUMPY, c, mass, gap, force), *ideal_stroke(NUMPY, c, mass, force, gap)]
+        ours = [*stroke(NUMPY, c, mass, gap, force), *ideal_stroke(NUMPY, c, mass, force, gap), *bed(NUMPY, c, mass),
+                paste_fraction(NUMPY, c, mass)]
         theirs = f(mass, gap, force)
         for a, b in zip(ours, theirs):
             assert np.allclose(np.asarray(b).ravel(), np.ravel(a), rtol=1e-12, atol=1e-20)
@@ -162,6 +165,62 @@ def test_the_bed_law_and_its_exact_derivative():
     assert bed_force(NUMPY, b, 0.0) == pytest.approx(area * modulus * strain * (math.exp(1 / strain) - 1), rel=1e-12)
     slopes = [float(dF(x)) for x in np.linspace(0.05, 0.95, 10) * h0]
     assert np.all(np.diff(slopes) > 0)  # convex: the stiffness grows as the gap closes
+
+
+def test_the_paste_fraction_of_spheres_and_the_softened_modulus():
+    """One class of spheres of size x: f = 1 - (1 - 2 delta / x)^3 (the shell delta deep over the sphere's volume);
+    fines below 2 delta are paste throughout; the bed's modulus is E0 (1 - f)^n."""
+    c = PEANUT.si()
+    delta = c["paste_depth_mm"]
+    for size in (0.05e-3, 0.3e-3, 2e-3, 8e-3):
+        k = CLASSES.index(size)
+        mass = np.zeros(CLASSES.n)
+        mass[k] = 1e-3
+        x = CLASSES.size[k]
+        shell = 1 - max(0.0, 1 - 2 * delta / x) ** 3
+        assert paste_fraction(NUMPY, c, mass) == pytest.approx(shell, rel=1e-12)
+        assert Bolus(mass).bed(PEANUT)[2] == pytest.approx(c["bed_modulus_kPa"] * (1 - shell) ** c["paste_exponent"], rel=1e-12)
+
+
+def test_the_beds_force_depends_exactly_on_the_bolus():
+    """The bed's force at a fixed share of its height, as a function of the class masses (its height and its softened
+    modulus both depend on them): CasADi's gradient against central differences on every class (h = 1e-6 of the
+    class's mass, at least 1e-12 kg: truncation ~h^2, rounding ~1e-16 F / h, both below 1e-5 of the largest
+    component)."""
+    import casadi as ca
+
+    rng = np.random.default_rng(5)
+    c = PEANUT.si()
+    mass = _random_bolus(rng, 1.6)
+    m = ca.SX.sym("m", CLASSES.n)
+
+    def force(xp, mass):
+        b = bed(xp, c, mass)
+        return bed_force(xp, b, 0.6 * b[0])
+
+    grad = np.asarray(ca.Function("g", [m], [ca.gradient(force(CASADI, m), m)])(mass)).ravel()
+    fd = np.empty(CLASSES.n)
+    for i in range(CLASSES.n):
+        h = max(1e-6 * mass[i], 1e-12)
+        up, down = mass.copy(), mass.copy()
+        up[i] += h
+        down[i] -= h
+        fd[i] = (force(NUMPY, up) - force(NUMPY, down)) / (2 * h)
+    assert np.allclose(grad, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+
+
+def test_the_bolus_softens_as_it_is_chewed():
+    """The bed's hardness in the bolus TPA (its force at 50 % of its height, the peak of the first bite of a
+    quasi-static law) after every one of 10 ideal strokes of both built-in foods falls at every stroke, and stays
+    below the intact food's TPA hardness (the bulk law's, chewbot.food.tpa)."""
+    from chewbot.food.tpa import ideal_test, settings
+
+    for name in ("peanut", "carrot"):
+        food = load_food(name)
+        c = comminution_of(food)
+        hardness = [float(bed_force(NUMPY, b, 0.5 * b[0])) for b in (x.bed(c) for x in chew(c, 10).boluses[1:])]
+        intact = ideal_test(food, settings(50.0, 2.0, 2.0, pre_test_speed_mm_s=2.0)).analysis.measures["hardness_N"]
+        assert np.all(np.diff(hardness) < 0) and hardness[0] < intact, (name, hardness, intact)
 
 
 def test_the_bed_gap_inverts_the_force_and_its_work_integrates_it():
@@ -375,9 +434,11 @@ def test_the_fits_jacobian_is_exact():
 
 def test_the_fit_recovers_known_parameters_within_its_standard_errors():
     """Synthetic sievings (3 chew counts x 3 subjects, Dirichlet noise) from known parameters, 8 seeds: every
-    estimate within 2.5 standard errors of the truth (24 estimates: a normal error beyond 2.5 has a chance of 1.2 %
-    each), at most 3 beyond 2; the standard error the fit reports matches the spread of the estimates over the seeds
-    (their ratio in 0.5-2: with 8 seeds the spread itself is uncertain by about 25 %)."""
+    estimate within 3.5 standard errors of the truth and at most 3 of the 24 beyond 2 (for normal errors the chance
+    that any of 24 passes 3.5 is 1.1 %, that more than 3 pass 2 is 2.6 %; "all within 2.5" would fail a calibrated
+    fit one time in four); the mean of the seeds' z within 1.5 of 0 (unbiased, that mean
+    spreads by about 1.5 / sqrt(8) = 0.53 with the spread ratios below: 1.5 is 2.8 of it); the standard error the fit reports matches the spread of the
+    estimates over the seeds (their ratio in 0.5-2: with 8 seeds the spread itself is uncertain by about 25 %)."""
     start = ComminutionTable(**{**PEANUT.model_dump(), **START})
     estimates, errors = [], []
     for seed in range(8):
@@ -387,7 +448,8 @@ def test_the_fit_recovers_known_parameters_within_its_standard_errors():
         errors.append(fit.standard_errors)
     estimates, errors = np.array(estimates), np.array(errors)
     z = (estimates - np.array(list(TRUTH.values()))) / errors
-    assert np.all(np.abs(z) < 2.5) and np.sum(np.abs(z) > 2) <= 3, z
+    assert np.all(np.abs(z) < 3.5) and np.sum(np.abs(z) > 2) <= 3, z
+    assert np.all(np.abs(z.mean(axis=0)) < 1.5), z.mean(axis=0)
     ratio = estimates.std(axis=0, ddof=1) / errors.mean(axis=0)
     assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
 

@@ -122,9 +122,8 @@ def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     broken = q["broken"] > 0
     g = gap(MODEL, "left", sim.q[broken], sim.dq[broken])
     c = comminution_of(PEANUT)
-    si = c.si()
-    rows_bed = np.column_stack([q["h0_bed"][broken], np.full((broken.sum(), 4), [si["table_area_mm2"], si["bed_modulus_kPa"],
-                                                                               si["bed_compaction_strain"], si["bed_damping_s_per_m"]])])
+    beds = {b[0]: b for b in (r.bolus.bed(c) for r in two_cycles.records)}  # each bolus's bed by its height
+    rows_bed = [beds[h0] for h0 in q["h0_bed"][broken]]
     expected = [bed_normal_force(NUMPY, b, x, -v) for b, x, v in zip(rows_bed, g["gap"], g["rate"])]
     assert np.allclose(q["force"][broken], expected, rtol=1e-12, atol=1e-9)
     assert [r.strokes for r in two_cycles.records[1:]] == [1, 1]
@@ -134,6 +133,23 @@ def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     x50 = [r.fit.x50_mm for r in two_cycles.records[1:]]
     assert x50[1] < x50[0]
     assert all(ch.passed is not False for ch in two_cycles.checks if ch.severity == "failure")
+
+
+def test_the_bolus_tpa_softens_with_the_share_of_cycles(two_cycles):
+    """The bolus TPA (--tpa-at) on the robot's two-cycle sequence: the hardness falls from the intact kernel's (its
+    bulk law) to the bed's after one cycle and after two; each bed's hardness is its law's force at half its height
+    (the first bite's peak of a quasi-static law), reached to 1e-6 from below: the TPA's peak is the largest force of
+    its sampled path, whose nearest sample to the turn falls short of it by about 3e-9 of the force here."""
+    from chewbot.simulation.chewing import bolus_tpa
+
+    tpa = bolus_tpa(two_cycles, [0, 50, 100])
+    hardness = [t["measures"]["hardness_N"] for t in tpa]
+    assert [t["cycle"] for t in tpa] == [0, 1, 2] and hardness[0] > hardness[1] > hardness[2] > 0, hardness
+    c = comminution_of(PEANUT)
+    for t in tpa[1:]:
+        b = two_cycles.records[t["cycle"]].bolus.bed(c)
+        peak = bed_force(NUMPY, b, 0.5 * b[0])
+        assert peak * (1 - 1e-6) <= t["measures"]["hardness_N"] <= peak * (1 + 1e-12)
 
 
 def test_the_damped_bed_force():

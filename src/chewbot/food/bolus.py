@@ -35,9 +35,13 @@ from a class to the same or smaller ones, and its breakage matrix's columns sum 
 **The particle bed** (:func:`bed`, :func:`bed_force`): the share of the bolus that lies on the table, V (1 - e^-C) / C
 (V its volume), forms a bed of loose height h0 = V (1 - e^-C) / (C A (1 - phi0)), phi0 its loose porosity. Closed to
 a gap g < h0 it is compacted by eps = 1 - g / h0 (laterally confined: the volumetric strain), and pushes back with
-F = A E0 eps_c (e^(eps / eps_c) - 1): a modulus E0 when first loaded, stiffening e-fold every eps_c of strain as
-the pores close, and finite when the teeth meet (eps = 1: a thin bed, squeezed out, bounded). Written once for NumPy
-and CasADi (:data:`chewbot.food.law.NUMPY`, :data:`~chewbot.food.law.CASADI`), with its exact inverse
+F = A E eps_c (e^(eps / eps_c) - 1): a modulus E when first loaded, stiffening e-fold every eps_c of strain as
+the pores close, and finite when the teeth meet (eps = 1: a thin bed, squeezed out, bounded). The bed softens as the
+bolus is comminuted: every fracture opens the food's cells to a depth delta (``paste_depth_mm``) under the new
+surface, whose contents and the saliva they take up make a paste, a share f of the bolus's mass
+(:func:`paste_fraction`, 1 - (1 - 2 delta / x)^3 of a particle of size x); the dry share 1 - f carries the load, so
+E = E0 (1 - f)^n, E0 ``bed_modulus_kPa`` the dry bed's of the first coarse fragments, n ``paste_exponent``. Written
+once for NumPy and CasADi (:data:`chewbot.food.law.NUMPY`, :data:`~chewbot.food.law.CASADI`), with its exact inverse
 (:func:`bed_gap`).
 
 **The ideal stroke** (:func:`ideal_stroke`): the teeth close on the bed until its force reaches ``closing_force`` or
@@ -67,10 +71,11 @@ SUBCLASSES = 4  # classes between two neighbouring sieve sizes (a factor sqrt(2)
 _BELOW = 6  # sqrt(2) steps below the finest sieve: 0.5 mm / 8 = 0.0625 mm
 _ABOVE = 4  # sqrt(2) steps above the coarsest: 5.6 mm x 4 = 22.4 mm
 _REFERENCE_SIZE = 1e-3  # m: the size at which strength_at_1mm_MPa is given
+_DRY_FLOOR = 1e-6  # the least dry share 1 - f of a bed (a bolus of fines alone keeps a modulus E0 1e-6^n > 0)
 _TINY = 1e-300  # floors that keep logarithms and powers (and their derivatives) finite at zero
 
 # The particle bed as the plant's graphs take it (:func:`bed_force`): loose height h0 (m), table area A (m^2),
-# modulus E0 (Pa), compaction strain eps_c, Hunt-Crossley damping alpha (s/m; :func:`bed_normal_force`).
+# modulus E (Pa, softened: :func:`bed`), compaction strain eps_c, Hunt-Crossley damping alpha (s/m; :func:`bed_normal_force`).
 BED_PARAMETERS = ("h0", "area", "modulus", "compaction_strain", "damping")
 
 
@@ -179,13 +184,23 @@ def stroke(xp, c, mass, gap, force, B=None):
     return mass - broken + B @ broken, xp.sum(S * mass), xp.sum(broken)
 
 
+def paste_fraction(xp, c, mass):
+    """f, the share of the bolus's mass within ``paste_depth_mm`` of its particles' surfaces: the cells a fracture
+    opened, whose contents (a peanut's oil, a carrot's juice) and the saliva they take up make a paste. A sphere of size
+    x holds 1 - max(0, 1 - 2 delta / x)^3 of it; the fines below 2 delta are paste throughout."""
+    core = xp.fmax(1 - 2 * c["paste_depth_mm"] / xp.asarray(CLASSES.size), 0.0) ** 3
+    return xp.sum(mass * (1 - core)) / xp.sum(mass)
+
+
 def bed(xp, c, mass):
-    """The particle bed on the table: the values of :data:`BED_PARAMETERS` (h0 m, A m^2, E0 Pa, eps_c, alpha s/m)."""
+    """The particle bed on the table: the values of :data:`BED_PARAMETERS` (h0 m, A m^2, E Pa, eps_c, alpha s/m), its
+    modulus E = E0 (1 - f)^n softened by the paste fraction f (:func:`paste_fraction`)."""
     _, _, share = _coverage(xp, c, mass)
     area = c["table_area_mm2"]
     layer = share[0]  # the smallest class's share counts all the particles: the bed is one layer of the mixture
     h0 = xp.sum(mass) * layer / c["density_kg_per_m3"] / (area * (1 - c["bed_porosity"]))
-    return h0, area, c["bed_modulus_kPa"], c["bed_compaction_strain"], c["bed_damping_s_per_m"]
+    dry = xp.fmax(1 - paste_fraction(xp, c, mass), _DRY_FLOOR)
+    return h0, area, c["bed_modulus_kPa"] * dry ** c["paste_exponent"], c["bed_compaction_strain"], c["bed_damping_s_per_m"]
 
 
 def _named(b) -> SimpleNamespace:
@@ -322,4 +337,4 @@ def chew(c: ComminutionTable, cycles: int, closing_force: float = CLOSING_FORCE_
 
 __all__ = ["BED_PARAMETERS", "CLASSES", "CLOSING_FORCE_N", "MIN_GAP_MM", "SIEVE", "SUBCLASSES", "Bolus", "Chewing", "SizeClasses",
            "StrokeRecord", "bed", "bed_force", "bed_gap", "bed_normal_force", "bed_work", "breakage", "chew", "comminution_of", "fragments",
-           "ideal_stroke", "selection", "stroke"]
+           "ideal_stroke", "paste_fraction", "selection", "stroke"]

@@ -12,9 +12,11 @@ value has its hard limits and a plausible range, and :meth:`ComminutionTable.si`
   ``strength_at_1mm_MPa`` at 1 mm scaled with size by the Weibull modulus ``weibull_modulus``; its fragments follow a
   Rosin-Rammler law truncated at the parent's size, median ``fragment_size`` x the parent's, spread
   ``fragment_spread``;
-* the particle bed: ``bed_porosity`` when loose, ``bed_modulus_kPa`` when first compressed and
-  ``bed_compaction_strain``, the strain over which its stiffness grows e-fold, ``bed_damping_s_per_m`` its
-  Hunt-Crossley damping while it is compressed (the robot's plant);
+* the particle bed: ``bed_porosity`` when loose, ``bed_modulus_kPa`` when first compressed (dry, of coarse
+  fragments) and ``bed_compaction_strain``, the strain over which its stiffness grows e-fold, ``bed_damping_s_per_m``
+  its Hunt-Crossley damping while it is compressed (the robot's plant); its softening as it is comminuted: the paste
+  of the cells a fracture opens, ``paste_depth_mm`` deep under every particle's surface, lowers its modulus as
+  (1 - paste fraction)^``paste_exponent``;
 * ``fitted``: the keys a fit (``chewbot fit-comminution``) has set.
 
 This module imports no other part of the food layer, so that the food reader (:mod:`chewbot.food.law`) can hand the
@@ -46,7 +48,9 @@ _RANGES = {
     "fragment_size": (0.05, 0.95, "median fragment sizes as a share of the parent's"),
     "fragment_spread": (0.5, 10.0, "Rosin-Rammler spreads of fragments"),
     "bed_porosity": (0.1, 0.9, "porosities of loose particle beds"),
-    "bed_modulus_kPa": (1.0, 1e6, "moduli of food particle beds at first compression"),
+    "bed_modulus_kPa": (1.0, 1e6, "moduli of dry food particle beds at first compression"),
+    "paste_depth_mm": (0.005, 1.0, "depths of the cell layer a fracture opens (the food's cells)"),
+    "paste_exponent": (0.5, 10.0, "exponents of a bed's softening with its paste fraction"),
     "bed_compaction_strain": (0.02, 1.0, "strains over which a bed's stiffness grows e-fold"),
     "bed_damping_s_per_m": (0.1, 100.0, "Hunt-Crossley damping of food particle beds (75 s/m: no rebound at 2 cm/s)"),
 }
@@ -88,6 +92,8 @@ class ComminutionTable(Strict):
     fragment_spread: _field("fragment_spread", gt=0)
     bed_porosity: _field("bed_porosity", gt=0, lt=1)
     bed_modulus_kPa: _field("bed_modulus_kPa", gt=0)
+    paste_depth_mm: _field("paste_depth_mm", gt=0)
+    paste_exponent: _field("paste_exponent", gt=0)
     bed_compaction_strain: _field("bed_compaction_strain", gt=0)
     bed_damping_s_per_m: _field("bed_damping_s_per_m", ge=0)
     fitted: list[str] = []

@@ -7,12 +7,13 @@ broken (docs/bolus.md, "The bolus in the plant").
 * the food's bulk law (:mod:`chewbot.food.law`) until its first fracture (the law's ``fracture`` event, located as in
   the food plant), then
 * the particle bed's after it, damped while compressed: F = max(0, F_bed(g) (1 + 3/2 alpha r)),
-  F_bed(g) = A E0 eps_c (e^(eps / eps_c) - 1), eps = max(0, 1 - g / h0), r = -dg/dt the closing rate, alpha the bed's
+  F_bed(g) = A E eps_c (e^(eps / eps_c) - 1), eps = max(0, 1 - g / h0), E the bolus's softened modulus
+  (:func:`chewbot.food.bolus.bed`), r = -dg/dt the closing rate, alpha the bed's
   Hunt-Crossley damping (:func:`chewbot.food.bolus.bed_normal_force`), g the bite point's gap; its tangential friction
   the food's (``tooth_friction``). The switch is the food's ``broken`` state, so it happens at the fracture's strain,
   within the step.
 
-The bed's parameters (:data:`~chewbot.food.bolus.BED_PARAMETERS`: h0, A, E0, eps_c) are a block of the compiled step's
+The bed's parameters (:data:`~chewbot.food.bolus.BED_PARAMETERS`: h0, A, E, eps_c, alpha) are a block of the compiled step's
 shared inputs (:data:`BOLUS_SHARED`), read from the plant's own state at each step's start: a chewing sequence
 changes them without compiling anything. The bolus is part of that state (:class:`BolusSolved`): a **stroke** is a
 contact of the teeth with the food (from the first step whose force is positive to the first where it is zero again);
@@ -199,7 +200,8 @@ class BolusPlant(FoodPlant):
         """The food plant's entries, and under ``bolus`` the law, the portion and the strokes applied."""
         out = super().info(sim)
         out["bolus"] = {"law": "the food's bulk law until its first fracture, then the particle bed's "
-                               "F = A E0 eps_c (exp(eps/eps_c) - 1), eps = max(0, 1 - g/h0) (docs/bolus.md)",
+                               "F = A E eps_c (exp(eps/eps_c) - 1), eps = max(0, 1 - g/h0), E = E0 (1 - f)^n softened "
+                               "by the bolus's paste fraction f (docs/bolus.md)",
                         "stroke": "a contact (force > 0); at its end the bolus breaks by chewbot.food.bolus.stroke with its "
                                   "closest gap and peak force",
                         "portion_g": self.bolus.total * 1e3,
