@@ -20,7 +20,7 @@ from chewbot.identification.output import model_text
 from chewbot.model.params import load_model
 from chewbot.simulation.options import resolve
 from chewbot.simulation.run import compute
-from chewbot.simulation.texture import TPA_FREQUENCY_HZ, simulated_log
+from chewbot.simulation.texture import simulated_log
 from chewbot.task.csvio import task_table
 
 # The plant's assumed friction coefficients (the built-in target's), and its inertias.
@@ -89,6 +89,10 @@ def identified_model(log: RobotLog, path: Path, **options):
     return load_model(str(path)), result
 
 
+# The bandwidth of the computed-torque loop these texture tests run under (Hz): stiff enough to hold the crosshead's
+# path under the food's load, as a texture analyser's crosshead is.
+TEXTURE_FREQUENCY_HZ = 100.0
+
 @functools.cache
 def texture_test(food: str, plant: tuple = (), speed_mm_s: float = 4.0, friction: str = "on", pause_s: float = 1.0,
                  encoder_noise: float = 0.0):
@@ -101,7 +105,7 @@ def texture_test(food: str, plant: tuple = (), speed_mm_s: float = 4.0, friction
     t = p.times()
     task = molar_path_task(nominal, "left", t, *p.path(t), name=f"texture test of the {f.name}")
     r = compute(resolve(controller="computed-torque", model="target", side="left", rate=1000.0, food=food,
-                        gain_overrides={"computed_torque.frequency_Hz": TPA_FREQUENCY_HZ}, friction=friction,
+                        gain_overrides={"computed_torque.frequency_Hz": TEXTURE_FREQUENCY_HZ}, friction=friction,
                         plant_overrides=dict(plant), noise_rad=encoder_noise), task=task)
     return r, simulated_log(r)
 
