@@ -41,6 +41,9 @@ BOUND_TOL = 1e-10
 # The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
 # mm or deg; the SQP stops at 1e-10).
 STATIONARITY_TOL = 1e-6
+# A frame of the search's penalised fit counts as admissible when it ends at most this far outside (mm in a socket,
+# robotfit.REACH_UNIT of sine squared on a chain; the penalty's optimum lies about 1e-5 outside).
+PROJECTED_TOL = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +90,35 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     fns = fit_functions(model, min_transmission_deg)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
+    z, last, outside = _unconstrained(fns, p, R, target, settings)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
+    admissible = np.ones(len(z), dtype=bool)
+    if rows.size:
+        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
+    return _result(fns, z, admissible, outside, target, settings)
+
+
+def projected_fit(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float,
+                  orientation_weight_per_deg: float, min_transmission_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The registration search's fit: step 1 of the module, then, on the frames whose optimum is not admissible,
+    the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`) from that optimum in one
+    compiled call instead of the SQP. Returns the scaled unknowns z (N, n), whether each frame ends admissible to
+    :data:`PROJECTED_TOL` (z is 0 on the others)."""
+    fns = fit_functions(model, min_transmission_deg)
+    settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+    target = targets(p, R)
+    z, _, outside = _unconstrained(fns, p, R, target, settings)
+    ok = np.isfinite(z).all(axis=1)
+    rows = np.flatnonzero(outside.any(axis=1) & ok)
+    if rows.size:
+        z[rows], off = fns.projected(z[rows], target[rows], settings)
+        ok[rows] = off <= PROJECTED_TOL
+    return np.where(ok[:, None], z, 0.0), ok
+
+
+def _unconstrained(fns: FitFunctions, p, R, target, settings):
+    """Step 1 of the module: the unconstrained optimum z (N, n), its last step (N,) and the constraints it breaks
+    (N, n_g)."""
     own = own_coordinates(fns, p, R)
     z, last = _converge(fns, *fns.sequential(own[0], target, settings), target, settings)
     # Each frame again from its own recorded coordinates, all at once: a frame after one that went astray (a
@@ -98,12 +130,7 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     z[~keep], last[~keep] = z_own[~keep], last_own[~keep]
     z -= np.round((z - own) * fns.scale / (2 * np.pi)) * (fns.scale == DEG) * 2 * np.pi / fns.scale  # within half a turn
     g = fns.constraints(z)
-    outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
-    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
-    admissible = np.ones(len(z), dtype=bool)
-    if rows.size:
-        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
-    return _result(fns, z, admissible, outside, target, settings)
+    return z, last, (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
 
 
 def fitted_pose(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
