@@ -41,8 +41,8 @@ BOUND_TOL = 1e-10
 # The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
 # mm or deg; the SQP stops at 1e-10).
 STATIONARITY_TOL = 1e-6
-# A frame of the search's penalised fit counts as admissible when it ends at most this far outside (mm in a socket,
-# robotfit.REACH_UNIT of sine squared on a chain; the penalty's optimum lies about 1e-5 outside).
+# A frame of the penalised fit is inside the admissible set when it breaks no bound by more than this (mm in a
+# socket, robotfit.REACH_UNIT of sine squared on a chain; the penalty's optimum lies about 1e-5 outside).
 PROJECTED_TOL = 1e-3
 
 
@@ -94,25 +94,33 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
     admissible = np.ones(len(z), dtype=bool)
     if rows.size:
-        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
+        start = fns.projected(z[rows], target[rows], settings)[0]
+        z[rows], admissible[rows] = _constrained(fns, start, target[rows], settings)
     return _result(fns, z, admissible, outside, target, settings)
 
 
-def projected_fit(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float,
-                  orientation_weight_per_deg: float, min_transmission_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """The registration search's fit: step 1 of the module, then, on the frames whose optimum is not admissible,
-    the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`) from that optimum in one
-    compiled call instead of the SQP. Returns the scaled unknowns z (N, n), whether each frame ends admissible to
-    :data:`PROJECTED_TOL` (z is 0 on the others)."""
+def screened_fit(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float,
+                 orientation_weight_per_deg: float, min_transmission_deg: float, enough: float) -> tuple[np.ndarray, np.ndarray]:
+    """The registration search's fit, where only the frames whose weighted residual abs(r) exceeds ``enough`` count:
+    step 1 of the module, then the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`) of
+    the frames whose optimum is not admissible, in one compiled call. A frame that the penalised fit brings inside
+    (to :data:`PROJECTED_TOL`) with abs(r) <= ``enough`` has an admissible pose that good, so the constrained
+    optimum's abs(r) is no larger: it needs no SQP. The others are solved by the SQP of step 2, started from the
+    penalised fit. Returns the scaled unknowns z (N, n) (the SQP's optimum where it ran, 0 where no admissible pose
+    was found) and whether each frame has an admissible pose."""
     fns = fit_functions(model, min_transmission_deg)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
-    z, _, outside = _unconstrained(fns, p, R, target, settings)
-    ok = np.isfinite(z).all(axis=1)
-    rows = np.flatnonzero(outside.any(axis=1) & ok)
+    z, last, outside = _unconstrained(fns, p, R, target, settings)
+    ok = np.ones(len(z), dtype=bool)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
     if rows.size:
-        z[rows], off = fns.projected(z[rows], target[rows], settings)
-        ok[rows] = off <= PROJECTED_TOL
+        start, off = fns.projected(z[rows], target[rows], settings)
+        good = (off <= PROJECTED_TOL) & (np.sqrt(_cost(fns, start, target[rows], settings)) <= enough)
+        z[rows] = start
+        polish = rows[~good]
+        if polish.size:
+            z[polish], ok[polish] = _constrained(fns, start[~good], target[polish], settings)
     return np.where(ok[:, None], z, 0.0), ok
 
 

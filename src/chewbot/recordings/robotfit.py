@@ -293,18 +293,21 @@ def _build(model: Model) -> FitFunctions:
 
 
 def _projection(model: Model, z, target, settings, r, g, reach: list[bool]) -> ca.Function:
-    """The compiled kernel of :meth:`FitFunctions.projected`: PROJECTION_ITERATIONS Levenberg-Marquardt steps on
-    [r; PENALTY * (excess of g beyond its bounds, in mm and REACH_UNITs)], each kept only where it lowers the cost
-    (the damping then shrinks threefold, else grows fourfold)."""
+    """The compiled kernel of :meth:`FitFunctions.projected`: PROJECTION_ITERATIONS damped Newton steps on
+    0.5 abs([r; PENALTY * (excess of g beyond its bounds, in mm and REACH_UNITs)])^2, each kept only where it
+    lowers that cost (the damping then shrinks threefold, else grows fourfold)."""
     n, ng = z.numel(), g.numel()
     lbg, ubg = ca.SX.sym("lbg", ng), ca.SX.sym("ubg", ng)
     unit = ca.DM([REACH_UNIT if c else 1.0 for c in reach])
     outside = (ca.fmax(0, lbg - g) + ca.fmax(0, g - ubg)) / unit
     rp = ca.vertcat(r, PENALTY * outside)
-    J = ca.jacobian(rp, z)
-    JtJ = ca.mtimes(J.T, J)
+    J = ca.jacobian(r, z)
+    # Gauss-Newton's J^T J for the pose error, the penalty's exact Hessian (its constraints' curvature weighed by
+    # their multipliers PENALTY^2 outside, as in an SQP's Lagrangian): without it the steps zigzag along a curved
+    # boundary and the penalty refuses them
+    H = ca.mtimes(J.T, J) + ca.hessian(0.5 * ca.sumsqr(PENALTY * outside), z)[0]
     mu = ca.SX.sym("mu")
-    step = -ca.solve(JtJ + mu * ca.diag(ca.diag(JtJ)) + 1e-12 * ca.trace(JtJ) * ca.SX.eye(n), ca.mtimes(J.T, rp))
+    step = -ca.solve(H + mu * ca.diag(ca.diag(H)) + 1e-12 * ca.trace(H) * ca.SX.eye(n), ca.gradient(0.5 * ca.sumsqr(rp), z))
     cost = ca.Function("fit_penalised_cost", [z, target, settings, lbg, ubg], [ca.sumsqr(rp)])
     lm = ca.Function("fit_penalised_step", [z, target, settings, lbg, ubg, mu], [z + step])
     z0 = ca.MX.sym("z0", n)
