@@ -15,7 +15,8 @@ in the least-squares sense) over the admissible poses (condyles inside their soc
    once.
 2. Where that optimum is not admissible, the nearest admissible pose lies on the boundary: those frames are
    solved as constrained problems (SQP, CasADi ``sqpmethod``, exact Hessian), all in one mapped call, each
-   starting from its own unconstrained optimum. A frame where the SQP does not end at an admissible,
+   starting from the penalised projection of its unconstrained optimum (:meth:`FitFunctions.projected`, one
+   compiled call over those frames). A frame where the SQP does not end at an admissible,
    stationary point has no admissible pose near it.
 
 For the 6RSS the fit is exact (zero error) wherever the recorded pose is reachable.

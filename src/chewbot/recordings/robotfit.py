@@ -62,9 +62,10 @@ SQP_ITERATIONS = 40
 # error and an exterior penalty of the admissibility constraints, PENALTY per mm outside a socket and per
 # REACH_UNIT of sine squared below a chain's floor (about a millimetre of the mandible's motion near the floor).
 # Its optimum lies outside the admissible set by about (pose error's gradient) / PENALTY^2: 1e-5 mm for a frame
-# 10 mm beyond the reach at 2 per mm, far below any tolerance of the fit. From the unconstrained optimum, the
-# frames 10-40 mm beyond the reach of the suite's recordings settle in 10-20 steps (the last step below 1e-6 mm);
-# PROJECTION_ITERATIONS leave a margin, and a step that does not lower the cost is refused (the damping grows).
+# 10 mm beyond the reach at 2 per mm, far below any tolerance of the fit. It is a start for the SQP, not its
+# replacement: on issue 28's analyser (frames 10-40 mm beyond the reach) PROJECTION_ITERATIONS steps end at the
+# SQP's answer (to 1e-8) in some calls and up to 2.8 mm or deg from it in others; a step that does not lower the
+# cost is refused (the damping grows).
 PENALTY = 1e3
 REACH_UNIT = 0.01
 PROJECTION_ITERATIONS = 40
