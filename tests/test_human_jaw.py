@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 
 import functools
+import re
 
 import numpy as np
 import pytest
@@ -273,28 +274,31 @@ def test_the_search_never_leaves_its_bounds(written, tmp_path):
     assert f.placement_turn_deg <= MAX_TURN_DEG + 1e-9 and f.placement_shift_mm <= np.sqrt(3) * MAX_SHIFT_MM + 1e-9
 
 
-def _runs(path, tmp_path, *expected):
+def _runs(path, tmp_path, *expected, options=(), warnings=False):
     out = tmp_path / f"{path.stem}_task.csv"
     result = runner.invoke(app, ["import-motion", str(path), "--registration", str(path.with_suffix(".toml")),
-                                 "--fit-registration", "--out", str(out)])
+                                 "--fit-registration", "--out", str(out), *options])
     assert result.exit_code == 0, result.output
     for text in expected:
         assert text in result.output, result.output
     run = runner.invoke(app, ["run", "--task", str(out), "--out", str(tmp_path / f"{path.stem}_run")])
     assert run.exit_code == 0, run.output
-    # no failed check but contact-pull, a warning: with the drive's rotors the minimum-norm torques pull a condyle
-    # (as on the default task: CHANGELOG)
     record = json.loads((tmp_path / f"{path.stem}_run" / "run.json").read_text())
-    failed = [c["name"] for c in record["checks"] if c["passed"] is False]
-    assert failed in ([], ["contact-pull"]), failed
-    return out
+    failed = {c["name"]: c["severity"] for c in record["checks"] if c["passed"] is False}
+    if warnings:  # checks that failed only as warnings
+        assert all(v == "warning" for v in failed.values()), failed
+    else:
+        # no failed check but contact-pull, a warning: with the drive's rotors the minimum-norm torques pull a condyle
+        # (as on the default task: CHANGELOG)
+        assert set(failed) <= {"contact-pull"}, failed
+    return out, result.output
 
 
 def test_the_written_task_runs(written, tmp_path):
     """The command on the chin cluster (default --timing limits): the task, the registration (what was detected,
     the prior, the share) and the report (detection, prior, the registration and how far it moved, the incisal path
     in {S} and in the tracker's frame) are written, and `chewbot run` on the task exits 0 with no failed check."""
-    out = _runs(written["cluster"].path, tmp_path, "detected: a rigid body that rotates", "registration: the prior")
+    out = _runs(written["cluster"].path, tmp_path, "detected: a rigid body that rotates", "registration: the prior")[0]
     text = out.with_name(f"{out.stem}.registration.toml").read_text()
     assert 'tracked = "rigid"' in text and "# detected: a rigid body" in text and "# prior: the opening axis" in text
     page = out.with_name(f"{out.stem}.report.html").read_text()
@@ -321,3 +325,24 @@ def test_issue_28s_chin_cluster_is_played_whole_on_the_hinge(issue, tmp_path):
     assert result.found.share == 1.0 and m.rotation_share >= 0.9 and m.r_rotation >= 0.95, m.describe()
     assert sum("tracker spike dropped" in n for n in result.notes) == 2, result.notes
     _runs(w.path, tmp_path, "detected: a rigid body that rotates")
+
+
+@pytest.mark.slow  # about 2 minutes of registration search (docs/recordings.md)
+def test_issue_28s_jaw_motion_analyser_is_registered_on_the_incisor(issue, tmp_path):
+    """Like issue 28's second real recording (a jaw-motion analyser's face-bow triangle moved in parallel, the
+    incisal point 44 mm down and 34 mm back, 12.7 s at 50 Hz, not scaled into the robot's reach, which opens the
+    incisor 40.5 mm): detected as a point path, registered on the incisor, its share reported, and the robot plays
+    >= 60 % of the incisal excursion (the issue's bound for point paths) in step (r >= 0.95); the issue found 73-85 %
+    reachable on the real one (docs/recordings.md gives this one's). `chewbot run` on the written task (default
+    --timing limits) exits 0, its only failed checks warnings (the openings ride the fit's 10 deg transmission margin
+    at their widest: near-singular, a warning). With --max-rigid 2: the triangle turns up to 1.4 deg, which
+    moves its points up to 1.65 mm from moving in parallel with their mean, beyond the default 1 mm (the import
+    refuses those frames by default; docs/recordings.md)."""
+    w = issue["wide_opening"]
+    out, output = _runs(w.path, tmp_path, "detected: the path of one point", options=("--max-rigid", "2"), warnings=True)
+    played = re.search(r"([0-9.]+) % of the incisal excursion \(peak [0-9.]+ mm\), r = ([0-9.]+)", output)
+    assert float(played.group(1)) >= 60 and float(played.group(2)) >= 0.95, output
+    text = out.with_name(f"{out.stem}.registration.toml").read_text()
+    assert 'tracked = "incisor"' in text
+    share = float(re.search(r"# share ([0-9.]+)", text).group(1))
+    assert 0.6 <= share <= 1.0, text

@@ -15,7 +15,8 @@ in the least-squares sense) over the admissible poses (condyles inside their soc
    once.
 2. Where that optimum is not admissible, the nearest admissible pose lies on the boundary: those frames are
    solved as constrained problems (SQP, CasADi ``sqpmethod``, exact Hessian), all in one mapped call, each
-   starting from its own unconstrained optimum. A frame where the SQP does not end at an admissible,
+   starting from the penalised projection of its unconstrained optimum (:meth:`FitFunctions.projected`, one
+   compiled call over those frames). A frame where the SQP does not end at an admissible,
    stationary point has no admissible pose near it.
 
 For the 6RSS the fit is exact (zero error) wherever the recorded pose is reachable.
@@ -41,6 +42,9 @@ BOUND_TOL = 1e-10
 # The SQP's answer counts as a solution when the gradient of its Lagrangian is below this (weighted error^2 per
 # mm or deg; the SQP stops at 1e-10).
 STATIONARITY_TOL = 1e-6
+# A frame of the penalised fit is inside the admissible set when it breaks no bound by more than this (mm in a
+# socket, robotfit.REACH_UNIT of sine squared on a chain; the penalty's optimum lies about 1e-5 outside).
+PROJECTED_TOL = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +91,43 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     fns = fit_functions(model, min_transmission_deg)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
     target = targets(p, R)
+    z, last, outside = _unconstrained(fns, p, R, target, settings)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
+    admissible = np.ones(len(z), dtype=bool)
+    if rows.size:
+        start = fns.projected(z[rows], target[rows], settings)[0]
+        z[rows], admissible[rows] = _constrained(fns, start, target[rows], settings)
+    return _result(fns, z, admissible, outside, target, settings)
+
+
+def screened_fit(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float,
+                 orientation_weight_per_deg: float, min_transmission_deg: float, enough: float) -> tuple[np.ndarray, np.ndarray]:
+    """The registration search's fit, where only the frames whose weighted residual abs(r) exceeds ``enough`` count:
+    step 1 of the module, then the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`) of
+    the frames whose optimum is not admissible, in one compiled call. A frame that the penalised fit brings inside
+    (to :data:`PROJECTED_TOL`) with abs(r) <= ``enough`` has an admissible pose that good, so the constrained
+    optimum's abs(r) is no larger: it needs no SQP. The others are solved by the SQP of step 2, started from the
+    penalised fit. Returns the scaled unknowns z (N, n) (the SQP's optimum where it ran, 0 where no admissible pose
+    was found) and whether each frame has an admissible pose."""
+    fns = fit_functions(model, min_transmission_deg)
+    settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+    target = targets(p, R)
+    z, last, outside = _unconstrained(fns, p, R, target, settings)
+    ok = np.ones(len(z), dtype=bool)
+    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
+    if rows.size:
+        start, off = fns.projected(z[rows], target[rows], settings)
+        good = (off <= PROJECTED_TOL) & (np.sqrt(_cost(fns, start, target[rows], settings)) <= enough)
+        z[rows] = start
+        polish = rows[~good]
+        if polish.size:
+            z[polish], ok[polish] = _constrained(fns, start[~good], target[polish], settings)
+    return np.where(ok[:, None], z, 0.0), ok
+
+
+def _unconstrained(fns: FitFunctions, p, R, target, settings):
+    """Step 1 of the module: the unconstrained optimum z (N, n), its last step (N,) and the constraints it breaks
+    (N, n_g)."""
     own = own_coordinates(fns, p, R)
     z, last = _converge(fns, *fns.sequential(own[0], target, settings), target, settings)
     # Each frame again from its own recorded coordinates, all at once: a frame after one that went astray (a
@@ -98,12 +139,7 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
     z[~keep], last[~keep] = z_own[~keep], last_own[~keep]
     z -= np.round((z - own) * fns.scale / (2 * np.pi)) * (fns.scale == DEG) * 2 * np.pi / fns.scale  # within half a turn
     g = fns.constraints(z)
-    outside = (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
-    rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
-    admissible = np.ones(len(z), dtype=bool)
-    if rows.size:
-        z[rows], admissible[rows] = _constrained(fns, z[rows], target[rows], settings)
-    return _result(fns, z, admissible, outside, target, settings)
+    return z, last, (g < fns.lbg - BOUND_TOL) | (g > fns.ubg + BOUND_TOL)
 
 
 def fitted_pose(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -52,7 +52,7 @@ from chewbot.errors import RecordingError
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import RigidPrior, rigid_prior
-from chewbot.recordings.fit import fit_to_robot, settings_vector
+from chewbot.recordings.fit import fit_to_robot, screened_fit, settings_vector
 from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_X, fit_functions, registration_functions
 from chewbot.units import factor
@@ -251,10 +251,8 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     def objective(x, s):
         counter[0] += 1
         target, J = poses(x, s, search_rows)
-        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, 1.0 / tolerances[0], 1.0 / tolerances[1],
-                           min_transmission_deg)
-        ok = fit.admissible
-        z = np.where(ok[:, None], fit.q / fns.scale, 0.0)
+        z, ok = screened_fit(model, target[:, :3], _unflat(target[:, 3:]), point, 1.0 / tolerances[0], 1.0 / tolerances[1],
+                             min_transmission_deg, MARGIN)
         r = fns.errors(z, target, settings)[2]
         e = np.sqrt(np.sum(r**2, axis=1))
         excess = np.where(ok, np.maximum(0.0, e - MARGIN), 0.0)

@@ -40,7 +40,7 @@ from scipy.spatial.transform import Rotation
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import point_prior
-from chewbot.recordings.fit import fit_to_robot
+from chewbot.recordings.fit import fit_to_robot, screened_fit
 from chewbot.recordings.register import PULL, FoundRegistration, angle_deg, box, limited_by, search
 from chewbot.recordings.robotfit import POINT_CONST, POINT_X, fit_functions, point_registration_functions
 from chewbot.units import factor
@@ -98,9 +98,8 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
     def objective(x, s):
         counter[0] += 1
         target, J = graphs.targets(unknowns(x), d[search_rows], const(s))
-        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_search, min_transmission_deg)
-        ok = fit.admissible
-        z = np.where(ok[:, None], fit.q / fns.scale, 0.0)
+        z, ok = screened_fit(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_search, min_transmission_deg,
+                             tau * weights_search[0])
         r = fns.errors(z, target, settings)[2]
         e = np.sqrt(np.sum(r**2, axis=1)) / weights_search[0]
         excess = np.where(ok, np.maximum(0.0, e - tau), 0.0)

@@ -58,6 +58,17 @@ MIN_LEVER_MM = 10.0
 # SQP iterations per frame at most: a frame on the boundary takes about 3; one that stalls is started again
 # elsewhere, or kept where it stalled if admissible (chewbot.recordings.fit).
 SQP_ITERATIONS = 40
+# The projection of the registration search (:meth:`FitFunctions.projected`): Levenberg-Marquardt steps on the pose
+# error and an exterior penalty of the admissibility constraints, PENALTY per mm outside a socket and per
+# REACH_UNIT of sine squared below a chain's floor (about a millimetre of the mandible's motion near the floor).
+# Its optimum lies outside the admissible set by about (pose error's gradient) / PENALTY^2: 1e-5 mm for a frame
+# 10 mm beyond the reach at 2 per mm, far below any tolerance of the fit. It is a start for the SQP, not its
+# replacement: on issue 28's analyser (frames 10-40 mm beyond the reach) PROJECTION_ITERATIONS steps end at the
+# SQP's answer (to 1e-8) in some calls and up to 2.8 mm or deg from it in others; a step that does not lower the
+# cost is refused (the damping grows).
+PENALTY = 1e3
+REACH_UNIT = 0.01
+PROJECTION_ITERATIONS = 40
 _SQP = {
     "qpsol": "qrqp", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,  # "regularize" slows it tenfold here; clipping keeps 3 iterations
     # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
@@ -93,6 +104,7 @@ class FitFunctions:
     _sequential: ca.Function
     _extreme: ca.Function
     _cost_gradient: ca.Function
+    _projected: ca.Function
 
     @property
     def n(self) -> int:
@@ -159,6 +171,14 @@ class FitFunctions:
                 except RuntimeError:
                     pass
             return z, lam
+
+    def projected(self, z0, target, settings) -> tuple[np.ndarray, np.ndarray]:
+        """The penalised fit (see :data:`PENALTY`) from z0 (N, n) in one compiled call over the N frames, no SQP:
+        z (N, n) and how far each ends outside the admissible set (N,) (mm in a socket, :data:`REACH_UNIT` of sine
+        squared on a chain). The registration search's objective, whose gradient by the recorded pose is that of
+        the pose error at this optimum (Danskin's theorem: the penalty does not depend on the recording)."""
+        z, outside = evaluate(self._projected, z0, target, settings, self.lbg, self.ubg)
+        return z, outside[:, 0]
 
     def cost_gradient(self, z, target, settings) -> np.ndarray:
         """The gradient (N, 12) of 0.5 abs(r)^2 with respect to the recorded pose [p_rec; R_rec column by column]:
@@ -256,6 +276,7 @@ def _build(model: Model) -> FitFunctions:
     constraints = ca.Function("fit_constraints", [z], [g], ["z"], ["g"])
 
     f = 0.5 * ca.sumsqr(r)
+    projected = _projection(model, z, target, settings, r, g, ["reach" in nm for nm in names])
     lam = ca.SX.sym("lam_g", g.numel())
     stationarity = ca.Function("fit_stationarity", [z, lam, target, settings],
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
@@ -269,7 +290,38 @@ def _build(model: Model) -> FitFunctions:
     return FitFunctions(coords, scale, np.array(lbg), np.array(ubg), tuple(names), gauss_newton, errors, constraints,
                         ca.Function("fit_pose_z", [z], [p, R], ["z"], ["p", "R"]), nlp, stationarity,
                         gauss_newton.mapaccum("fit_sequential", CHUNK), extreme,
-                        ca.Function("fit_cost_gradient", [z, target, settings], [ca.gradient(f, target)]))
+                        ca.Function("fit_cost_gradient", [z, target, settings], [ca.gradient(f, target)]), projected)
+
+
+def _projection(model: Model, z, target, settings, r, g, reach: list[bool]) -> ca.Function:
+    """The compiled kernel of :meth:`FitFunctions.projected`: PROJECTION_ITERATIONS damped Newton steps on
+    0.5 abs([r; PENALTY * (excess of g beyond its bounds, in mm and REACH_UNITs)])^2, each kept only where it
+    lowers that cost (the damping then shrinks threefold, else grows fourfold)."""
+    n, ng = z.numel(), g.numel()
+    lbg, ubg = ca.SX.sym("lbg", ng), ca.SX.sym("ubg", ng)
+    unit = ca.DM([REACH_UNIT if c else 1.0 for c in reach])
+    outside = (ca.fmax(0, lbg - g) + ca.fmax(0, g - ubg)) / unit
+    rp = ca.vertcat(r, PENALTY * outside)
+    J = ca.jacobian(r, z)
+    # Gauss-Newton's J^T J for the pose error, the penalty's exact Hessian (its constraints' curvature weighed by
+    # their multipliers PENALTY^2 outside, as in an SQP's Lagrangian): without it the steps zigzag along a curved
+    # boundary and the penalty refuses them
+    H = ca.mtimes(J.T, J) + ca.hessian(0.5 * ca.sumsqr(PENALTY * outside), z)[0]
+    mu = ca.SX.sym("mu")
+    step = -ca.solve(H + mu * ca.diag(ca.diag(H)) + 1e-12 * ca.trace(H) * ca.SX.eye(n), ca.gradient(0.5 * ca.sumsqr(rp), z))
+    cost = ca.Function("fit_penalised_cost", [z, target, settings, lbg, ubg], [ca.sumsqr(rp)])
+    lm = ca.Function("fit_penalised_step", [z, target, settings, lbg, ubg, mu], [z + step])
+    z0 = ca.MX.sym("z0", n)
+    tg, st, lo, hi = ca.MX.sym("target", 12), ca.MX.sym("settings", 5), ca.MX.sym("lbg", ng), ca.MX.sym("ubg", ng)
+    zk, mk, ck = z0, ca.MX(1e-3), cost(z0, tg, st, lo, hi)
+    for _ in range(PROJECTION_ITERATIONS):
+        trial = lm(zk, tg, st, lo, hi, mk)
+        ct = cost(trial, tg, st, lo, hi)
+        better = ct < ck
+        zk, ck, mk = ca.if_else(better, trial, zk), ca.if_else(better, ct, ck), ca.if_else(better, mk / 3, mk * 4)
+    out = ca.Function("fit_penalised_outside", [z, lbg, ubg], [ca.mmax(outside)])(zk, lo, hi)
+    return compiled(ca.Function(f"fit_projection_{model.mechanism}", [z0, tg, st, lo, hi], [zk, out],
+                                ["z0", "target", "settings", "lbg", "ubg"], ["z", "outside"]))
 
 
 
