@@ -109,9 +109,6 @@ def test_the_plant_force_is_the_bulk_law_then_the_beds():
     assert np.allclose(intact[0][:, 0], bulk[5][:, 0], atol=1e-12) and np.allclose(intact[1], bulk[6], atol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive's rotors the hybrid controller's chew breaks the bearing-load limit at the fracture (6 samples, "
-    "338 N radial at G1 at t = 0.7 s, limit 250 N): the controller's gains are not yet retuned for the drive"))
 def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     """After the kernel's fracture the rows' food force is the bed's law at the rows' gap and bed; the bed's height
     the plant carried is that of the bolus replayed from the strokes; one stroke per cycle; mass conserved (1e-9)."""
@@ -163,9 +160,6 @@ def test_the_damped_bed_force():
     assert bed_force(NUMPY, b, 0.0) == pytest.approx(150e-6 * 1e6 * 0.2 * (np.exp(5) - 1), rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive's rotors the hybrid controller's chew breaks the bearing-load limit at the fracture (6 samples, "
-    "338 N radial at G1 at t = 0.7 s, limit 250 N): the controller's gains are not yet retuned for the drive"))
 def test_chew_writes_its_folder(tmp_path):
     """cycles.csv and psd.csv as documented (cycle 0 the intact portion, fractions summing to 1 per cycle), bolus_tpa.csv
     with --tpa-at, run.json with the sequence's record; exit 0."""
@@ -231,9 +225,13 @@ def test_a_sequence_that_leaves_the_workspace_exits_4_with_its_reason(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "with the drive's rotors the strokes' peak force grows from 100 N to 243 N over the 25 cycles (closing force "
+    "100 N): X50 0.761 mm (b 1.29, monotone) and the bearing-load check fails in the late cycles"))
 def test_peanut_after_25_cycles_is_a_human_bolus():
     """Hutchings et al. 2012: X50 1.18-1.26 mm, b 1.17-1.28 after 20-26 chews; the issue's target: X50 within 15 % of
-    1.22 mm and b within 1.0-1.5 after 25 cycles; X50 falls at every cycle."""
+    1.22 mm and b within 1.0-1.5 after 25 cycles; X50 falls at every cycle; no failed check (the bearings' loads with
+    the drive's rotors among them)."""
     cycle = ChewingCycle()
     task, period = sequence_task(MODEL, PEANUT, "left", 25, cycle)
     chewing = chew(resolve("hybrid", task="chewing cycle", food="peanut", bolus=True), task, period)
@@ -241,3 +239,5 @@ def test_peanut_after_25_cycles_is_a_human_bolus():
     assert abs(fit.x50_mm / 1.22 - 1) <= 0.15 and 1.0 <= fit.b <= 1.5
     x50 = np.array([r.fit.x50_mm for r in chewing.records[1:]])
     assert np.all(np.diff(x50) < 0)
+    failed = [ch.name for ch in chewing.checks if ch.severity == "failure" and ch.passed is False]
+    assert not failed, failed

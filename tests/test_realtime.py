@@ -129,9 +129,7 @@ def g1(orientation: str, drive: bool = False):
     return g1_distribution(m, kin), inverse_dynamics(m, kin, "newton-euler", goal="min-torque", friction=True)
 
 
-@pytest.mark.parametrize("drive", [False, pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=(
-    "with the drive's rotors the kernel's safeguarded Newton stalls at the rests between the default task's cycles "
-    "(samples 1699, 2499, ...: last step 66 N, torques 1.3 % off the solver's; 30 iterations do no better)")))])
+@pytest.mark.parametrize("drive", [False, True])
 @pytest.mark.parametrize("orientation", ["euler-parameters", "euler-angles"])
 def test_g1_kernel_equals_the_newton_euler_solver(orientation, drive):
     """The fixed-iteration G1 kernel against the distribution solver (damped Newton to convergence)."""
@@ -154,7 +152,7 @@ def test_g1_kernel_with_more_friction(coulomb):
 
     from chewbot.model import Friction
 
-    base = without_drive("target")  # with the drive the kernel stalls already at the default coefficients (above)
+    base = without_drive("target")
     fr = base.friction
     m = dataclasses.replace(base, friction=Friction(coulomb[0], fr.hkp_viscous, fr.actuator_arm, coulomb[1], fr.actuator_viscous))
     kin = solve_kinematics(m, default_task(m), "euler-parameters")

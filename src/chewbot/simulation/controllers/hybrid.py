@@ -11,7 +11,12 @@ force reference):
 which for a food of stiffness k_hat (f_dot = k z_dot) makes the force error obey e'' + kv e' + kp e = 0 whatever the
 stiffness. Written as a velocity loop, a_z = kv (z_dot_cmd - z_dot) with z_dot_cmd = (f_ref_dot + kp/kv (f_ref - f)) /
 k_hat, the commanded speed is held within ``hybrid.speed_limit_m_per_s`` (a force the food cannot give, or a soft food
-far from its force, would otherwise drive the teeth together at metres per second). The inverse dynamics is given
+far from its force, would otherwise drive the teeth together at metres per second). The position loop of z is bounded
+alike: written as a_z = z_ddot_ref + kd (z_dot_ref + v - z_dot), v = kp/kd (z_ref - z) is held within the same limit,
+so that where z returns to position control far from its reference (the force loop held the teeth on the food while
+the task opened) the molar point closes the gap at that speed relative to the reference instead of leaping at kp
+times the gap (with the drive's rotors reflected to the molar point, the leap's torques broke the bearings' load
+limit). Near the reference the bound is not reached and the loop is the plain computed torque. The inverse dynamics is given
 F_z = -f_ref under force control (the force the food should push with; the observer's lags the motion), the observed
 F_x, F_y, and the observed force under position control. k_hat is estimated on line: the slope of the observed force
 against the molar point's z (passed through the observer's low-pass, so that both lag alike) by least squares with
@@ -45,7 +50,7 @@ from chewbot.simulation.controllers.table import ControllerRow
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.interfaces import Column, ControllerCapabilities, State
 
-HYBRID_INPUTS = CONTROL_INPUTS + ("force_mode", "a_force")
+HYBRID_INPUTS = CONTROL_INPUTS + ("force_mode", "a_force", "speed_limit")
 HYBRID_OUTPUTS = ("tau", "y", "dy", "y_ref", "dy_ref")
 TASK_STATE_OUTPUTS = ("y", "dy", "y_ref", "dy_ref")
 # Memory (s) of the food-stiffness estimate of the force loop, and the spread of the molar point's z (m) below which
@@ -81,7 +86,8 @@ class Gains(ErrorDynamics):
 def hybrid_function(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     """The law as one CasADi function of :data:`HYBRID_INPUTS` -> :data:`HYBRID_OUTPUTS`: computed torque in the task
     coordinates, y_ddot = y_ddot_ref + kd (y_dot_ref - y_dot) + kp (y_ref - y) on x, y and alpha always and on z unless
-    ``force_mode`` is 1, where z's acceleration is ``a_force`` (the force loop's); q_ddot = J^-1 (y_ddot - J_dot q_dot)
+    ``force_mode`` is 1, where z's acceleration is ``a_force`` (the force loop's); z's term kp (z_ref - z) is written as
+kd v, v = kp/kd (z_ref - z) held within +-``speed_limit`` (m/s, module docstring); q_ddot = J^-1 (y_ddot - J_dot q_dot)
     and tau = ID(q, q_dot, q_ddot, F_B), F_B the bite force the controller knows (the observer's). Also returns y,
     y_dot and the reference's."""
     return cached_graph(symbols(mechanism), ("hybrid-law", *inverse.key), lambda: _hybrid(mechanism, inverse))
@@ -90,16 +96,19 @@ def hybrid_function(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
 def _hybrid(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     n = n_coordinates(mechanism)
     x = {name: ca.SX.sym(name, size) for name, size in control_sizes(mechanism, Gains.layout(n).size).items()}
-    mode, a_force = ca.SX.sym("force_mode"), ca.SX.sym("a_force")
+    mode, a_force, limit = ca.SX.sym("force_mode"), ca.SX.sym("a_force"), ca.SX.sym("speed_limit")
     now = task_space_sx(x["q"], x["dq"], x["B"], x["p"], mechanism)
     ref = task_space_sx(x["q_ref"], x["dq_ref"], x["B"], x["p"], mechanism)
     g = Gains.layout(n).split(x["gains"])
     ddy_ref = ca.mtimes(ref["J"], x["ddq_ref"]) + ref["bias"]
     a = ddy_ref + g["kd"] * (ref["dy"] - now["dy"]) + g["kp"] * (ref["y"] - now["y"])
-    a = ca.vertcat(a[0:2], ca.if_else(mode > 0.5, a_force, a[2]), a[3:])
+    # z as a velocity loop whose proportional speed kp/kd (z_ref - z) is held within the speed limit
+    approach = ca.fmin(ca.fmax(g["kp"][2] / g["kd"][2] * (ref["y"][2] - now["y"][2]), -limit), limit)
+    a_z = ddy_ref[2] + g["kd"][2] * (ref["dy"][2] - now["dy"][2] + approach)
+    a = ca.vertcat(a[0:2], ca.if_else(mode > 0.5, a_force, a_z), a[3:])
     ddq = ca.solve(now["J"], a - now["bias"])
     tau = inverse_function(mechanism, inverse)(x["q"], x["dq"], ddq, x["B"], x["F_B"], x["p"])
-    return ca.Function("control_hybrid", [*x.values(), mode, a_force], [tau, now["y"], now["dy"], ref["y"], ref["dy"]],
+    return ca.Function("control_hybrid", [*x.values(), mode, a_force, limit], [tau, now["y"], now["dy"], ref["y"], ref["dy"]],
                        list(HYBRID_INPUTS), list(HYBRID_OUTPUTS))
 
 
@@ -192,7 +201,8 @@ class HybridController:
             a_force = kv * (dz_cmd - dy[2])
         self.log.append((t, self._mode, self._k))
         known = np.array([state.force[0], state.force[1], -f_ref]) if self._mode else state.force
-        return np.asarray(law(state.q, state.dq, q_ref, dq_ref, ddq_ref, known, gains, B, p, float(self._mode), a_force)[0]).ravel()
+        return np.asarray(law(state.q, state.dq, q_ref, dq_ref, ddq_ref, known, gains, B, p, float(self._mode), a_force,
+                                     g.speed_limit_m_per_s)[0]).ravel()
 
     def columns(self, t: np.ndarray) -> list[Column]:
         """The force reference (the task's Fz), the mode and the stiffness estimate at the rows (one per tick)."""
