@@ -63,7 +63,7 @@ SQP_ITERATIONS = 40
 # REACH_UNIT of sine squared below a chain's floor (about a millimetre of the mandible's motion near the floor).
 # Its optimum lies outside the admissible set by about (pose error's gradient) / PENALTY^2: 1e-5 mm for a frame
 # 10 mm beyond the reach at 2 per mm, far below any tolerance of the fit. It is a start for the SQP, not its
-# replacement: on issue 28's analyser (frames 10-40 mm beyond the reach) PROJECTION_ITERATIONS steps end at the
+# replacement: on the analyser recording like a real one (frames 10-40 mm beyond the reach) PROJECTION_ITERATIONS steps end at the
 # SQP's answer (to 1e-8) in some calls and up to 2.8 mm or deg from it in others; a step that does not lower the
 # cost is refused (the damping grows).
 PENALTY = 1e3
