@@ -71,7 +71,8 @@ class Layout:
         return {name: x[s, :] for name, s in self.slices().items()}
 
     def pack(self, columns: int | None = None, **values) -> np.ndarray:
-        """The vector of these blocks (every block given by name; a scalar fills its block), or with ``columns``
+        """The vector of these blocks (every block given by name; a scalar fills its block, a matrix is laid out column
+        by column), or with ``columns``
         the matrix whose rows are laid out so: a block's value is (size, columns), or its size (the same in every
         column), or for a block of one row its row (columns,)."""
         missing, unknown = set(self.names) - set(values), set(values) - set(self.names)
@@ -81,7 +82,9 @@ class Layout:
         out = np.empty(shape)
         for name, s in self.slices().items():
             value = np.asarray(values[name], float)
-            if columns is not None and value.ndim == 1:  # a block's values for every column, or a one-row block's row
+            if columns is None:
+                value = np.ravel(value, order="F")
+            elif value.ndim == 1:  # a block's values for every column, or a one-row block's row
                 value = value[:, None] if value.size == s.stop - s.start else value[None, :]
             out[s] = value
         return out

@@ -231,7 +231,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     counter = [0]
 
     def const(s):
-        return REGISTRATION_CONST.join(rotation=prior.rotation, origin=prior.origin, centre=centre, R_B=prior.R_B,
+        return REGISTRATION_CONST.pack(rotation=prior.rotation, origin=prior.origin, centre=centre, R_B=prior.R_B,
                                        t_B=prior.t_B, scale=s)
 
     def frames(s, rows):  # rows laid out as robotfit.REGISTRATION_FRAME: [exp(s phi_k); R_Y,k - I; p_Y,k]
@@ -264,7 +264,7 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
     bounds = box(3, 3) + box(3, 3, free=markers is None)
     x, share, fit, refined = search(verdict, objective, bounds, progress)
     limiting_frames, limiting = limited_by(verdict, x, share)
-    u = REGISTRATION_X.cut(x)
+    u = REGISTRATION_X.split(x)
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
     A = turn @ prior.rotation
     origin = turn @ (prior.origin - centre) + centre + u["shift"] * MM

@@ -85,7 +85,7 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
     counter = [0]
 
     def const(s):
-        return POINT_CONST.join(rotation=prior.rotation, scale=s, home=home, point=b)
+        return POINT_CONST.pack(rotation=prior.rotation, scale=s, home=home, point=b)
 
     def unknowns(x):
         return np.r_[x[:3], rest + x[3:]]
@@ -110,7 +110,7 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
 
     x, share, fit, refined = search(verdict, objective, box(3, 3), progress)
     limiting_frames, limiting = limited_by(verdict, x, share)
-    u = POINT_X.cut(unknowns(x))
+    u = POINT_X.split(unknowns(x))
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
     A = turn @ prior.rotation
     first = home + u["rest"] * MM

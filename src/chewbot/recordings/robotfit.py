@@ -29,6 +29,7 @@ import numpy as np
 
 from chewbot.compiled.cache import KERNELS, cached_graph, folded
 from chewbot.compiled.kernels import compiled, evaluate
+from chewbot.compiled.layout import Layout
 from chewbot.analysis.checks import NEAR_SINGULAR_DEG
 from chewbot.kinematics.ik import SINGULAR_TOLERANCE
 from chewbot.kinematics.symbolic import COORDINATES, symbolic
@@ -327,31 +328,6 @@ def _projection(model: Model, z, target, settings, r, g, reach: list[bool]) -> c
 
 # ------------------------------------------------------------------------------------------ registration search
 
-@dataclass(frozen=True)
-class Layout:
-    """A named layout of a flat vector: ``parts`` (name, size) in order; :meth:`cut` gives each part's slice of a
-    NumPy or CasADi vector, :meth:`join` the vector of named NumPy parts."""
-
-    parts: tuple[tuple[str, int], ...]
-
-    @property
-    def size(self) -> int:
-        return sum(n for _, n in self.parts)
-
-    def slices(self) -> dict[str, slice]:
-        out, at = {}, 0
-        for name, n in self.parts:
-            out[name] = slice(at, at + n)
-            at += n
-        return out
-
-    def cut(self, v) -> dict:
-        return {name: v[sl] for name, sl in self.slices().items()}
-
-    def join(self, **values) -> np.ndarray:
-        return np.concatenate([np.ravel(np.asarray(values[name], dtype=float), order="F") for name, _ in self.parts])
-
-
 # The rigid-body registration search's unknowns (relative to the prior) and constants (matrices column by column).
 REGISTRATION_X = Layout((("turn", 3), ("shift", 3), ("placement_turn", 3), ("placement_shift", 3)))
 REGISTRATION_CONST = Layout((("rotation", 9), ("origin", 3), ("centre", 3), ("R_B", 9), ("t_B", 3), ("scale", 1)))
@@ -398,7 +374,7 @@ def _build_registration() -> RegistrationFunctions:
     x = ca.SX.sym("x", REGISTRATION_X.size)
     const = ca.SX.sym("const", REGISTRATION_CONST.size)
     frame = ca.SX.sym("frame", REGISTRATION_FRAME.size)
-    u, c, f = REGISTRATION_X.cut(x), REGISTRATION_CONST.cut(const), REGISTRATION_FRAME.cut(frame)
+    u, c, f = REGISTRATION_X.split(x), REGISTRATION_CONST.split(const), REGISTRATION_FRAME.split(frame)
     turn = _expm(u["turn"] * DEG)
     A = ca.mtimes(turn, ca.reshape(c["rotation"], 3, 3))
     o = ca.mtimes(turn, c["origin"] - c["centre"]) + c["centre"] + u["shift"] * MM
@@ -467,7 +443,7 @@ def _build_point_registration(model: Model) -> PointRegistrationFunctions:
     x = ca.SX.sym("x", POINT_X.size)
     const = ca.SX.sym("const", POINT_CONST.size)
     d = ca.SX.sym("d", 3)
-    u, c = POINT_X.cut(x), POINT_CONST.cut(const)
+    u, c = POINT_X.split(x), POINT_CONST.split(const)
     A = ca.mtimes(_expm(u["turn"] * DEG), ca.reshape(c["rotation"], 3, 3))
     v = c["scale"] * ca.mtimes(A, d)
     Q = c["home"] + u["rest"] * MM + v
