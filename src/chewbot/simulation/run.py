@@ -380,7 +380,8 @@ def loop_info(sim: Simulation, options: SimulationOptions, parts: Parts) -> dict
     return {"control": {"rate_Hz": sim.rate, "hold": "zero-order hold between ticks" if sim.rate else "evaluated at every integrator stage",
                         "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
             "controller": {"kind": row.name, "model": parts.model.name, "method": inverse.method, "goal": inverse.goal,
-                           "friction": inverse.friction, "bite_force_known": not options.bite_unknown, "gains": gains.as_dict(),
+                           "friction": inverse.friction, "contact": inverse.contact.value,
+                           "bite_force_known": not options.bite_unknown, "gains": gains.as_dict(),
                            **({"force_observer": {"cutoff_Hz": parts.observer.cutoff,
                                                   "method": "the bite-force estimator at each tick (docs/bite_force.md)"}}
                               if parts.observer is not None else {})},
