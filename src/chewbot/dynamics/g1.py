@@ -67,9 +67,16 @@ def g1_kernel(mechanism: str = "target", orientation: str = G1_ORIENTATION,
 
     return KernelSpec("g1_target", build, (mechanism, orientation, iterations), mechanism)
 
+# A controller's unilateral distribution keeps N_L, N_R this far (N) above contact.preload_N: the plant's normal forces
+# differ from the ones the controller plans by what its model and its force estimate miss (the estimate's lag, the
+# torques held over a tick). Held at the bare bound, the carrot's test (chewbot tpa --food carrot, the drive on) left
+# N_R at -0.0042 N on 48 samples, where the controller's face put it at 0 N; 1 N is 240 times that miss and 1 % of
+# the carrot's 100 N peak.
+CONTROLLER_MARGIN_N = 1.0
+
 
 def distribution_function(params: SymbolicModel, orientation: str, goal: str, friction: float,
-                          iterations: int = G1_ITERATIONS, unilateral: bool = False) -> ca.Function:
+                          iterations: int = G1_ITERATIONS, unilateral: bool = False, margin: float = 0.0) -> ca.Function:
     """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
     (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
     ``orientation``), ``friction`` 0.0 or 1.0 (a constant of the graph). The best piecewise least-squares start
@@ -80,7 +87,8 @@ def distribution_function(params: SymbolicModel, orientation: str, goal: str, fr
     the two bounds, as the distribution solver's :func:`chewbot.dynamics.distribution.solve` does: the free optimum
     where it respects them; else the best of the admissible optima on the faces (one force held at the preload, the
     other by ``iterations`` safeguarded Newton steps) and the corner (both at the preload). On the faces and the
-    corner grad is the gradient along the free unknowns only (zero along a held one), so it stays ~0 at the answer."""
+    corner grad is the gradient along the free unknowns only (zero along a held one), so it stays ~0 at the answer.
+    ``margin`` (N): the bounds are ``contact.preload_N`` + margin (a controller's, :data:`CONTROLLER_MARGIN_N`)."""
     def build():
         model = params
         extra, _ = parameter_input(model)
@@ -130,7 +138,7 @@ def distribution_function(params: SymbolicModel, orientation: str, goal: str, fr
         # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
         Nk, grad, newton_step = iterate((0, 1), start(Dsym, *extra))
         if unilateral:
-            pre = model.contact.preload
+            pre = model.contact.preload + margin
             corner = ca.vertcat(pre, pre)
             best = (corner, ca.SX.zeros(2), ca.SX(0.0), value(Dsym, corner, *extra))
             for held in (0, 1):  # the face N_held = preload, the other free from its clamped free optimum
@@ -146,7 +154,7 @@ def distribution_function(params: SymbolicModel, orientation: str, goal: str, fr
         tau, limits = final(Dsym, Nk, *extra)
         return ca.Function("distribution", [Dsym, *extra], [tau, Nk, grad, newton_step, limits])
 
-    return cached_graph(params, ("distribution", orientation, goal, friction, iterations, unilateral), build)
+    return cached_graph(params, ("distribution", orientation, goal, friction, iterations, unilateral, margin), build)
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
@@ -161,13 +169,14 @@ def sample_torques(mechanism: str, goal: str = "min-torque", friction: bool = Tr
                    contact: str = "bilateral") -> ca.Function:
     """A controller's Newton–Euler inverse dynamics of one sample (:class:`~chewbot.dynamics.base.Sample`): the
     sample's data and, on the target, the distribution of ``goal`` at a fixed cost (:func:`distribution_function`;
-    ``contact="unilateral"``: with N_L, N_R >= ``contact.preload_N``); the 6RSS's torques in closed form. The model's
-    friction where ``friction``."""
+    ``contact="unilateral"``: with N_L, N_R >= ``contact.preload_N`` + :data:`CONTROLLER_MARGIN_N`); the 6RSS's torques
+    in closed form. The model's friction where ``friction``."""
     s = Sample.of(mechanism)
     m = s.params
     ea = Orientation.euler_angles.value
     D = coefficients_kernel(mechanism, ea).graph()(s.kinematics["theta"], s.q, s.dq, s.ddq, s.F, s.B, m.p)[0]
     fl = 1.0 if friction else 0.0
     if m.has_hkp:
-        return s.function(distribution_function(m, ea, goal, fl, unilateral=contact == "unilateral")(D, m.p)[0])
+        return s.function(distribution_function(m, ea, goal, fl, unilateral=contact == "unilateral",
+                                                margin=CONTROLLER_MARGIN_N)(D, m.p)[0])
     return s.function(forces_sx(m, D, ca.SX(0, 1), fl)["tau"])
