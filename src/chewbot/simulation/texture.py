@@ -13,7 +13,9 @@ robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it
    approach's samples are the same, so the trigger comes where it came. The robot is the model's robot with its
    friction (``--friction on``); the position loop is the ``crosshead`` controller
    (:mod:`chewbot.simulation.controllers.crosshead`: computed torque with integral action), its inverse dynamics
-   Newton-Euler with the model's friction.
+   Newton-Euler with the model's friction, given the force observer's estimate of the sample's force, its
+   distribution of the redundant torques unilateral (N_L, N_R >= ``contact.preload_N`` +
+   :data:`chewbot.dynamics.g1.CONTROLLER_MARGIN_N`: both condyles pressed on their planes while the sample pushes).
 3. **The measures** (:func:`chewbot.food.tpa.analyse`, both readings) twice: ``plant``, from the food's force in the
    plant and the plant's gap, contact at the trigger force; ``estimated``, from what the robot logs, the crank angles
    and the torques, through the bite-force estimator with the model's friction (as ``chewbot estimate-force``), contact
@@ -46,7 +48,8 @@ from chewbot.simulation.simulator import simulate
 TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
 TPA_METHOD = "newton-euler"
 # The contact the test is judged under (a condyle lifted off its plane is a failed check) and the controller's
-# distribution keeps: N_L, N_R >= contact.preload_N, the redundant torques pressing the condyles while the food pushes.
+# distribution keeps: N_L, N_R >= contact.preload_N (+ the controller's margin), the redundant torques pressing the
+# condyles while the food pushes, its force fed forward from the force observer.
 TPA_CONTACT = Contact.unilateral
 # The estimate's contact force is at least this many times its noise (1.4826 MAD of its sample-to-sample
 # differences over sqrt 2: white noise's standard deviation, blind to a force that changes smoothly at 1 kHz): a
