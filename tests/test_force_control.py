@@ -162,7 +162,7 @@ def test_gains_files_may_leave_out_the_new_sections_and_name_bad_keys(tmp_path):
     with pytest.raises(ChewbotError, match=r"bad\.toml: key 'hybrid\.threshold_N': expected one positive number"):
         Gains.load(bad)
     with pytest.raises(ChewbotError, match="stiffness_min_N_per_m"):
-        Gains.load(overrides={"hybrid.stiffness_min_N_per_m": 1e6})
+        Gains.load(overrides={"hybrid.stiffness_min_N_per_m": 1e8})  # above the maximum, 1e7
 
 
 def test_hybrid_needs_a_food_and_a_control_rate(tmp_path):

@@ -27,15 +27,14 @@ opens fast does not ask for torques beyond the limit (saturated, they broke the 
 an anti-windup of z. The force loop is not held so: where it brakes the teeth on a stiffening food it needs all of it.
 
 The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the observer's lags the motion), the observed
-F_x, F_y, and the observed force under position control. k_hat is estimated on line as f d(ln f)/dz: the slope of the
-logarithm of the observed force against the molar point's z (passed through the observer's low-pass, so that both lag
-alike) by least squares with exponential forgetting (:data:`STIFFNESS_MEMORY_S`), times the force now, within
-``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at the maximum (a stiffness overestimated by c
-slows the loop by c; underestimated, it makes it faster and overshoots). The logarithm's slope is exact for a food
-that stiffens exponentially (the particle bed: f + f_0 = c e^(z/lambda), whose stiffness grows with the force and which
-the slope of f itself, averaged over the memory, underestimated several times while the force rose, so that the
-rotors' momentum carried the force far past its reference); on a linear food, f d(ln f)/dz over the memory is at
-least the stiffness (1/(z - z_0) falls along the compression), erring on the slow side. The force loop is left once the force reference is below the threshold and the
+F_x, F_y, and the observed force under position control. k_hat is estimated on line from the observed force against
+the molar point's z (passed through the observer's low-pass, so that both lag alike), by least squares with
+exponential forgetting (:data:`STIFFNESS_MEMORY_S`) of two laws, the one that fits the points better (the larger
+coefficient of determination) giving it: a linear food's, k_hat = df/dz, or an exponentially stiffening food's,
+k_hat = f d(ln f)/dz (the particle bed, f + f_0 = c e^(z/lambda): its stiffness grows with the force, and the slope of
+f over the memory, behind it while the force rose, let the rotors' momentum carry the force past its reference);
+within ``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at the maximum (a stiffness
+overestimated by c slows the loop by c; underestimated, it makes it faster and overshoots). The force loop is left once the force reference is below the threshold and the
 task's z reference lies below the point (the task opens), whatever force the food still gives (a food that relaxes
 slowly, or a bed pressed thin, would otherwise hold the teeth shut through the opening), and not entered again while
 that holds.
@@ -211,20 +210,24 @@ class HybridController:
         self._z = y[2] if self._z is None else b * self._z + (1 - b) * y[2]
         leaving = f_ref < g.threshold_N and y_ref[2] < y[2]
         if self._mode == 0 and f >= g.threshold_N and not leaving:
-            self._mode, self._moments = 1, np.zeros(5)
+            self._mode, self._moments = 1, np.zeros(9)
         elif self._mode == 1 and leaving:
             self._mode = 0
         a_force = 0.0
         if self._mode == 1:
-            if f >= g.threshold_N:  # in contact: a point of the food's log force against z
+            if f >= g.threshold_N:  # in contact: a point of the food's force (and its logarithm) against z
                 lam = np.exp(-h / STIFFNESS_MEMORY_S)
-                log_f = np.log(f)
-                self._moments = lam * self._moments + np.array([1.0, self._z, log_f, self._z**2, self._z * log_f])
-            w, sz, sl, szz, szl = self._moments
-            spread = szz / w - (sz / w) ** 2 if w > 0 else 0.0
-            if spread > STIFFNESS_SPREAD_M**2 and f >= g.threshold_N:
-                slope = (szl / w - sz * sl / w**2) / spread
-                self._k = float(np.clip(f * slope, g.stiffness_min_N_per_m, g.stiffness_max_N_per_m))
+                z, u = self._z, np.array([f, np.log(f)])
+                self._moments = lam * self._moments + np.concatenate([[1.0, z, z * z], u, z * u, u * u])
+            w = self._moments[0]
+            mean_z, mean_u = self._moments[1] / w, self._moments[3:5] / w
+            var_z = self._moments[2] / w - mean_z**2
+            if var_z > STIFFNESS_SPREAD_M**2 and f >= g.threshold_N:
+                cov = self._moments[5:7] / w - mean_z * mean_u
+                var_u = np.maximum(self._moments[7:9] / w - mean_u**2, 1e-300)
+                slope = cov / var_z  # of f, and of ln f, against z
+                linear = cov[0] ** 2 / var_u[0] >= cov[1] ** 2 / var_u[1]  # the law that fits better (R^2)
+                self._k = float(np.clip(slope[0] if linear else f * slope[1], g.stiffness_min_N_per_m, g.stiffness_max_N_per_m))
             dt = 1e-3
             before, after = np.interp((t - dt / 2, t + dt / 2), reference.t, self._fz)
             df_ref = -(after - before) / dt
