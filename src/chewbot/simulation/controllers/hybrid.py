@@ -21,23 +21,24 @@ limit). Near the reference the bound is not reached and the loop is the plain co
 The drive's authority: the torques are affine in z's acceleration, tau = tau_0 + c a_z (the inverse dynamics of the
 controller's model, whose drive's rotors are reflected to the cranks), so the largest |a_z| that keeps every torque
 within the limit is min_i (limit - |tau_0,i|) / |c_i| (results.csv's ``z_authority``: with the built-in robot's rotors,
-about 631 kg at the molar point along z, some 3.6 m/s^2 at the closed pose). Under position control z's commanded
-acceleration is held within :data:`AUTHORITY_SHARE` of it, so that the return from force control to a reference that
-opens fast does not ask for torques beyond the limit (saturated, they broke the bearings' load limit with the drive):
-an anti-windup of z. The force loop is not held so: where it brakes the teeth on a stiffening food it needs all of it.
+about 631 kg at the molar point along z, some 3.5 m/s^2 at the chewing cycle's closed pose and 9 m/s^2 at its open one).
+Under position control z's commanded acceleration is held within :data:`AUTHORITY_SHARE` of it, so that the return from
+force control to a reference that opens fast does not ask for torques beyond the limit (saturated, they broke the
+bearings' load limit with the drive): an anti-windup of z. The force loop is not held so: where it brakes the teeth on a
+stiffening food it needs all of it.
 
-The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the observer's lags the motion), the observed
-F_x, F_y, and the observed force under position control. k_hat is estimated on line from the observed force against
-the molar point's z (passed through the observer's low-pass, so that both lag alike), by least squares with
-exponential forgetting (:data:`STIFFNESS_MEMORY_S`) of two laws, the one that fits the points better (the larger
-coefficient of determination) giving it: a linear food's, k_hat = df/dz, or an exponentially stiffening food's,
-k_hat = f d(ln f)/dz (the particle bed, f + f_0 = c e^(z/lambda): its stiffness grows with the force, and the slope of
-f over the memory, behind it while the force rose, let the rotors' momentum carry the force past its reference);
-within ``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at the maximum (a stiffness
-overestimated by c slows the loop by c; underestimated, it makes it faster and overshoots). The force loop is left once the force reference is below the threshold and the
-task's z reference lies below the point (the task opens), whatever force the food still gives (a food that relaxes
-slowly, or a bed pressed thin, would otherwise hold the teeth shut through the opening), and not entered again while
-that holds.
+The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the observer's lags
+the motion), the observed F_x, F_y, and the observed force under position control. k_hat is estimated on line from the
+observed force against the molar point's z (passed through the observer's low-pass, so that both lag alike), by least
+squares with exponential forgetting (:data:`STIFFNESS_MEMORY_S`) of two laws, the one that fits the points better (the
+larger coefficient of determination) giving it: a linear food's, k_hat = df/dz, or an exponentially stiffening food's,
+k_hat = f d(ln f)/dz (the particle bed, f + f_0 = c e^(z/lambda): its stiffness grows with the force, and the slope of f
+over the memory, behind it while the force rose, let the rotors' momentum carry the force past its reference); within
+``hybrid.stiffness_min_N_per_m`` .. ``stiffness_max_N_per_m``, starting at the maximum (a stiffness overestimated by c
+slows the loop by c; underestimated, it makes it faster and overshoots). The force loop is left once the force reference
+is below the threshold and the task's z reference lies below the point (the task opens), whatever force the food still
+gives (a food that relaxes slowly, or a bed pressed thin, would otherwise hold the teeth shut through the opening), and
+not entered again while that holds.
 
 The controller's state (the mode, the stiffness estimate, the filtered z, the regression's moments) changes at its
 ticks; its log gives results.csv's ``force_mode``, ``stiffness_estimate`` and ``z_authority``.
@@ -250,7 +251,8 @@ class HybridController:
                 Column("force_mode", log[:, 1], "1", "1 where z is force-controlled, 0 where position-controlled"),
                 Column("stiffness_estimate", log[:, 2], "N/m", "the hybrid controller's estimate of the food's stiffness along z"),
                 Column("z_authority", log[:, 3], "m/s^2", "the largest acceleration of the molar point's z that keeps the "
-                       "torques within their limit at the tick's state (the hybrid controller commands at most half of it)")]
+                       "torques within their limit at the tick's state (under position control the hybrid controller "
+                       "commands at most half of it)")]
 
     def info(self) -> dict:
         return {}
