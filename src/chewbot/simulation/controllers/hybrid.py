@@ -19,13 +19,13 @@ times the gap (with the drive's rotors reflected to the molar point, the leap's 
 limit). Near the reference the bound is not reached and the loop is the plain computed torque.
 
 The drive's authority: the torques are affine in z's acceleration, tau = tau_0 + c a_z (the inverse dynamics of the
-controller's model, whose drive's rotors are reflected to the cranks), so the largest |a_z| that keeps every torque
-within the limit is min_i (limit - |tau_0,i|) / |c_i| (results.csv's ``z_authority``: with the built-in robot's rotors,
-about 631 kg at the molar point along z, some 3.5 m/s^2 at the chewing cycle's closed pose and 9 m/s^2 at its open one).
-Under position control z's commanded acceleration is held within :data:`AUTHORITY_SHARE` of it, so that the return from
-force control to a reference that opens fast does not ask for torques beyond the limit (saturated, they broke the
-bearings' load limit with the drive): an anti-windup of z. The force loop is not held so: where it brakes the teeth on a
-stiffening food it needs all of it.
+controller's model, whose drive's rotors are reflected to the cranks; with friction, its linearisation at a_z = 0), so
+the largest |a_z| that keeps every torque within the limit is min_i (limit - |tau_0,i|) / |c_i| (results.csv's
+``z_authority``: with the built-in robot's rotors, about 631 kg at the molar point along z, some 3.5 m/s^2 at the
+chewing cycle's closed pose and 9 m/s^2 at its open one). Under position control z's commanded acceleration is held
+within :data:`AUTHORITY_SHARE` of it, so that the return from force control to a reference that opens fast does not ask
+for torques beyond the limit (saturated, they broke the bearings' load limit with the drive): an anti-windup of z. The
+force loop is not held so: where it brakes the teeth on a stiffening food it needs all of it.
 
 The inverse dynamics is given F_z = -f_ref under force control (the force the food should push with; the observer's lags
 the motion), the observed F_x, F_y, and the observed force under position control. k_hat is estimated on line from the
@@ -126,12 +126,13 @@ def _hybrid(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     # z as a velocity loop whose proportional speed kp/kd (z_ref - z) is held within the speed limit
     approach = ca.fmin(ca.fmax(g["kp"][2] / g["kd"][2] * (ref["y"][2] - now["y"][2]), -limit), limit)
     a_z = ddy_ref[2] + g["kd"][2] * (ref["dy"][2] - now["dy"][2] + approach)
-    # the torques are affine in z's acceleration: tau = tau_0 + c a_z; the drive's authority along z is the largest
-    # a_z (either sign) that keeps every torque within the limit
+    # the torques as tau_0 + c a_z (exact where the inverse dynamics is linear in the accelerations; with friction's
+    # distribution, its linearisation at a_z = 0); the drive's authority along z is the largest a_z (either sign) that
+    # keeps every torque within the limit
     a_sym = ca.SX.sym("a_z")
     ddq = ca.solve(now["J"], ca.vertcat(a[0:2], a_sym, a[3:]) - now["bias"])
     tau = inverse_function(mechanism, inverse)(x["q"], x["dq"], ddq, x["B"], x["F_B"], x["p"])
-    c = ca.jacobian(tau, a_sym)
+    c = ca.substitute(ca.jacobian(tau, a_sym), a_sym, 0)
     tau_0 = ca.substitute(tau, a_sym, 0)
     room = ca.fmax(torque_limit - ca.fabs(tau_0), 0) / (ca.fabs(c) + AUTHORITY_FLOOR)
     authority = ca.mmin(room)
