@@ -339,11 +339,11 @@ def stroke_force_check(chewing: Chewing):
     """``force-tracking`` of a sequence under a controller that switches to force control (results.csv's
     ``force_mode``), in place of the simulation's: the RMS of the food's force minus the reference within the
     simulation's bound (10 % of the reference's peak) over the rows where the teeth press on the bolus under force
-    control, each stroke's first 4 / (2 pi ``hybrid.force_frequency_Hz``) left out (the force loop's settling: a
-    critically damped loop is within 10 % of a step after it). The simulation's counts every row of the closing-force
-    burst, which spans the middle half of the cycle, and the teeth reach a thinning bolus ever later in it: the rows
-    before are the cycle's, and at the touch the reference is a step of some 90 N. None where the controller has no
-    force mode."""
+    control, each stroke's first 4 / (2 pi ``force_frequency_Hz``) of the controller's gains left out (its force loop's
+    settling: a critically damped loop is within 10 % of a step after it). The simulation's counts every row of the
+    closing-force burst, which spans the middle half of the cycle, and the teeth reach a thinning bolus ever later in
+    it: the rows before are the cycle's, and at the touch the reference is a step of some 90 N. None where the
+    controller has no force mode."""
     from chewbot.analysis.checks import CheckResult
     from chewbot.simulation.run import FORCE_TRACKING_BOUND_PERCENT
 
@@ -353,7 +353,7 @@ def stroke_force_check(chewing: Chewing):
     f, f_ref = sim.quantities["force"], -chewing.result.reference.force_at(sim.t)[:, 2]
     rows = np.flatnonzero((table["force_mode"] > 0.5) & (f > 0) & (f_ref > 0))
     touch = np.maximum.accumulate(np.where(np.r_[True, np.diff(rows) > 1], sim.t[rows], -np.inf))  # each stroke's first
-    settle = 4 / (2 * np.pi * chewing.result.gains["hybrid"].force_frequency_Hz)
+    settle = 4 / (2 * np.pi * chewing.result.gains[chewing.result.options.controller.gains].force_frequency_Hz)
     rows = rows[sim.t[rows] - touch >= settle]
     if not rows.size:
         return CheckResult("force-tracking", None, None, None, None, "not evaluated: the teeth never pressed on the bolus "
