@@ -22,6 +22,9 @@ Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first
 
 from __future__ import annotations
 
+import os
+import sys
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
 import casadi as ca
@@ -71,13 +74,32 @@ PENALTY = 1e3
 REACH_UNIT = 0.01
 PROJECTION_ITERATIONS = 40
 _SQP = {
-    "qpsol": "qrqp", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,  # "regularize" slows it tenfold here; clipping keeps 3 iterations
-    # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
-    "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
-                      "constr_viol_tol": 1e-13},
+    # qpOASES (an active-set solver for small dense QPs, bundled with CasADi): on the frames of the analyser like
+    # issue 28's that end 10-40 mm beyond the reach, qrqp took up to 5 ms per QP and left 12 of 141 frames
+    # unconverged (stalled at costs up to 78 higher); qpOASES solved all 141 to a stationary point, ten times
+    # faster, never at a higher cost (to 4e-12). Eigenvalues clipped where the Hessian is indefinite: qpOASES wants
+    # a convex QP, and clipping keeps 3 iterations where "regularize" took ten times more
+    "qpsol": "qpoases", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,
+    "qpsol_options": {"printLevel": "none", "error_on_fail": False},
     "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
     "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": SQP_ITERATIONS,
 }
+
+
+@contextmanager
+def _quiet():
+    """Standard output closed at the file descriptor for a while: qpOASES prints its licence notice on stdout from C++
+    whenever it makes a solver's memory, whatever its printLevel (casadi/casadi#1983, #3522), which would land in the
+    commands' output."""
+    sys.stdout.flush()
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,13 +183,15 @@ class FitFunctions:
         params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
         bounds = {"lbg": np.tile(self.lbg[:, None], (1, m)), "ubg": np.tile(self.ubg[:, None], (1, m))}
         try:
-            sol = KERNELS.mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
+            with _quiet():
+                sol = KERNELS.mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
             return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
         except RuntimeError:  # an evaluation failed (a pose where a chain's closure is undefined): find which, alone
             z, lam = np.full((m, self.n), np.nan), np.full((m, self.lbg.size), np.nan)
             for k in range(m):
                 try:
-                    sol = self._nlp(x0=z0[k], p=params[:, k], lbg=self.lbg, ubg=self.ubg)
+                    with _quiet():
+                        sol = self._nlp(x0=z0[k], p=params[:, k], lbg=self.lbg, ubg=self.ubg)
                     z[k], lam[k] = np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel()
                 except RuntimeError:
                     pass
@@ -281,8 +305,9 @@ def _build(model: Model) -> FitFunctions:
     lam = ca.SX.sym("lam_g", g.numel())
     stationarity = ca.Function("fit_stationarity", [z, lam, target, settings],
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
-    nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
-                    {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
+    with _quiet():
+        nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
+                        {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
     # the farthest a point of {M} reaches along a direction: minimise -d . (p + R b) in mm over the admissible poses
     reach = ca.SX.sym("reach", 6)
     extreme = ca.nlpsol(f"reach_nlp_{model.mechanism}", "ipopt",
