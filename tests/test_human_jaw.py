@@ -344,7 +344,7 @@ def test_a_triangle_that_turns_little_is_a_point_path_within_max_rigid(issue):
     assert np.linalg.norm(offsets - offsets[:1], axis=2).max() / MM > ImportOptions().max_rigid_mm
 
 
-@pytest.mark.slow  # about 2 minutes of registration search (docs/recordings.md)
+@pytest.mark.slow  # the import about 25 s of CPU time, mostly the registration search (docs/recordings.md), then a run
 def test_issue_28s_jaw_motion_analyser_is_registered_on_the_incisor(issue, tmp_path):
     """Like issue 28's second real recording (a jaw-motion analyser's face-bow triangle moved in parallel, the
     incisal point 44 mm down and 34 mm back, 12.7 s at 50 Hz, not scaled into the robot's reach, which opens the
