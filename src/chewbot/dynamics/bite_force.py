@@ -63,6 +63,9 @@ UNKNOWNS = ("Fx", "Fy", "Fz", "N_L", "N_R")
 # two steps reach the piece's minimiser to ~1e-12 N on the default task), and damped steps on the smoothed model.
 PATTERN_STEPS = 3
 POLISH_STEPS = 6
+# A sample whose polishing step is below this relative to its unknowns (1 + the largest abs(u), N) has converged to
+# rounding: its line search is skipped (it could only move u by rounding, and its cost rarely falls by it).
+POLISH_FLOOR = 1e-12
 HALVINGS = 6
 # A pattern's minimiser counts as having its signs down to this far on the wrong side (N): the smoothing of abs(N)
 # (DELTA_N) blurs the kink over that width anyway.
@@ -339,17 +342,20 @@ def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, 
 
 
 def _polish(residual, u, free, contact):
-    """Damped Gauss-Newton on the smoothed model (signs 0), the held unknowns kept, all samples at once; a halving
-    evaluates the samples whose step was not accepted yet, alone."""
+    """Damped Gauss-Newton on the smoothed model (signs 0), the held unknowns kept, all samples at once; the line
+    search on the samples whose step is above :data:`POLISH_FLOOR`, a halving on those whose step was not accepted
+    yet."""
     zero = np.zeros(2)
     r, G = residual(u, zero)
     cost = np.einsum("ij,ij->i", r, r)
+    patterns = [(pattern, np.all(free == pattern, axis=1)) for pattern in np.unique(free, axis=0)]
     for _ in range(POLISH_STEPS):
         step = np.zeros_like(u)
-        for pattern in np.unique(free, axis=0):
-            rows = np.all(free == pattern, axis=1)
+        for pattern, rows in patterns:
             step[rows] = _lstsq(G[rows], -r[rows], pattern)
-        left, alpha = np.arange(u.shape[0]), 1.0
+        left, alpha = np.flatnonzero(np.abs(step).max(axis=1) > POLISH_FLOOR * (1.0 + np.abs(u).max(axis=1))), 1.0
+        if not left.size:
+            break
         for _ in range(HALVINGS):
             trial = u[left] + alpha * step[left]
             if contact == "unilateral":
