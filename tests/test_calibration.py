@@ -166,6 +166,7 @@ def test_the_standard_errors_match_the_spread_of_the_estimates_over_noise_seeds(
     assert (ratio < 3).all() and (ratio > 1 / 3).all(), dict(zip(np.array(NAMES)[both], ratio))
 
 
+@pytest.mark.slow  # minutes: an identification with the drive's two parameters over a 4 s excitation at 1 kHz
 def test_identify_fits_the_drives_torque_constant_and_efficiency_from_a_current_log(folder):
     """A log of currents (2 mA of noise, no torques) of the excitation on a robot whose torque constant is +2 % and
     whose gearboxes' efficiency is 0.70 (the model's 0.75): identify reads the torques through the drive, estimates

@@ -283,16 +283,21 @@ def run_cli(*args):
     return CliRunner().invoke(app, list(args))
 
 
-def test_identify_and_estimate_force_read_a_current_only_log(simulated, tmp_path):
+def test_estimate_force_reads_a_current_only_log(simulated, tmp_path):
     path = _current_log(tmp_path / "log.csv", simulated)
     out = run_cli("estimate-force", str(path), "--model", "target", "--friction", "off", "--out", str(tmp_path / "force.csv"))
     assert out.exit_code == 0, out.output
     assert "from the log's currents" in out.output
+    out = run_cli("estimate-force", str(path), "--model", "target-as-printed", "--out", str(tmp_path / "f2.csv"))
+    assert out.exit_code == 2 and "no drive" in out.output
+
+
+@pytest.mark.slow  # minutes: identify over the whole cycle's log (a current log identified: test_calibration -k torque_constant)
+def test_identify_reads_a_current_only_log(simulated, tmp_path):
+    path = _current_log(tmp_path / "log.csv", simulated)
     out = run_cli("identify", str(path), "--model", "target", "--out", str(tmp_path / "id.toml"))
     assert out.exit_code in (0, 4), out.output
     assert (tmp_path / "id.toml").exists()
-    out = run_cli("estimate-force", str(path), "--model", "target-as-printed", "--out", str(tmp_path / "f2.csv"))
-    assert out.exit_code == 2 and "no drive" in out.output
 
 
 def test_a_plant_with_another_gearbox_than_the_controllers(target):
