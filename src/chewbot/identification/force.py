@@ -84,8 +84,9 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
     from F_L(k) by more than the fits' errors. An event is a local largest abs(D_k) above :data:`EVENT_FRACTION` of
     the largest force and :data:`EVENT_SCALES` robust spreads of abs(D) (1.4826 median absolute deviations), that
     the force keeps: the medians of F_R from w to 4 w samples after and of F_L as far before differ by at least half
-    of it. The first sample after the step is the first near k whose pose departs from the motion before it
-    (:func:`_first_deviations`), else k + 1. Events closer than a smoothing window to each other or to an end of the
+    of it. The first sample after the step is the sample nearest to k + 1 whose pose departs from the motion before
+    it (:func:`_first_deviations`), else k + 1: not the first such sample of the w before k, which, where the force
+    steps at a turn of the motion (a fracture at the deepest point), can be the turn's own departure, w samples early. Events closer than a smoothing window to each other or to an end of the
     log are left out (no window would fit between them)."""
     from chewbot.dynamics.bite_force import solve_states
     from chewbot.identification.motion import fit_poses
@@ -121,7 +122,7 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
         if np.linalg.norm(after - before) < 0.5 * D[k]:
             continue  # the force does not keep the step: a disagreement of the fits (a friction reversal), not an event
         near = [c for c in first if k - w < c <= k + 3]
-        cuts.append(near[0] if near else k + 1)
+        cuts.append(min(near, key=lambda c: abs(c - (k + 1))) if near else k + 1)
     full = window_samples(log.n, dt, window_s)
     kept = []
     for c in sorted(cuts):
