@@ -93,12 +93,15 @@ def tpa(
         if log is not None:
             record = _from_log(options, out, force, inputs)
         else:
-            from chewbot.outputs.tpa import write_tpa
+            from chewbot.outputs.tpa import tpa_folder
+            from chewbot.simulation.run import input_files
             from chewbot.simulation.texture import run_tpa
 
             with progress(quiet, "tpa", total=TPA_STEPS) as step:
-                result = run_tpa(options, progress=step, check=check_interrupted)
-                write_tpa(result, out, force=force, progress=step)
+                # the simulation's files are written by a second process while this one estimates the force
+                with tpa_folder(out, force, input_files(options.simulation), step) as folder:
+                    result = run_tpa(options, progress=step, check=check_interrupted, simulated=folder.simulated)
+                    folder.finish(result)
             record = result.record()
     if not quiet:
         _print(record, out)

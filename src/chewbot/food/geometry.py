@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.cache import cached_graph, symbols
-from chewbot.compiled.kernels import evaluate
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.kinematics.task import TARGET_COORDS, Task
@@ -52,6 +52,20 @@ def bite_point_function(mechanism: str) -> ca.Function:
     return cached_graph(m, ("food-bite-point",), build)
 
 
+def bite_point_kernel(mechanism: str) -> KernelSpec:
+    """:func:`bite_point_function` compiled: a whole trajectory's gaps in one C loop."""
+    from chewbot.model.symbolic import c_name
+
+    name = f"bite_point_{c_name(mechanism)}"
+
+    def build(params):
+        fn = bite_point_function(mechanism)
+        x = fn.sx_in()
+        return ca.Function(name, x, fn.call(x), fn.name_in(), fn.name_out(), {"cse": True})
+
+    return KernelSpec(name, build, (mechanism, "food-bite-point"), mechanism)
+
+
 def home_height(model: Model, side: str) -> float:
     """B_z at the home pose (m): {M} coincides with {S} there."""
     return float(np.asarray(model.molar(side), float)[2])
@@ -62,7 +76,7 @@ def gap(model: Model, side: str, q, dq=None) -> dict[str, np.ndarray]:
     states ``q``, ``dq`` (N, n) in Euler angles."""
     q = np.atleast_2d(np.asarray(q, float))
     dq = np.zeros_like(q) if dq is None else np.atleast_2d(np.asarray(dq, float))
-    point, velocity, cos_tilt = evaluate(bite_point_function(model.mechanism), q, dq, np.asarray(model.molar(side), float),
+    point, velocity, cos_tilt = evaluate(native(bite_point_kernel(model.mechanism)), q, dq, np.asarray(model.molar(side), float),
                                          model.vector())
     return {"gap": home_height(model, side) - point[:, 2], "rate": -velocity[:, 2], "sliding": velocity[:, :2],
             "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1.0, 1.0))}
@@ -168,4 +182,4 @@ def largest_height(model: Model, side: str) -> float:
     return largest_gap(model, side) - APPROACH
 
 
-__all__ = ["APPROACH", "bite_point_function", "gap", "home_height", "largest_gap", "largest_height", "molar_path_task"]
+__all__ = ["APPROACH", "bite_point_function", "bite_point_kernel", "gap", "home_height", "largest_gap", "largest_height", "molar_path_task"]

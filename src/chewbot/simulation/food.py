@@ -14,8 +14,8 @@ Events. The law has kinks and one jump (:mod:`chewbot.food.law`, its guards :fun
 order of :data:`~chewbot.food.law.FOOD_EVENTS`): contact, the teeth meeting (delta = h0), the fracture (delta / h0 =
 fracture_strain, which switches ``broken``: :func:`chewbot.food.law.fracture_state`), the adhesion clamp
 (F_d + F_m = -adhesion_N), the yield and the turn (where delta_max stops growing). Each is a guard function of the
-state; after every step the guards at its ends are compared,
-and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
+state, evaluated with the food's state at a step's end inside the compiled step (:func:`food_ended`: one C call a
+step); after every step the guards at its ends are compared, and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
 on the guard of the step's end as a function of the step length (each evaluation one compiled Radau IIA step from
 the start), to :data:`EVENT_TOLERANCE`; the step is taken to just past it, the state switched (fracture), and the
 interval continued. No step straddles a kink, so the method keeps its order, and the fracture happens at its strain,
@@ -56,6 +56,10 @@ STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1)
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
 FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_home=1)
+_ELAPSED = FOOD_INPUTS.slices()["elapsed"]
+# The food's state at a step's end, an output of the compiled step (:func:`food_ended`): F_m and b F_e (N), the
+# compression delta (m) and its rate (m/s), F_v and F_n (N), the deepest compression so far delta_max (m).
+FOOD_END = Layout.of(F_m=1, bFe=1, delta=1, ddelta=1, F_v=1, F_n=1, delta_max=1)
 
 
 @dataclass(frozen=True)
@@ -125,16 +129,38 @@ def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Func
     return cached_graph(m, (name,), build)
 
 
+def food_ended(mechanism: str):
+    """The food's state at the end of a step as outputs of the compiled step (``ended`` of
+    :func:`chewbot.simulation.plant.step_kernel`): ``food_end`` laid out as :data:`FOOD_END` and the ``guards`` there
+    (:func:`chewbot.food.law.guards`), from the state at the step's start (the blocks of s, :data:`FOOD_SHARED`): b F_e
+    at the end, the Maxwell branch's force integrated exactly over the step for a linear change of b F_e
+    (:func:`chewbot.food.law.maxwell_force`), the food's quantities there (:func:`food_function`)."""
+
+    def ended(q1, v1, blocks, h):
+        fn = food_function(mechanism)
+        state = (q1, v1, blocks["B"], blocks["p"], blocks["food"], blocks["broken"])
+        bFe = fn(*state, 0.0, blocks["delta_max"], blocks["z_home"])[3]
+        F_m = maxwell_force(CASADI, blocks["food"], blocks["F_m"], blocks["bFe"], bFe, h)
+        delta, ddelta, delta_max, bFe, F_v, F_n, _, _, g = fn(*state, F_m, blocks["delta_max"], blocks["z_home"])
+        end = dict(F_m=F_m, bFe=bFe, delta=delta, ddelta=ddelta, F_v=F_v, F_n=F_n, delta_max=delta_max)
+        return {"food_end": ca.vertcat(*(end[name] for name in FOOD_END.names)), "guards": g}
+
+    return ended
+
+
 def food_step_kernel(mechanism: str) -> KernelSpec:
-    """The plant's step with a food (:func:`chewbot.simulation.plant.step_kernel` on :func:`food_stage`)."""
+    """The plant's step with a food (:func:`chewbot.simulation.plant.step_kernel` on :func:`food_stage`), the food's
+    state and guards at its end among its outputs (:func:`food_ended`)."""
     from chewbot.model.symbolic import c_name
 
-    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), FOOD_SHARED)
+    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), FOOD_SHARED,
+                       food_ended(mechanism))
 
 
 def food_function(mechanism: str) -> ca.Function:
     """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, z_home) -> delta (m), ddelta (m/s), delta_max
-    (m, with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N), cos_tilt."""
+    (m, with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N), cos_tilt, guards (the law's
+    guards there, :func:`chewbot.food.law.guards`, in the order of :data:`EVENTS`; NaN: not armed)."""
     m = symbols(mechanism)
 
     def build():
@@ -144,12 +170,13 @@ def food_function(mechanism: str) -> ca.Function:
         delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
         delta_max = ca.fmax(delta_max0, delta)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity)
+        g = ca.vertcat(*guards(CASADI, f, delta, ddelta, broken, F_m, delta_max))
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
-                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt],
+                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt, g],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "z_home"],
-                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
+                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "guards"], {"cse": True})
 
-    return cached_graph(m, ("food-quantities-state",), build)
+    return cached_graph(m, ("food-quantities-guards",), build)
 
 
 def food_quantities_kernel(mechanism: str) -> KernelSpec:
@@ -163,17 +190,19 @@ def food_quantities_kernel(mechanism: str) -> KernelSpec:
         inputs = fn.sx_in()
         return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
 
-    return KernelSpec(name, build, (mechanism, "food-quantities-state"), mechanism)
+    return KernelSpec(name, build, (mechanism, "food-quantities-guards"), mechanism)
 
 
 @dataclass(frozen=True)
 class FoodSolved(Solved):
-    """The food plant's own state: the plant's (``z``) and the food's (``food``)."""
+    """The food plant's own state: the plant's (``z``), the food's (``food``) and the law's guards there (``guards``,
+    in the order of :data:`EVENTS`)."""
 
     food: FoodState = None
+    guards: np.ndarray = None
 
     def at(self, z: np.ndarray) -> FoodSolved:
-        return FoodSolved(z, self.food)
+        return FoodSolved(z, self.food, self.guards)
 
 
 @dataclass
@@ -215,49 +244,48 @@ class FoodPlant(Plant):
         blocks["delta_max"][:] = food.delta_max
         return s
 
-    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> FoodState:
-        """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
+    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> tuple[FoodState, np.ndarray]:
+        """The food's state at one plant state, ``delta_max`` the deepest compression before it, and the law's guards
+        there."""
         if self._fn is None:
             self._fn = native(food_quantities_kernel(self.mechanism))
-        delta, ddelta, deepest, bFe, F_v, F_n, _, _ = (np.asarray(v).flat[0] for v in self._fn(
-            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, self._z_home))
-        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
-                         float(ddelta))
+        delta, ddelta, deepest, bFe, F_v, F_n, _, _, g = self._fn(q, dq, self._B, self._p, self._f, broken, F_m, delta_max,
+                                                                  self._z_home)
+        return (FoodState(int(broken), float(F_m), float(bFe[0]), float(delta[0]), float(F_v[0]), float(F_n[0]),
+                          float(deepest[0]), float(ddelta[0])), np.ravel(g))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0)))
+        return replace(state, internal=FoodSolved(state.internal.z, *self.quantities(q, dq, 0, 0.0, 0.0)))
 
-    def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        food = start.internal.food
-        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max).bFe
-        F_m = float(maxwell_force(NUMPY, self._f, food.F_m, food.bFe, bFe, h))
-        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max)))
+    def ended(self, start: PlantState, end: PlantState, h: float, outputs: dict) -> PlantState:
+        """The food's state at the step's end, as the compiled step gave it (:func:`food_ended`)."""
+        F_m, bFe, delta, ddelta, F_v, F_n, delta_max = outputs["food_end"].tolist()
+        food = FoodState(start.internal.food.broken, F_m, bFe, delta, F_v, F_n, delta_max, ddelta)
+        return replace(end, internal=replace(end.internal, food=food, guards=outputs["guards"]))
 
     # ---------------------------------------------------------------------------------------------- events
 
     def guards_at(self, internal: FoodSolved) -> np.ndarray:
-        """The guard functions at the plant's own state (:meth:`guards` of its food's)."""
-        return self.guards(internal.food)
-
-    def guards(self, state: FoodState) -> np.ndarray:
-        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
-        (:func:`chewbot.food.law.guards`)."""
-        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max)
+        """The guard functions at the plant's own state, in the order of :data:`EVENTS` (NaN: not armed): the law's
+        (:func:`chewbot.food.law.guards`), evaluated where the state was."""
+        return internal.guards
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
         """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
         used: the food's force replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
-            self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
+            kernel = native(self.step_kernel())
+            self._step = Step(kernel, lambda state: self.shared_at(s0, state), tuple(kernel.name_out()))
 
         # the torques are held over the interval (the simulator's zero-order hold): read once, at the interval's own
         # step, whose inputs the simulator has ready (the bite forces of other steps' stages are not needed here)
-        tau = PLANT_INPUTS.unpack(inputs(state.t, h))["tau"].copy()
+        W = FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(state.t, h))["tau"], elapsed=0.0)
 
-        def stage(t0: float, dt: float) -> np.ndarray:
-            return FOOD_INPUTS.pack(columns=STAGES, tau=tau, elapsed=C * dt)
+        def stage(t0: float, dt: float) -> np.ndarray:  # the step copies W in: one array for the interval's steps
+            W[_ELAPSED] = C * dt
+            return W
 
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
@@ -293,8 +321,8 @@ class FoodPlant(Plant):
         if EVENTS[first] == "fracture":
             now = after.internal.food
             broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max)
-            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
-            after = replace(after, internal=replace(after.internal, food=food))
+            food, g = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
+            after = replace(after, internal=replace(after.internal, food=food, guards=g))
         return after
 
     # ---------------------------------------------------------------------------------------------- rows
@@ -305,7 +333,7 @@ class FoodPlant(Plant):
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
         delta_max = np.array([s.food.delta_max for s in internal], float)
-        delta, _, _, _, _, F_n, F, cos_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq, self._B, self._p,
+        delta, _, _, _, _, F_n, F, cos_tilt, _ = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq, self._B, self._p,
                                                        self._f, broken, F_m, delta_max, np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
                       "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m, "delta_max": delta_max}

@@ -162,12 +162,12 @@ class TpaResult:
         """The lower tooth's face at the deepest point of the first bite: its tilt against the upper tooth, the spread
         of the gap across the sample's face (its diameter x sin tilt) and the bite point's horizontal slide from
         where the test started (mm, deg)."""
-        from chewbot.food.geometry import bite_point_function
-        from chewbot.compiled.kernels import evaluate
+        from chewbot.compiled.kernels import evaluate, native
+        from chewbot.food.geometry import bite_point_kernel
 
         sim, model = self.simulation.simulation, self.simulation.plant_model
         k = int(np.argmin(self.curves["gap_plant"]))
-        point, _, cos_tilt = evaluate(bite_point_function(model.mechanism), sim.q[[0, k]], sim.dq[[0, k]],
+        point, _, cos_tilt = evaluate(native(bite_point_kernel(model.mechanism)), sim.q[[0, k]], sim.dq[[0, k]],
                                       np.asarray(model.molar(self.options.side), float), model.vector())
         tilt = float(np.arccos(np.clip(cos_tilt[1, 0], -1.0, 1.0)))
         diameter = 0.0 if self.food.diameter is None else self.food.diameter
@@ -209,8 +209,10 @@ def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> f
         reach = min(2 * reach, start)
 
 
-def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
-    """Trigger, test, measures and checks (module docstring)."""
+def run_tpa(options: TpaOptions, progress=None, check=None, simulated=None) -> TpaResult:
+    """Trigger, test, measures and checks (module docstring). ``simulated(result)``: called with the test's
+    simulation (:class:`~chewbot.simulation.run.SimulateResult`) as soon as it is done, before the estimate (the
+    command writes its files meanwhile)."""
     step = progress or (lambda msg, stage=None: None)
     step("food, protocol and trigger")
     food = load_food(options.food)
@@ -222,6 +224,8 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     t = profile.times()
     task = molar_path_task(model, options.side, t, *profile.path(t), name=f"texture test of the {food.name}")
     result = compute(options.simulation, progress=step, check=check, task=task)
+    if simulated is not None:
+        simulated(result)
     sim = result.simulation
     g_plant = gap(plant_model, options.side, sim.q, sim.dq)
     plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")
