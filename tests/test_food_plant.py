@@ -53,13 +53,6 @@ def tpa(tmp_path_factory):
     return lambda **extra: _tpa(tmp, tuple(sorted(extra.items())))
 
 
-ESTIMATE_WITH_DRIVE = pytest.mark.xfail(strict=True, reason=(
-    "with the drive the estimate from the angles alone (rates by the Savitzky-Golay filter) carries the rotors' inertia "
-    "torque J_r N^2 of the filter's acceleration error, 8.7e-3 kg m^2 at each crank: hardness 3.85 N for 0.785 N "
-    "(issue 27, item 3)"))
-
-
-@ESTIMATE_WITH_DRIVE
 def test_linear_elastic_cylinder(tpa):
     """Hardness = k x the deepest compression, 50 % of the height at the trigger h_t = h0 - F_t / k past the trigger's
     own F_t / k: E A / 2 + F_t / 2 (the crosshead leaves a few um of error), to 0.5 % from the plant and 5 % from the
@@ -76,7 +69,6 @@ def test_linear_elastic_cylinder(tpa):
     assert r.record()["tilt_at_deepest_deg"] < 5  # the laws' parallel teeth: a few degrees at 3 mm of gap
 
 
-@ESTIMATE_WITH_DRIVE
 def test_brittle_cylinder(tpa):
     """Fracturability = E A x fracture strain (the law's fracture force) to 1 %; the cohesiveness is below 1 by the
     areas of the law: A1 = k (df^2 / 2 + b (dm^2 - df^2) / 2 + b dm^2 / 2), A2 = b k dm^2, dm the deepest compression
@@ -151,10 +143,6 @@ def test_tpa_refuses_a_sample_taller_than_the_workspace(tmp_path):
     assert r.exit_code == EXIT_BAD_INPUT and "largest sample is 15.08 mm" in " ".join(r.output.split())
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive in the built-in robot the test exits 4: the estimated springiness and resilience out of their "
-    "range (1.014, 1.259), the estimate from the angles carrying the rotors' inertia times the smoothed "
-    "accelerations' error (issue 27, item 3)"))
 def test_tpa_command_writes_its_folder(tmp_path):
     """chewbot tpa writes tpa.json with both sets of measures, results.csv with the food's columns, the figures and
     the reports; its hardness lies between the equilibrium and the instantaneous modulus' force; and chewbot tpa --log

@@ -47,13 +47,7 @@ def tpa(tmp_path_factory):
     return lambda name: _tpa(tmp, name)
 
 
-ESTIMATE_RANGE_WITH_DRIVE = pytest.mark.xfail(strict=False, reason=(
-    "with the drive in the built-in robot the estimate from the angles carries the rotors' inertia J_r "
-    "N^2 times the smoothed accelerations' error: the elastic sample's estimated springiness and resilience leave "
-    "their range (1.014, 1.258) and the test exits 4 (issue 27, item 3)"))
-
-
-@pytest.mark.parametrize("name", [pytest.param("elastic", marks=ESTIMATE_RANGE_WITH_DRIVE), "stiff", "crushing"])
+@pytest.mark.parametrize("name", list(SAMPLES))
 def test_the_protocol_is_held_with_friction(tpa, name):
     """The robot, with its friction and its drive, holds the protocol on each sample, and no check fails: the
     compression within 1 % of its target, the teeth apart, the speed's 2nd-98th percentiles within 1 % of the
@@ -71,22 +65,18 @@ def test_the_protocol_is_held_with_friction(tpa, name):
     assert r.curves["force_plant"][k - 1] < 0.049 <= r.curves["force_plant"][k + 1]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive in the built-in robot the estimate from the angles is 0.178 N RMS off the plant's "
-    "0.81 N peak (22 %), the rotors' inertia J_r N^2 times the smoothed accelerations' error (issue 27, "
-    "item 3)"))
-
 def test_the_estimate_recovers_the_plants_force(tpa):
-    """The force the robot estimates from its crank angles and torques (chewbot estimate-force's estimator and its
-    default, the model's friction subtracted) is the plant's to 2 % RMS of the peak on the stiff sample (39 N); on the
-    elastic one (0.8 N) the friction model's misreadings where the robot starts and stops, about 0.02 N, are 3 % of
-    its peak."""
-    c = tpa("stiff").curves
-    error = c["force_estimated"] - c["force_plant"]
-    assert np.sqrt(np.mean(error**2)) < 0.02 * np.max(c["force_plant"])
-    c = tpa("elastic").curves
-    error = c["force_estimated"] - c["force_plant"]
-    assert np.sqrt(np.mean(error**2)) < 0.03 * np.max(c["force_plant"])
+    """The force the robot estimates from its crank angles and currents (chewbot estimate-force's estimator and its
+    default, the model's friction subtracted; the held currents averaged with the smoothed accelerations' weights, so
+    the rotors' inertia J_r N^2, 631 kg at the molar, meets the same average of the motion) is the plant's to 2 % RMS
+    of the peak on the stiff sample (39 N) and on the elastic one (0.8 N); its 95 % interval holds the plant's force at
+    90 % of the samples or more (the issue's bar)."""
+    for name in ("stiff", "elastic"):
+        c = tpa(name).curves
+        error = c["force_estimated"] - c["force_plant"]
+        assert np.sqrt(np.mean(error**2)) < 0.02 * np.max(c["force_plant"]), name
+        inside = (c["force_estimated_low95"] <= c["force_plant"]) & (c["force_plant"] <= c["force_estimated_high95"])
+        assert np.mean(inside) >= 0.9, name
 
 
 def test_the_condyles_stay_on_their_planes(tpa):
@@ -122,11 +112,6 @@ def test_a_crushed_sample_springs_back_by_r(tpa):
     assert r.plant.measures["cohesiveness"] < 0.2
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive in the built-in robot the estimate from the angles swings by +-1.2 N around the second bite's "
-    "turn (the rotors' inertia J_r N^2 times the smoothed accelerations' error) on a force of 0.36 N: it never stays "
-    "above its contact force for 100 ms, the second contact is not found and the estimated springiness is 0.0 "
-    "(issue 27, item 3)"))
 def test_a_crushed_sample_s_estimated_springiness_is_r(tpa):
     """The crushed sample's springiness read from the torques, as the plant's: r (0.1) within 0.02."""
     assert tpa("crushing").estimated.measures["springiness"] == pytest.approx(0.1, abs=0.02)
@@ -141,6 +126,11 @@ def test_tpa_json_gives_both_readings_definitions_and_checks(tpa):
     assert {"compression-reached", "speed-held", "teeth-met", "contact-pull", "plant-springiness-range",
             "estimated-resilience-range"} <= {c["name"] for c in record["checks"]}
     assert record["protocol"]["trigger_force_N"] == 0.049 and record["options"]["friction"] == "on"
+    for key, value in record["estimated"].items():  # each measure's interval holds the estimate's own
+        assert (value is None) == (record["estimated_ci95"][key] is None), key
+        if value is not None:
+            low, high = record["estimated_ci95"][key]
+            assert low <= value <= high, key
     json.dumps(record)
 
 
@@ -221,3 +211,32 @@ def test_tpa_options_resolve_once():
     assert d.protocol.compression is None and d.protocol.distance == pytest.approx(3e-3) and not d.simulation.friction
     with pytest.raises(OptionError, match="plant-set"):
         resolve_tpa(log="log.csv", plant_overrides={"mandible.mass_g": 400.0})
+
+
+def test_each_measure_s_interval_is_its_range_over_the_interval_s_bounds(tmp_path):
+    """A hand-built test of an elastic cylinder (1000 N/m along a profile of the protocol) whose estimate's 95 %
+    interval is the force -/+ 1 %: the hardness's interval is the hardness -/+ 1 % (a force, bounded exactly), the
+    cohesiveness's holds the exact 1 (each bound's areas in the same proportion), springiness's too; tpa.html shows
+    them beside the estimate."""
+    from chewbot.food.tpa import Protocol
+    from chewbot.outputs.tpa import write_tpa_log
+    from chewbot.simulation.texture import analyse_estimate
+
+    profile = Protocol(pause=0.5).profile(0.011, 1.25)
+    t = profile.times()
+    g = profile.path(t)[0]
+    F = 1000.0 * np.maximum(0.010 - g, 0.0)
+    curve = {"t": t, "gap": g, "force": F, "low95": 0.99 * F, "high95": 1.01 * F}
+    analysis = analyse_estimate(curve, 0.049)
+    hardness = analysis.measures["hardness_N"]
+    assert analysis.intervals["hardness_N"] == pytest.approx([0.99 * hardness, 1.01 * hardness], rel=1e-12)
+    for key in ("cohesiveness", "springiness"):
+        low, high = analysis.intervals[key]
+        assert low <= analysis.measures[key] <= high and low <= 1.0 + 1e-3 and high >= 1.0 - 1e-3
+    assert analysis.intervals["fracturability_N"] is None
+    record = {"chewbot_tpa": 2, "options": {"log": "hand-built"}, "protocol": profile.record(), "food": None,
+              "plant": None, "estimated": analysis.measures, "estimated_ci95": analysis.intervals,
+              "definitions": analysis.definitions, "anchors": {"estimated": analysis.anchors}, "estimator": {},
+              "checks": [c.as_dict() for c in analysis.checks]}
+    page = (write_tpa_log(record, curve, 0.010, "hand-built cylinder", tmp_path / "tpa") / "tpa.html").read_text("utf-8")
+    assert "<th>estimated: 95 % interval</th>" in page and f"{0.99 * hardness:.4g} \u2013 {1.01 * hardness:.4g}" in page

@@ -119,6 +119,7 @@ def _from_log(options, out: Path, force: bool, inputs) -> dict:
     analysis, curve, estimator = tpa_from_log(options)
     record = {"chewbot_tpa": 2, "options": options.record(), "protocol": options.protocol.record(),
               "food": None if sample is None else sample.as_dict(), "plant": None, "estimated": analysis.measures,
+              "estimated_ci95": analysis.intervals,
               "definitions": analysis.definitions, "anchors": {"estimated": analysis.anchors}, "estimator": estimator,
               "checks": [c.as_dict() for c in analysis.checks]}
     write_tpa_log(record, curve, None if sample is None else sample.height, "logged" if sample is None else sample.name,
@@ -137,10 +138,14 @@ def _print(record: dict, out: Path) -> None:
                      f"{p['height_at_trigger_mm']:.4g} mm; compression {how} to a gap of {p['deepest_gap_mm']:.4g} mm at "
                      f"{p['test_speed_mm_s']:g} mm/s; friction {record['options']['friction']}", highlight=False, markup=False)
     columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
-    stdout.print("measure".ljust(20) + "".join(c.rjust(12) for c in columns), highlight=False, markup=False)
+    intervals = record.get("estimated_ci95") or {}
+    stdout.print("measure".ljust(20) + "".join(c.rjust(12) for c in columns) + ("  estimated 95 %" if intervals else ""),
+                 highlight=False, markup=False)
     for m in MEASURES:
         cells = ["null" if record[c][m] is None else f"{record[c][m]:.4g}" for c in columns]
-        stdout.print(m.ljust(20) + "".join(c.rjust(12) for c in cells), highlight=False, markup=False)
+        bounds = intervals.get(m)
+        ci = "" if bounds is None else f"  [{bounds[0]:.4g}, {bounds[1]:.4g}]"
+        stdout.print(m.ljust(20) + "".join(c.rjust(12) for c in cells) + ci, highlight=False, markup=False)
     checks = record["checks"]
     stdout.print(f"checks: {sum(c['passed'] is True for c in checks)} passed, {sum(c['passed'] is False for c in checks)} "
                  f"failed, {sum(c['passed'] is None for c in checks)} not evaluated (tpa.json \"checks\")", highlight=False,

@@ -289,13 +289,15 @@ def protocol(height: float, compression_percent: float = 50.0, speed_mm_s: float
 @dataclass(frozen=True)
 class TpaAnalysis:
     """The measures of a two-bite test (:data:`MEASURES`, plain numbers or None), their definitions in words (with
-    the contact force used), the checks of the energy readings (:class:`chewbot.analysis.checks.CheckResult`) and the
-    anchors a texture analyser's software marks (samples, times, gaps, forces, areas)."""
+    the contact force used), the checks of the energy readings (:class:`chewbot.analysis.checks.CheckResult`), the
+    anchors a texture analyser's software marks (samples, times, gaps, forces, areas) and, for an estimated force
+    with an error bar, each measure's 95 % interval ``[low, high]`` (``intervals``; None where there is none)."""
 
     measures: dict
     definitions: dict
     checks: list
     anchors: dict
+    intervals: dict | None = None
 
     def as_dict(self) -> dict:
         """tpa.json's pieces: the measures, the definitions, the checks as run.json has them, the anchors."""

@@ -24,7 +24,7 @@ import numpy as np
 
 from chewbot.dynamics.bite_force import ForceEstimate, estimate
 from chewbot.identification.log import RobotLog
-from chewbot.identification.motion import log_motion
+from chewbot.identification.motion import LogMotion, log_motion
 from chewbot.model import Model
 from chewbot.task import WINDOW_S
 
@@ -47,6 +47,16 @@ def estimate_log(model: Model, log: RobotLog, *, side: str = "left", contact: st
     :func:`chewbot.dynamics.bite_force.estimate`. A log read by its currents has them turned into crank torques
     through the model's drive at the smoothed crank rates first, then is estimated as a log of those torques.
     ``info["rates"]`` says how the rates were obtained, ``info["events"]`` where the force steps."""
+    return estimate_log_motion(model, log, side=side, contact=contact, friction=friction, window_s=window_s,
+                               sigma=sigma, events=events)[0]
+
+
+def estimate_log_motion(model: Model, log: RobotLog, *, side: str = "left", contact: str = "bilateral",
+                        friction: bool = True, window_s: float = WINDOW_S, sigma: float | None = None,
+                        events: bool = True) -> tuple[ForceEstimate, LogMotion]:
+    """:func:`estimate_log` and the motion it was estimated along (the poses, the smoothed rates, the held torques'
+    average: :class:`~chewbot.identification.motion.LogMotion`), for a caller that needs the mandible's motion too
+    (the texture test's gap)."""
     reads = log.reads(model)
     if reads == "currents":
         log = replace(log, tau=log.crank_torques(model, log_motion(model, log, side, window_s).kin.dtheta), current=None)
@@ -60,7 +70,7 @@ def estimate_log(model: Model, log: RobotLog, *, side: str = "left", contact: st
                         "angle_residual_rms_rad": float(np.sqrt(np.mean(motion.angle_residual**2))),
                         "torques": "held between samples: averaged with the smoothed accelerations' weights" if smoothed
                         else "as logged", "events": [{"sample": int(k), "t_s": float(log.t[k])} for k in cuts]})
-    return result
+    return result, motion
 
 
 def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s: float = WINDOW_S,
@@ -74,8 +84,9 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
     from F_L(k) by more than the fits' errors. An event is a local largest abs(D_k) above :data:`EVENT_FRACTION` of
     the largest force and :data:`EVENT_SCALES` robust spreads of abs(D) (1.4826 median absolute deviations), that
     the force keeps: the medians of F_R from w to 4 w samples after and of F_L as far before differ by at least half
-    of it. The first sample after the step is the first near k whose pose departs from the motion before it
-    (:func:`_first_deviations`), else k + 1. Events closer than a smoothing window to each other or to an end of the
+    of it. The first sample after the step is the sample nearest to k + 1 whose pose departs from the motion before
+    it (:func:`_first_deviations`), else k + 1: not the first such sample of the w before k, which, where the force
+    steps at a turn of the motion (a fracture at the deepest point), can be the turn's own departure, w samples early. Events closer than a smoothing window to each other or to an end of the
     log are left out (no window would fit between them)."""
     from chewbot.dynamics.bite_force import solve_states
     from chewbot.identification.motion import fit_poses
@@ -111,7 +122,7 @@ def force_events(model: Model, log: RobotLog, side: str, contact: str, window_s:
         if np.linalg.norm(after - before) < 0.5 * D[k]:
             continue  # the force does not keep the step: a disagreement of the fits (a friction reversal), not an event
         near = [c for c in first if k - w < c <= k + 3]
-        cuts.append(near[0] if near else k + 1)
+        cuts.append(min(near, key=lambda c: abs(c - (k + 1))) if near else k + 1)
     full = window_samples(log.n, dt, window_s)
     kept = []
     for c in sorted(cuts):

@@ -162,6 +162,11 @@ def _cell(v) -> str:
     return html.escape(str(v))
 
 
+def _interval(bounds) -> str | None:
+    """A measure's 95 % interval as a cell's text, ``low – high`` (None: no interval)."""
+    return None if bounds is None else f"{bounds[0]:.4g} – {bounds[1]:.4g}"
+
+
 def _table(header: list[str], rows: list[list]) -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in row) + "</tr>" for row in rows)
@@ -195,7 +200,10 @@ def tpa_html(record: dict) -> str:
     protocol as run, the sample, and the force-time (anchors and areas shaded) and force-displacement figures."""
     columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
     definitions = record.get("definitions", {})
-    measures = [[_named(m), *(record[c].get(m) for c in columns), definitions.get(m, "")] for m in MEASURES]
+    intervals = record.get("estimated_ci95")
+    header = ["measure", *columns, *(["estimated: 95 % interval"] if intervals else []), "definition"]
+    measures = [[_named(m), *(record[c].get(m) for c in columns), *([_interval(intervals.get(m))] if intervals else []),
+                 definitions.get(m, "")] for m in MEASURES]
     checks = [[c["name"], {True: "passed", False: "FAILED" if c["severity"] == "failure" else "warning", None: "not evaluated"}[c["passed"]],
                c["message"]] for c in record.get("checks", [])]
     failed = [c for c in record.get("checks", []) if c["passed"] is False and c["severity"] == "failure"]
@@ -216,8 +224,10 @@ vertical-align:top}}table{{border-collapse:collapse;margin-bottom:1em}}tr:nth-ch
 {verdict}
 <h2>Measures</h2>
 <p>Bourne's measures of the two-bite test; "plant" is the sample's force in the simulation (the load cell), "estimated"
-the force the robot estimates from its crank angles and torques. Areas are works of the force over the probe's travel.</p>
-{_table(["measure", *columns, "definition"], measures)}
+the force the robot estimates from its crank angles and torques, with each measure's 95 % interval: the range of the
+measure over the estimated curve and the two bounds of its 95 % interval (the estimate &plusmn; 1.96 standard errors:
+the torques', the smoothed rates' and the model's errors). Areas are works of the force over the probe's travel.</p>
+{_table(header, measures)}
 <h2>Force over time</h2>
 <p>The anchors a texture analyser's software marks (contact, fracture, peaks, deepest points) and the areas: the first
 compression (A1 up to the deepest point), the first withdrawal (its returned work, resilience's numerator), the second

@@ -37,7 +37,7 @@ import numpy as np
 from chewbot.dynamics.options import Contact
 from chewbot.food.geometry import gap, largest_height, molar_path_task
 from chewbot.food.law import Food, load_food
-from chewbot.food.tpa import HOLD, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
+from chewbot.food.tpa import HOLD, MEASURES, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
 from chewbot.model import Model
 from chewbot.simulation.controllers.table import TEXTURE_CONTROLLER, controller_row
 from chewbot.simulation.options import SimulationOptions, resolve
@@ -153,6 +153,7 @@ class TpaResult:
                 "tilt_at_deepest_deg": info.get("tilt_at_deepest_deg"), "face": self.face(),
                 "events": info.get("events", []),
                 "plant": self.plant.measures, "estimated": self.estimated.measures,
+                "estimated_ci95": self.estimated.intervals,
                 "definitions": self.plant.definitions, "anchors": {"plant": self.plant.anchors, "estimated": self.estimated.anchors},
                 "estimator": self.estimator, "checks": [c.as_dict() for c in self.checks]}
 
@@ -230,10 +231,10 @@ def run_tpa(options: TpaOptions, progress=None, check=None, simulated=None) -> T
     plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")
     step("bite force from the torques")
     curve, estimator = estimate_from_log(model, simulated_log(result), options.side, options.friction)
-    estimated = analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
-                        contact_hold=CONTACT_HOLD)
+    estimated = analyse_estimate(curve, estimator["contact_force_N"])
     curves = {"t": sim.t, "gap_plant": g_plant["gap"], "force_plant": sim.quantities["force"], "gap_estimated": curve["gap"],
-              "force_estimated": curve["force"], "force_estimated_se": curve["se"]}
+              "force_estimated": curve["force"], "force_estimated_se": curve["se"],
+              "force_estimated_low95": curve["low95"], "force_estimated_high95": curve["high95"]}
     checks = texture_checks(result, food, profile, g_plant, plant, estimated)
     return TpaResult(options, food, profile, result, plant, estimated, curves, h_max, estimator, checks)
 
@@ -257,29 +258,55 @@ def estimate_trigger(force: np.ndarray, trigger_force: float) -> tuple[float, fl
 
 
 def estimate_from_log(model: Model, log, side: str, friction: bool = True, trigger_force: float | None = None) -> tuple[dict, dict]:
-    """The sample's force along the gap from a log's crank angles and torques: the motion as ``chewbot identify``
-    recovers it (poses by least squares on the angles, rates smoothed from them unless logged), the force by the
-    bite-force estimator (``friction``: the model's friction subtracted, as ``chewbot estimate-force``'s default), the
-    gap from the recovered poses. Returns the curve {"t", "gap", "force", "se"} and what tpa.json says of the estimator,
-    with the contact force the measures use (:func:`estimate_trigger`)."""
-    from chewbot.dynamics.bite_force import estimate
+    """The sample's force along the gap from a log's crank angles and torques (or currents), as ``chewbot
+    estimate-force`` estimates it (:func:`chewbot.identification.force.estimate_log`: the motion as ``chewbot
+    identify`` recovers it, rates smoothed from the angles unless logged, the held torques averaged with the smoothed
+    accelerations' weights, the smoothing kept from reaching across the force's steps; ``friction``: the model's
+    friction subtracted), the gap from the recovered poses. Returns the curve {"t", "gap", "force", "se", "low95",
+    "high95"} (the force's 95 % interval) and what tpa.json says of the estimator, with the contact force the
+    measures use (:func:`estimate_trigger`)."""
     from chewbot.food.tpa import TRIGGER_FORCE
-    from chewbot.identification.motion import log_motion
+    from chewbot.identification.force import estimate_log_motion
 
-    motion = log_motion(model, log, side)
-    est = estimate(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), side=side, friction=friction)
+    est, motion = estimate_log_motion(model, log, side=side, friction=friction)
     q, dq, _ = motion.kin.euler_angle_state()
     force = -est.F_B[:, 2]
+    low, high = est.interval()
     contact, noise = estimate_trigger(force, TRIGGER_FORCE if trigger_force is None else trigger_force)
-    curve = {"t": est.t, "gap": gap(model, side, q, dq)["gap"], "force": force, "se": est.se[:, 2]}
-    return curve, {"method": "chewbot.dynamics.bite_force.estimate on the motion recovered from the crank angles "
-                             f"(chewbot.identification.motion.log_motion), the model's friction {'on' if friction else 'off'}",
-                   "friction": "on" if friction else "off", "rates": motion.rates, "window_samples": motion.window_samples,
+    curve = {"t": est.t, "gap": gap(model, side, q, dq)["gap"], "force": force, "se": est.se[:, 2],
+             "low95": -high[:, 2], "high95": -low[:, 2]}
+    return curve, {"method": "chewbot.identification.force.estimate_log (chewbot estimate-force's estimator) on the "
+                             f"crank angles and the logged {est.info['reads']}, the model's friction "
+                             f"{'on' if friction else 'off'}",
+                   "friction": "on" if friction else "off", "reads": est.info["reads"], "rates": motion.rates,
+                   "torques": est.info["torques"], "window_samples": motion.window_samples, "events": est.info["events"],
                    "sigma_Nm": est.sigma, "noise_N": noise, "contact_force_N": contact,
                    "contact_force_rule": f"the larger of the trigger force and {NOISE_FACTOR:g} x the estimate's noise "
                                          "(1.4826 MAD of its sample-to-sample differences / sqrt 2), held for "
                                          f"{CONTACT_HOLD:g} s",
+                   "standard_error_rms_N": {k: float(np.sqrt(np.mean(v[:, 2] ** 2))) for k, v in est.se_parts.items()},
                    "ill_conditioned_samples": int(np.size(est.ill_conditioned)), "warnings": list(est.warnings)}
+
+
+def analyse_estimate(curve: dict, contact_force: float) -> TpaAnalysis:
+    """Bourne's measures of an estimated force curve (:func:`estimate_from_log`'s), with each measure's 95 % interval
+    (``intervals``, tpa.json's ``"estimated_ci95"``): the range of the measure over three curves, the estimate and
+    the two bounds of its 95 % interval (each sample's estimate -/+ 1.96 standard errors), all with the same contact
+    force. The interval's width is mostly the same sign along a stroke (the smoothed rates' error, a model
+    parameter's: they move the whole curve), so the bounds are curves the force could have been; a measure the
+    bounds' curves cannot be analysed on (the lower bound never positive) has the interval null."""
+    estimated = analyse(curve["t"], curve["gap"], curve["force"], contact_force, label="estimated",
+                        contact_hold=CONTACT_HOLD)
+    try:
+        bounds = [analyse(curve["t"], curve["gap"], curve[k], contact_force, contact_hold=CONTACT_HOLD).measures
+                  for k in ("low95", "high95")]
+    except TpaError:
+        return replace(estimated, intervals=dict.fromkeys(MEASURES))
+    intervals = {}
+    for key, value in estimated.measures.items():
+        values = [v for v in (value, *(b[key] for b in bounds)) if v is not None]
+        intervals[key] = None if value is None else [min(values), max(values)]
+    return replace(estimated, intervals=intervals)
 
 
 def simulated_log(result: SimulateResult):
@@ -302,10 +329,10 @@ def tpa_from_log(options: TpaOptions) -> tuple[TpaAnalysis, dict, dict]:
     model = load_model(options.model)
     log = read_log(options.log)
     curve, estimator = estimate_from_log(model, log, options.side, options.friction, options.protocol.trigger_force)
-    return (analyse(curve["t"], curve["gap"], curve["force"], estimator["contact_force_N"], label="estimated",
-                    contact_hold=CONTACT_HOLD), curve, estimator)
+    return analyse_estimate(curve, estimator["contact_force_N"]), curve, estimator
 
 
-__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult", "check_height",
+__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult",
+           "analyse_estimate", "check_height",
            "estimate_from_log", "estimate_trigger", "find_trigger", "resolve_tpa", "run_tpa", "simulated_log",
            "texture_checks", "tpa_from_log"]
