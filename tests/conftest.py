@@ -14,6 +14,10 @@ import numpy as np
 import pytest
 from support import model
 
+# pytest-xdist's workers inherit COLUMNS=80: a rich console first made under it keeps 80 columns for the whole worker,
+# whatever width a test gives its runner
+os.environ.pop("COLUMNS", None)
+
 CLUSTER_WAIT_S = 120  # the scheduler and its worker must answer within this (a loaded 2-core machine)
 
 
