@@ -7,8 +7,9 @@ The gap is measured along {S}'s z:
     g = B_z(home) - B_z(q),   delta = max(0, h0 - g),
 
 and d(delta)/dt = dB_z/dt; the bite point's velocity in {S}'s x-y plane is the sliding velocity of the sample on the
-upper tooth. The laws assume parallel teeth: the lower tooth's tilt is the angle between {M}'s z axis and {S}'s,
-arccos(R_33).
+upper tooth. The lower tooth's tilt theta is the angle between {M}'s z axis and {S}'s: cos theta = R_33 and sin theta
+= |(R_13, R_23)|, the latter smoothed as sqrt(R_13^2 + R_23^2 + e^2) - e (e = :data:`SIN_TILT_SMOOTHING`) so that
+its derivative is finite at theta = 0, where the food's law (:mod:`chewbot.food.law`) takes it.
 
 The point-path task of a texture test (:func:`molar_path_task`) moves B along {S}'s z with B_x, B_y held at home and
 one angle pinned (alpha = 0 by default, as ``chewbot track-incisor --pin``): three equations of the point and the pin
@@ -35,10 +36,14 @@ PATH_TOLERANCE = 1e-12
 # The gap at the start of a texture test is h0 + this (m): a texture analyser's probe starts a millimetre or so above the
 # sample and finds it at its pre-test speed.
 APPROACH = 1e-3
+# e of the smoothed sin(tilt) (module docstring): it changes sin(tilt) by at most 1e-9, the half-spread of the
+# compression across a 10 mm face by at most 5e-12 m.
+SIN_TILT_SMOOTHING = 1e-9
 
 
 def bite_point_function(mechanism: str) -> ca.Function:
-    """(q, dq, B, p) -> point (3, the bite point in {S}, m), velocity (3, m/s), cos_tilt (R_33), q in Euler angles."""
+    """(q, dq, B, p) -> point (3, the bite point in {S}, m), velocity (3, m/s), cos_tilt (R_33), sin_tilt (smoothed,
+    module docstring) and its rate (1/s), q in Euler angles."""
     m = symbols(mechanism)
 
     def build():
@@ -46,10 +51,13 @@ def bite_point_function(mechanism: str) -> ca.Function:
         B = ca.SX.sym("B", 3)
         point = s.point(B)
         velocity = ca.jtimes(point, s.q, s.dq)
-        return ca.Function("bite_point", [s.q, s.dq, B, m.p], [point, velocity, s.R[2, 2]],
-                           ["q", "dq", "B", "p"], ["point", "velocity", "cos_tilt"])
+        e = SIN_TILT_SMOOTHING
+        sin_tilt = ca.sqrt(s.R[0, 2] ** 2 + s.R[1, 2] ** 2 + e**2) - e
+        return ca.Function("bite_point", [s.q, s.dq, B, m.p],
+                           [point, velocity, s.R[2, 2], sin_tilt, ca.jtimes(sin_tilt, s.q, s.dq)],
+                           ["q", "dq", "B", "p"], ["point", "velocity", "cos_tilt", "sin_tilt", "sin_tilt_rate"])
 
-    return cached_graph(m, ("food-bite-point",), build)
+    return cached_graph(m, ("food-bite-point-face",), build)
 
 
 def home_height(model: Model, side: str) -> float:
@@ -58,14 +66,14 @@ def home_height(model: Model, side: str) -> float:
 
 
 def gap(model: Model, side: str, q, dq=None) -> dict[str, np.ndarray]:
-    """The gap g (m), its rate dg/dt (m/s), the sliding velocity (N, 2; m/s) and the lower tooth's tilt (rad) along
-    states ``q``, ``dq`` (N, n) in Euler angles."""
+    """The gap g (m), its rate dg/dt (m/s), the sliding velocity (N, 2; m/s), the lower tooth's tilt (rad) and the bite
+    point (N, 3; m, in {S}) along states ``q``, ``dq`` (N, n) in Euler angles."""
     q = np.atleast_2d(np.asarray(q, float))
     dq = np.zeros_like(q) if dq is None else np.atleast_2d(np.asarray(dq, float))
-    point, velocity, cos_tilt = evaluate(bite_point_function(model.mechanism), q, dq, np.asarray(model.molar(side), float),
-                                         model.vector())
+    point, velocity, cos_tilt, sin_tilt, _ = evaluate(bite_point_function(model.mechanism), q, dq,
+                                                      np.asarray(model.molar(side), float), model.vector())
     return {"gap": home_height(model, side) - point[:, 2], "rate": -velocity[:, 2], "sliding": velocity[:, :2],
-            "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1.0, 1.0))}
+            "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "point": point}
 
 
 def _path_functions(model: Model, side: str):
@@ -141,6 +149,82 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
                 source="texture test (point path of the molar)", meta={"generator": "tpa", "pin": "alpha"})
 
 
+def _face_functions(model: Model, side: str):
+    """The lower tooth translated (alpha = beta = 0, Y = 0: its face parallel to the upper tooth) as a function of X:
+    (X, X_c, g) -> the bite point's horizontal slide from where it is at X_c (2, m) and its first and second
+    derivatives along the gap g (m), X = X(g) solving B_z(X) = B_z(home) - g, by the implicit function theorem with
+    exact derivatives; and the residual B_z(X) - B_z(home) + g for Newton's method."""
+    from chewbot.compiled.cache import folded
+
+    params = folded(model)
+
+    def build():
+        s = symbolic(params, ORIENTATION)
+        B = ca.DM(np.asarray(model.molar(side), float))
+        X, X_c, g = ca.SX.sym("X"), ca.SX.sym("X_c"), ca.SX.sym("g")
+        point = ca.Function("molar", [s.q], [s.point(B)])
+        P = point(ca.vertcat(X, 0, 0, 0))
+        dP, ddP = ca.jacobian(P, X), ca.jacobian(ca.jacobian(P, X), X)
+        dX = -1.0 / dP[2]  # B_z(X(g)) = B_z(home) - g
+        ddX = -ddP[2] * dX**2 / dP[2]
+        slide = P[:2] - point(ca.vertcat(X_c, 0, 0, 0))[:2]
+        levels = ca.Function("face_levels", [X, X_c], [slide, dP[:2] * dX, ddP[:2] * dX**2 + dP[:2] * ddX])
+        z_home = float(np.asarray(model.molar(side), float)[2])
+        residual = ca.Function("face_residual", [X, g], [P[2] - z_home + g])
+        return ca.rootfinder("face_path", "newton", residual, {"abstol": PATH_TOLERANCE, "max_iter": 50,
+                                                                "error_on_fail": False}), levels
+
+    return cached_graph(params, ("food-face-path", side), build)
+
+
+def _bounded(v, dv, ddv, bound: float):
+    """sigma(v) = v (1 + (|v| / L)^8)^(-1/8) (L = ``bound``) and its first and second derivatives along the gap, from
+    those of v (N, 2): the slide v, smoothly kept below L (|sigma| < L; sigma = v (1 - O((|v| / L)^8)) well inside
+    it, |sigma| = 0.917 L at |v| = L, 0.994 L at 1.5 L)."""
+    w = np.sum(v * v, axis=1) / bound**2  # (|v| / L)^2
+    dw = 2 * np.sum(v * dv, axis=1) / bound**2
+    ddw = 2 * np.sum(dv * dv + v * ddv, axis=1) / bound**2
+    psi = (1 + w**4) ** -0.125
+    dpsi_dw = -0.5 * w**3 * (1 + w**4) ** -1.125
+    ddpsi_dw = -1.5 * w**2 * (1 + w**4) ** -1.125 + 2.25 * w**6 * (1 + w**4) ** -2.125
+    dpsi = dpsi_dw * dw
+    ddpsi = ddpsi_dw * dw**2 + dpsi_dw * ddw
+    return (v * psi[:, None], dv * psi[:, None] + v * dpsi[:, None],
+            ddv * psi[:, None] + 2 * dv * dpsi[:, None] + v * ddpsi[:, None])
+
+
+def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, slide: float,
+                   name: str = "texture test") -> Task:
+    """The texture test's path (the four coordinates over the stroke) that keeps the lower tooth's face as parallel to
+    the upper one as a horizontal slide of the bite point of at most ``slide`` (m) from where it is at ``contact_gap``
+    (m, the sample's top) allows, the bite point at gaps ``g`` (m) with rates ``dg``, ``ddg`` at times ``t``.
+
+    The robot can keep its face parallel only by translating it (alpha = beta = 0), and its condyles' planes then
+    make the bite point slide as it goes down (:func:`_face_functions`: about 0.9 mm forward per mm down on the
+    target). The bite point follows that slide, smoothly bounded by ``slide`` (:func:`_bounded`), and is held at the
+    bounded slide: there the lower tooth tilts (beta) just as far as the gap needs, alpha pinned at 0
+    (:func:`molar_path_task` with the slide as its shift). Within the bound the face is parallel; beyond it the tilt is
+    the least at that depth for a slide of the bounded length in the planes' direction. Every sample is solved at once
+    (CasADi's Newton mapped over the samples), the rates from exact first and second derivatives."""
+    t = np.asarray(t, float)
+    n = t.size
+    g, dg, ddg = (np.asarray(x, float).reshape(n) for x in (g, dg, ddg))
+    if not slide > 0:
+        raise TaskError(f"the slide bound must be positive, not {slide / factor('mm'):g} mm")
+    solver, levels = _face_functions(model, side)
+    X = np.asarray(solver.map(n + 1)(np.zeros((1, n + 1)), np.append(g, contact_gap)[None, :])).ravel()
+    X_c = X[-1]
+    v, dv, ddv = (np.asarray(a) for a in levels.map(n)(X[None, :n], np.full((1, n), X_c)))
+    v, dv, ddv = v.T, dv.T, ddv.T
+    s, ds, dds = _bounded(v, dv, ddv, slide)
+    offset = np.asarray(levels(X_c, 0.0)[0]).ravel()  # B_xy(X_c) - B_xy(0)
+    shift = (offset + s, ds * dg[:, None], dds * (dg**2)[:, None] + ds * ddg[:, None])
+    task = molar_path_task(model, side, t, g, dg, ddg, name=name, shift=shift)
+    return Task(name=task.name, t=task.t, coords=task.coords, q=task.q, dq=task.dq, ddq=task.ddq, force=task.force,
+                side=side, source="texture test (the face as parallel as the slide bound allows)",
+                meta={"generator": "tpa", "pin": "alpha", "slide_bound_m": slide})
+
+
 def largest_gap(model: Model, side: str, upper: float = 0.04, tolerance: float = 1e-5) -> float:
     """The largest gap (m) the bite point of ``side`` reaches along {S}'s z from home with alpha = 0 inside the
     workspace (reach of every chain, transmission, sockets), by bisection to ``tolerance`` (m)."""
@@ -168,4 +252,4 @@ def largest_height(model: Model, side: str) -> float:
     return largest_gap(model, side) - APPROACH
 
 
-__all__ = ["APPROACH", "bite_point_function", "gap", "home_height", "largest_gap", "largest_height", "molar_path_task"]
+__all__ = ["APPROACH", "SIN_TILT_SMOOTHING", "bite_point_function", "face_path_task", "gap", "home_height", "largest_gap", "largest_height", "molar_path_task"]

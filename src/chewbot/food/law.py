@@ -10,7 +10,9 @@ The law, one normal force along the gap (positive when the sample pushes the tee
   for the cylinder (E A / h) and 1/2 for the sphere (sqrt(R)).
 * the sample's own state (:data:`FOOD_STATE`, carried by the plant and by the ideal texture analyser of
   :mod:`chewbot.food.tpa`): ``broken`` (0 or 1), ``F_m`` the Maxwell branch's force (N) and ``delta_max``, the
-  deepest compression so far (m). Its permanent set s (m, :func:`permanent_set`) follows from them:
+  deepest compression so far (m) of the face's most compressed fibre, lambda = delta + a sin(theta)
+  (:func:`leading_compression`; delta itself with parallel teeth or a sphere). Its permanent set s (m,
+  :func:`permanent_set`) follows from them:
 
   - crushed (broken): its unloaded height becomes h_c = h0 - delta_max (1 - r), r = ``recovery_after_fracture``:
     a second bite meets fragments that recovered r of the deepest compression;
@@ -20,7 +22,11 @@ The law, one normal force along the gap (positive when the sample pushes the tee
     :func:`loaded_force` gives b F_e of that sample, b = 1 intact and ``stiffness_after_fracture`` broken.
 
   With r = 1 and no yield strain (the neutral values) s = 0 and the law is that of an elastic sample that keeps its
-  height, broken or not.
+  height, broken or not. Over a tilted face (below) every state event is read on lambda, the fibre that touched
+  first: the sample touches at lambda = s, breaks at lambda / h0 = fracture_strain, yields at lambda = yield_strain h0,
+  and a crushed sample touches the next bite at lambda = (1 - r) lambda_max, so that the distance from contact to
+  the deepest point of a second bite to the same depth is r times the first's, tilted or not (at a tilt that is the
+  same at the contacts and the deepest points).
 * the face: the lower tooth may be tilted by an angle theta against the upper one. A cylinder's law is then integrated
   over its circular cross-section of radius a (:func:`face_integrals`): the fibre at x along the face, measured from
   its centre towards the side that rises to the upper tooth, is compressed by delta + x sin(theta); each fibre is a
@@ -37,7 +43,7 @@ The law, one normal force along the gap (positive when the sample pushes the tee
 * normal force in contact (some fibre compressed: u + c > 0): F_n = max(F_d + F_m, -adhesion_N): a sample never
   pulls, except through its damping and relaxed Maxwell branch while unloading, and then at most ``adhesion_N``. Out
   of contact F_n = 0;
-* the teeth meet at delta = h0: beyond it a stiff linear tooth contact :data:`TOOTH_STIFFNESS` acts besides the food;
+* the teeth meet at delta = h0 (at the bite point, the face's centre): beyond it a stiff linear tooth contact :data:`TOOTH_STIFFNESS` acts besides the food;
 * tangential friction of the sample on the upper tooth (the slide): F_t = -mu max(F_n, 0) v_t / sqrt(|v_t|^2 + eps^2),
   v_t the bite point's velocity in {S}'s x-y plane. This is the regularised Coulomb law of the plant's joints (below
   the speed :data:`FRICTION_SPEED` it acts as a stiff viscous damper, the regularised "stick"; above it it slides
@@ -46,12 +52,12 @@ The law, one normal force along the gap (positive when the sample pushes the tee
 How the state changes (:data:`FOOD_EVENTS`, :func:`guards`, :func:`fracture_state`):
 
 * ``F_m`` is continuous: the ODE above;
-* ``delta_max`` is continuous: max(delta_max at a step's start, delta) where delta is monotonic in the step; it
-  stops growing where the compression turns (the ``turn`` event, a kink of the force of a crushed or plastic sample);
-* ``broken`` jumps from 0 to 1 at the ``fracture`` event (delta / h0 = fracture_strain), and F_m jumps with it by
+* ``delta_max`` is continuous: max(delta_max at a step's start, lambda) where lambda is monotonic in the step; it
+  stops growing where lambda turns (the ``turn`` event, a kink of the force of a crushed or plastic sample);
+* ``broken`` jumps from 0 to 1 at the ``fracture`` event (lambda / h0 = fracture_strain), and F_m jumps with it by
   the ratio of b F_e after to F_e before (the factor b when r = 1);
 * the law's other kinks, located as events so that no integrator step straddles them: ``contact`` (u + c = 0),
-  ``teeth`` (delta = h0), ``adhesion`` (F_d + F_m = -adhesion_N), ``yield`` (delta = yield_strain h0 while it is
+  ``teeth`` (delta = h0), ``adhesion`` (F_d + F_m = -adhesion_N), ``yield`` (lambda = yield_strain h0 while it is
   the deepest so far).
 
 One source for both engines: the law's functions take the array functions (:data:`NUMPY` for whole arrays of
@@ -306,6 +312,13 @@ def maxwell_force(xp, f, F_m0, bFe0, bFe, t):
     return F_m0 * decay + _p(f, "rho") * (bFe - bFe0) * phi
 
 
+def leading_compression(f, delta, sin_tilt=0.0):
+    """lambda = delta + a sin(theta) (m): the compression of the face's most compressed fibre, the one that touched
+    first (delta itself at theta = 0 or for a sphere, a = 0); the law's state events are read on it. Linear: with
+    the rates d(delta)/dt and d(sin theta)/dt it gives lambda's rate."""
+    return delta + _p(f, "radius") * sin_tilt
+
+
 def in_contact(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0):
     """The contact guard u + c (m): positive where some fibre of the face is compressed."""
     return delta - permanent_set(xp, f, broken, delta_max) + _p(f, "radius") * sin_tilt
@@ -338,20 +351,24 @@ def fracture_state(xp, f, delta, F_m, delta_max, sin_tilt=0.0):
     return 1.0, F_m * after / xp.fmax(before, 1e-300), delta_max
 
 
-def guards(f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0) -> np.ndarray:
+def guards(f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0, sin_tilt_rate=0.0) -> np.ndarray:
     """The guard functions of :data:`FOOD_EVENTS` at one state (NumPy; NaN: not armed there): an event is where its
-    guard changes sign. ``yield`` and ``turn`` are armed only where the compression is the deepest so far (they
-    change the permanent set), ``fracture`` while intact, ``adhesion`` in contact."""
+    guard changes sign. ``fracture``, ``yield`` and ``turn`` are read on the leading compression lambda
+    (:func:`leading_compression`) and its rate (``sin_tilt_rate`` the rate of sin theta, 1/s); ``yield`` and ``turn``
+    are armed only where lambda is the deepest so far (they change the permanent set), ``fracture`` while intact,
+    ``adhesion`` in contact."""
     h0 = float(_p(f, "h0"))
     _, F_v = normal_force(NUMPY, f, delta, ddelta, broken, F_m, delta_max, sin_tilt)
     contact = float(in_contact(NUMPY, f, delta, broken, delta_max, sin_tilt))
-    deepest = delta >= delta_max
+    lead = float(leading_compression(f, delta, sin_tilt))
+    lead_rate = float(leading_compression(f, ddelta, sin_tilt_rate))
+    deepest = lead >= delta_max
     sets = broken or float(_p(f, "plastic_fraction")) > 0 and delta_max >= float(_p(f, "yield_strain")) * h0
     return np.array([contact, delta - h0,
-                     delta / h0 - float(_p(f, "fracture_strain")) if not broken else np.nan,
+                     lead / h0 - float(_p(f, "fracture_strain")) if not broken else np.nan,
                      float(F_v) + float(_p(f, "adhesion")) if contact > 0 else np.nan,
-                     delta - float(_p(f, "yield_strain")) * h0 if float(_p(f, "plastic_fraction")) > 0 and deepest else np.nan,
-                     ddelta if sets and deepest else np.nan])
+                     lead - float(_p(f, "yield_strain")) * h0 if float(_p(f, "plastic_fraction")) > 0 and deepest else np.nan,
+                     lead_rate if sets and deepest else np.nan])
 
 
 # ------------------------------------------------------------------------------------------- files
@@ -449,5 +466,5 @@ def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
 
 __all__ = ["CASADI", "FOOD_EVENTS", "FOOD_PARAMETERS", "FOOD_STATE", "FRICTION_SPEED", "Food", "FoodError", "N_FOOD", "NUMPY",
            "RECOVERY_AFTER_FRACTURE", "SHAPES", "TOOTH_STIFFNESS", "breaking", "builtin_foods", "elastic_force",
-           "face_integrals", "food_from_dict", "fracture_state", "guards", "in_contact", "load_food", "loaded_force",
+           "face_integrals", "food_from_dict", "fracture_state", "guards", "in_contact", "leading_compression", "load_food", "loaded_force",
            "maxwell_force", "normal_force", "permanent_set", "pressure_centre", "tangential_force"]

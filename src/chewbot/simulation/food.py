@@ -38,8 +38,8 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
-from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, loaded_force, maxwell_force,
-                              normal_force, tangential_force)
+from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, leading_compression,
+                              loaded_force, maxwell_force, normal_force, tangential_force)
 from chewbot.compiled.layout import Layout
 from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C, STAGES
@@ -64,7 +64,7 @@ class FoodState:
     deepest compression so far (m; with ``broken`` it gives the permanent set, :func:`chewbot.food.law.permanent_set`),
     and what the state gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative:
     apart), ``ddelta`` its rate (m/s), ``F_v`` the force before the clamp F_d + F_m (N), ``F_n`` the normal force
-    (N)."""
+    (N), ``sin_tilt`` sin of the lower tooth's tilt and ``sin_tilt_rate`` its rate (1/s)."""
 
     broken: int
     F_m: float
@@ -74,22 +74,25 @@ class FoodState:
     F_n: float
     delta_max: float = 0.0
     ddelta: float = 0.0
+    sin_tilt: float = 0.0
+    sin_tilt_rate: float = 0.0
 
 
 def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home, delta_max0=0.0):
-    """The food's kinematic quantities at a state (SX): delta (h0 - g), its rate, b F_e of the sample in its state
-    (``delta_max0`` the deepest compression before: the deepest so far is it or delta, the larger; the ``turn`` and
-    ``yield`` events keep a step from straddling the kinks where it stops growing), the bite point's velocity, cos of
+    """The food's kinematic quantities at a state (SX): delta (h0 - g at the face's centre), its rate, b F_e of the
+    sample in its state over the lower tooth's tilted face (``delta_max0`` the deepest leading compression before: the
+    deepest so far is it or lambda, :func:`chewbot.food.law.leading_compression`, the larger; the ``turn`` and
+    ``yield`` events keep a step from straddling the kinks where it stops growing), the bite point's velocity, sin of
     the lower tooth's tilt."""
-    point, velocity, cos_tilt = bite_point_function(mechanism)(q, dq, B, p)
+    point, velocity, _, sin_tilt, _ = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
-    bFe = loaded_force(CASADI, f, delta, broken, ca.fmax(delta_max0, delta))
-    return delta, ddelta, bFe, velocity, cos_tilt
+    bFe = loaded_force(CASADI, f, delta, broken, ca.fmax(delta_max0, leading_compression(f, delta, sin_tilt)), sin_tilt)
+    return delta, ddelta, bFe, velocity, sin_tilt
 
 
-def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
-    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max)
+def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity, sin_tilt):
+    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max, sin_tilt)
     Fx, Fy = tangential_force(CASADI, f, F_n, velocity[0], velocity[1])
     return F_n, F_v, ca.vertcat(Fx, Fy, -F_n)
 
@@ -97,16 +100,18 @@ def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity):
 def food_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a food: (q, v, a, N, w, s) -> r with w laid out as :data:`FOOD_INPUTS` and
     s as :data:`FOOD_SHARED`."""
-    return stage_with_food(mechanism, "food_stage", FOOD_SHARED,
-                           lambda f, delta, ddelta, F_m, velocity, shared: _force_sx(
-                               f, delta, ddelta, shared["broken"], F_m, ca.fmax(shared["delta_max"], delta), velocity)[2])
+    return stage_with_food(mechanism, "food_stage_face", FOOD_SHARED,
+                           lambda f, delta, ddelta, F_m, velocity, sin_tilt, shared: _force_sx(
+                               f, delta, ddelta, shared["broken"], F_m,
+                               ca.fmax(shared["delta_max"], leading_compression(f, delta, sin_tilt)), velocity, sin_tilt)[2])
 
 
 def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
     """A stage residual of the plant with a food: (q, v, a, N, w, s) -> r, w laid out as :data:`FOOD_INPUTS` and s as
     ``shared`` (:data:`FOOD_SHARED` and what ``force`` reads beyond it); ``force(f, delta, ddelta, F_m, velocity,
-    blocks)`` the food's force on the mandible (3,) from the food's vector, the compression and its rate, the Maxwell
-    branch's force over the stage, the bite point's velocity and the blocks of s."""
+    sin_tilt, blocks)`` the food's force on the mandible (3,) from the food's vector, the compression and its rate, the
+    Maxwell branch's force over the stage, the bite point's velocity, sin of the lower tooth's tilt and the blocks of
+    s."""
     m = symbols(mechanism)
 
     def build():
@@ -115,10 +120,10 @@ def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Func
         w, stage = FOOD_INPUTS.symbols("w", ca.SX.sym)
         s, blocks = shared.symbols("s", ca.SX.sym)
         B, p, f = blocks["B"], blocks["p"], blocks["food"]
-        delta, ddelta, bFe, velocity, _ = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"], blocks["z_home"],
-                                                           blocks["delta_max"])
+        delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"],
+                                                                  blocks["z_home"], blocks["delta_max"])
         F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
-        F = force(f, delta, ddelta, F_m, velocity, blocks)
+        F = force(f, delta, ddelta, F_m, velocity, sin_tilt, blocks)
         r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
         return ca.Function(name, [q, v, a, N, w, s], [r])
 
@@ -134,36 +139,39 @@ def food_step_kernel(mechanism: str) -> KernelSpec:
 
 def food_function(mechanism: str) -> ca.Function:
     """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, z_home) -> delta (m), ddelta (m/s), delta_max
-    (m, with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N), cos_tilt."""
+    (m, the deepest leading compression with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S},
+    N), cos_tilt, sin_tilt and its rate (1/s)."""
     m = symbols(mechanism)
 
     def build():
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
         broken, F_m, delta_max0, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("delta_max"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, cos_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
-        delta_max = ca.fmax(delta_max0, delta)
-        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity)
+        delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
+        _, _, cos_tilt, _, sin_tilt_rate = bite_point_function(mechanism)(q, dq, B, m.p)
+        delta_max = ca.fmax(delta_max0, leading_compression(f, delta, sin_tilt))
+        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity, sin_tilt)
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
-                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt],
+                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt, sin_tilt, sin_tilt_rate],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "z_home"],
-                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt"], {"cse": True})
+                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "sin_tilt",
+                            "sin_tilt_rate"], {"cse": True})
 
-    return cached_graph(m, ("food-quantities-state",), build)
+    return cached_graph(m, ("food-quantities-face",), build)
 
 
 def food_quantities_kernel(mechanism: str) -> KernelSpec:
     """:func:`food_function` compiled: the food's state at each step's end is one call of it."""
     from chewbot.model.symbolic import c_name
 
-    name = f"food_quantities_{c_name(mechanism)}"
+    name = f"food_quantities_face_{c_name(mechanism)}"
 
     def build(params):
         fn = food_function(mechanism)
         inputs = fn.sx_in()
         return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
 
-    return KernelSpec(name, build, (mechanism, "food-quantities-state"), mechanism)
+    return KernelSpec(name, build, (mechanism, "food-quantities-face"), mechanism)
 
 
 @dataclass(frozen=True)
@@ -219,10 +227,10 @@ class FoodPlant(Plant):
         """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
         if self._fn is None:
             self._fn = native(food_quantities_kernel(self.mechanism))
-        delta, ddelta, deepest, bFe, F_v, F_n, _, _ = (np.asarray(v).flat[0] for v in self._fn(
+        delta, ddelta, deepest, bFe, F_v, F_n, _, _, sin_tilt, sin_tilt_rate = (np.asarray(v).flat[0] for v in self._fn(
             q, dq, self._B, self._p, self._f, broken, F_m, delta_max, self._z_home))
         return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
-                         float(ddelta))
+                         float(ddelta), float(sin_tilt), float(sin_tilt_rate))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
@@ -243,7 +251,8 @@ class FoodPlant(Plant):
     def guards(self, state: FoodState) -> np.ndarray:
         """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
         (:func:`chewbot.food.law.guards`)."""
-        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max)
+        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max, state.sin_tilt,
+                      state.sin_tilt_rate)
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
         """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
@@ -292,7 +301,7 @@ class FoodPlant(Plant):
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
             now = after.internal.food
-            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max)
+            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max, now.sin_tilt)
             food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
             after = replace(after, internal=replace(after.internal, food=food))
         return after
@@ -305,10 +314,11 @@ class FoodPlant(Plant):
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
         delta_max = np.array([s.food.delta_max for s in internal], float)
-        delta, _, _, _, _, F_n, F, cos_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq, self._B, self._p,
-                                                       self._f, broken, F_m, delta_max, np.full(len(t), self._z_home))
+        delta, _, _, _, _, F_n, F, cos_tilt, sin_tilt, _ = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq,
+                                                                    self._B, self._p, self._f, broken, F_m, delta_max,
+                                                                    np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
-                      "tilt": np.arccos(np.clip(cos_tilt[:, 0], -1, 1)), "F_m": F_m, "delta_max": delta_max}
+                      "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "F_m": F_m, "delta_max": delta_max}
         return F, quantities
 
     def columns(self, quantities: dict) -> list[Column]:
