@@ -39,7 +39,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
 from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, leading_compression,
-                              loaded_force, maxwell_force, normal_force, tangential_force)
+                              loaded_force, maxwell_force, normal_force, permanent_set, tangential_force)
 from chewbot.compiled.layout import Layout
 from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C, STAGES
@@ -310,7 +310,8 @@ class FoodPlant(Plant):
 
     def outputs(self, t, q, dq, force, internal) -> tuple[np.ndarray, dict]:
         """The food's force on the mandible at the rows, and the food's quantities: ``compression`` (m, max(0, delta)),
-        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad), ``F_m`` (N) and ``delta_max`` (m)."""
+        ``force`` (N, F_n), ``broken``, ``delta`` (m, h0 - g), ``tilt`` (rad), ``F_m`` (N), ``delta_max`` (m) and
+        ``height`` (m, the sample's unloaded height h0 - s, s its permanent set)."""
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
         delta_max = np.array([s.food.delta_max for s in internal], float)
@@ -318,7 +319,8 @@ class FoodPlant(Plant):
                                                                     self._B, self._p, self._f, broken, F_m, delta_max,
                                                                     np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
-                      "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "F_m": F_m, "delta_max": delta_max}
+                      "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "F_m": F_m, "delta_max": delta_max,
+                      "height": self.food.height - permanent_set(NUMPY, self._f, broken, delta_max)}
         return F, quantities
 
     def columns(self, quantities: dict) -> list[Column]:
@@ -326,7 +328,9 @@ class FoodPlant(Plant):
                        "point's gap along {S}'s z"),
                 Column("food_force", quantities["force"], "N", "the food's normal force on the teeth (positive pushing them apart; "
                        "Fz = -food_force)"),
-                Column("food_broken", quantities["broken"], "1", "1 once the food has broken (its fracture strain reached)")]
+                Column("food_broken", quantities["broken"], "1", "1 once the food has broken (its fracture strain reached)"),
+                Column("food_height", quantities["height"], "m", "the sample's unloaded height h0 - s, s its permanent set "
+                       "(crushed once broken, plastic past its yield strain)")]
 
     def info(self, sim) -> dict:
         """The plant's entries, and what run.json says about the food: the food, the events, the deepest compression and
