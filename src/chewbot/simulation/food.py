@@ -3,7 +3,8 @@
 :class:`FoodPlant` is the plant of :mod:`chewbot.simulation.plant` with a food (:class:`chewbot.food.law.Food`) at
 the bite point of its side. The bite force in the equations of motion is no longer given: at every stage of the
 integrator step it is the food's force at the stage's state (:func:`food_stage`): the compression delta from the bite
-point's gap (:mod:`chewbot.food.geometry`), its rate, the sliding velocity, and the food's own state, the
+point's gap (:mod:`chewbot.food.geometry`), its rate, the lower tooth's tilt (the cylinder's law integrated over its
+tilted face), the sliding velocity, and the food's own state, the
 :class:`FoodState`: ``broken`` (0/1), the Maxwell branch's force F_m (integrated exactly over the step for a linear
 change of b F_e, :func:`chewbot.food.law.maxwell_force`) and the deepest compression so far delta_max (with
 ``broken`` or the yield it sets the sample's permanent set, :func:`chewbot.food.law.permanent_set`). The derivatives the step's Newton iteration needs are
@@ -334,7 +335,7 @@ class FoodPlant(Plant):
 
     def info(self, sim) -> dict:
         """The plant's entries, and what run.json says about the food: the food, the events, the deepest compression and
-        the lower tooth's tilt there (the laws assume parallel teeth)."""
+        the lower tooth's tilt there."""
         q = sim.quantities
         k = int(np.argmax(q["delta"])) if len(q["delta"]) else 0
         return {**super().info(sim),
