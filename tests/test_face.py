@@ -78,10 +78,11 @@ def test_the_path_has_the_least_tilt_for_its_slide(path):
 
 
 def test_a_crushed_sample_springs_back_by_r_over_a_tilted_face():
-    """The ideal analyser with the faces at a constant 3 degrees: the crushed sample's state read on the face's most
-    compressed fibre (contact, fracture, deepest compression), its springiness is r (0.1) within 0.02 on a 13.5 mm
-    face, as with parallel faces; read at the face's centre (a set of (1 - r) times the centre's deepest compression)
-    it would be (r delta + c) / (delta + c) = 0.16, c = a sin(3 deg) = 0.35 mm."""
+    """The ideal analyser with the faces at a constant 3 degrees: the crushed sample's set is a field over its face,
+    each fibre keeping (1 - r) of its own deepest compression, so its top is inclined as the face was; the second bite
+    meets it nearly parallel and its springiness is r (0.1) within 0.02 on a 13.5 mm face (0.098; 0.0998 with
+    parallel faces). With a flat set at the centre's (1 - r) delta_max the tilted face would touch the crushed sample
+    with its edge, a sin(3 deg) = 0.35 mm early, and read 0.151."""
     food = food_from_dict({"food": {"name": "crushing", "shape": "cylinder", "height_mm": 10.0, "diameter_mm": 13.5,
                                     "young_modulus_kPa": 7000.0, "fracture_strain": 0.1, "stiffness_after_fracture": 0.3,
                                     "recovery_after_fracture": 0.1, "tooth_friction": 0.3}})

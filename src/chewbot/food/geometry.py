@@ -42,8 +42,8 @@ SIN_TILT_SMOOTHING = 1e-9
 
 
 def bite_point_function(mechanism: str) -> ca.Function:
-    """(q, dq, B, p) -> point (3, the bite point in {S}, m), velocity (3, m/s), cos_tilt (R_33), sin_tilt (smoothed,
-    module docstring) and its rate (1/s), q in Euler angles."""
+    """(q, dq, B, p) -> point (3, the bite point in {S}, m), velocity (3, m/s), cos_tilt (R_33) and sin_tilt
+    (smoothed, module docstring), q in Euler angles."""
     m = symbols(mechanism)
 
     def build():
@@ -53,9 +53,8 @@ def bite_point_function(mechanism: str) -> ca.Function:
         velocity = ca.jtimes(point, s.q, s.dq)
         e = SIN_TILT_SMOOTHING
         sin_tilt = ca.sqrt(s.R[0, 2] ** 2 + s.R[1, 2] ** 2 + e**2) - e
-        return ca.Function("bite_point", [s.q, s.dq, B, m.p],
-                           [point, velocity, s.R[2, 2], sin_tilt, ca.jtimes(sin_tilt, s.q, s.dq)],
-                           ["q", "dq", "B", "p"], ["point", "velocity", "cos_tilt", "sin_tilt", "sin_tilt_rate"])
+        return ca.Function("bite_point", [s.q, s.dq, B, m.p], [point, velocity, s.R[2, 2], sin_tilt],
+                           ["q", "dq", "B", "p"], ["point", "velocity", "cos_tilt", "sin_tilt"])
 
     return cached_graph(m, ("food-bite-point-face",), build)
 
@@ -70,8 +69,8 @@ def gap(model: Model, side: str, q, dq=None) -> dict[str, np.ndarray]:
     point (N, 3; m, in {S}) along states ``q``, ``dq`` (N, n) in Euler angles."""
     q = np.atleast_2d(np.asarray(q, float))
     dq = np.zeros_like(q) if dq is None else np.atleast_2d(np.asarray(dq, float))
-    point, velocity, cos_tilt, sin_tilt, _ = evaluate(bite_point_function(model.mechanism), q, dq,
-                                                      np.asarray(model.molar(side), float), model.vector())
+    point, velocity, cos_tilt, sin_tilt = evaluate(bite_point_function(model.mechanism), q, dq,
+                                                   np.asarray(model.molar(side), float), model.vector())
     return {"gap": home_height(model, side) - point[:, 2], "rate": -velocity[:, 2], "sliding": velocity[:, :2],
             "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "point": point}
 

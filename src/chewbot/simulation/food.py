@@ -39,8 +39,8 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.dynamics.formulations.newton_euler import n_unknowns
 from chewbot.food.geometry import bite_point_function, gap, home_height
-from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, leading_compression,
-                              loaded_force, maxwell_force, normal_force, permanent_set, tangential_force)
+from chewbot.food.law import (CASADI, FOOD_EVENTS, N_FOOD, NUMPY, Food, fracture_state, guards, loaded_force,
+                              maxwell_force, normal_force, permanent_set, tangential_force)
 from chewbot.compiled.layout import Layout
 from chewbot.simulation.forward import forward_kernel, n_coordinates, plant_outputs_kernel, residual_function
 from chewbot.simulation.integrator import C, STAGES
@@ -51,8 +51,8 @@ from chewbot.simulation.plant import MAX_STEP, PLANT_SHARED, Plant, Solved, Step
 EVENT_TOLERANCE = 1e-10
 EVENTS = FOOD_EVENTS
 # The food's state at a step's start: broken (0/1), the Maxwell branch's force F_m and the elastic force b F_e (N), the
-# deepest compression so far delta_max (m).
-STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1)
+# deepest compression so far delta_max (m) and sin of the lower tooth's tilt there.
+STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1, tilt_max=1)
 # W of the food's step: the torques and each stage's time since the step's start (s); s: the plant's, the food's
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
@@ -65,7 +65,7 @@ class FoodState:
     deepest compression so far (m; with ``broken`` it gives the permanent set, :func:`chewbot.food.law.permanent_set`),
     and what the state gives there: ``bFe`` the elastic force b F_e (N), ``delta`` the compression h0 - g (m; negative:
     apart), ``ddelta`` its rate (m/s), ``F_v`` the force before the clamp F_d + F_m (N), ``F_n`` the normal force
-    (N), ``sin_tilt`` sin of the lower tooth's tilt and ``sin_tilt_rate`` its rate (1/s)."""
+    (N), ``sin_tilt`` sin of the lower tooth's tilt, ``tilt_max`` sin of the tilt where the compression was deepest."""
 
     broken: int
     F_m: float
@@ -76,24 +76,31 @@ class FoodState:
     delta_max: float = 0.0
     ddelta: float = 0.0
     sin_tilt: float = 0.0
-    sin_tilt_rate: float = 0.0
+    tilt_max: float = 0.0
 
 
-def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home, delta_max0=0.0):
+def deepest_sx(delta_max0, tilt_max0, delta, sin_tilt):
+    """(delta_max, tilt_max) at a stage: the deepest compression so far, the step's start's or the stage's, and sin of
+    the tilt there (the ``turn`` and ``yield`` events keep a step from straddling the kinks where they stop growing)."""
+    deeper = delta > delta_max0
+    return ca.fmax(delta_max0, delta), ca.if_else(deeper, sin_tilt, tilt_max0)
+
+
+def food_geometry_sx(mechanism: str, q, dq, B, p, f, broken, z_home, delta_max0=0.0, tilt_max0=0.0):
     """The food's kinematic quantities at a state (SX): delta (h0 - g at the face's centre), its rate, b F_e of the
-    sample in its state over the lower tooth's tilted face (``delta_max0`` the deepest leading compression before: the
-    deepest so far is it or lambda, :func:`chewbot.food.law.leading_compression`, the larger; the ``turn`` and
-    ``yield`` events keep a step from straddling the kinks where it stops growing), the bite point's velocity, sin of
-    the lower tooth's tilt."""
-    point, velocity, _, sin_tilt, _ = bite_point_function(mechanism)(q, dq, B, p)
+    sample in its state over the lower tooth's tilted face (``delta_max0``, ``tilt_max0`` the state's deepest
+    compression before and sin of the tilt there: :func:`deepest_sx`), the bite point's velocity, sin of the lower
+    tooth's tilt."""
+    point, velocity, _, sin_tilt = bite_point_function(mechanism)(q, dq, B, p)
     delta = f[0] - (z_home - point[2])  # h0 - g
     ddelta = velocity[2]
-    bFe = loaded_force(CASADI, f, delta, broken, ca.fmax(delta_max0, leading_compression(f, delta, sin_tilt)), sin_tilt)
+    delta_max, tilt_max = deepest_sx(delta_max0, tilt_max0, delta, sin_tilt)
+    bFe = loaded_force(CASADI, f, delta, broken, delta_max, sin_tilt, tilt_max)
     return delta, ddelta, bFe, velocity, sin_tilt
 
 
-def _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity, sin_tilt):
-    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max, sin_tilt)
+def _force_sx(f, delta, ddelta, broken, F_m, delta_max, tilt_max, velocity, sin_tilt):
+    F_n, F_v = normal_force(CASADI, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max)
     Fx, Fy = tangential_force(CASADI, f, F_n, velocity[0], velocity[1])
     return F_n, F_v, ca.vertcat(Fx, Fy, -F_n)
 
@@ -104,7 +111,7 @@ def food_stage(mechanism: str) -> ca.Function:
     return stage_with_food(mechanism, "food_stage_face", FOOD_SHARED,
                            lambda f, delta, ddelta, F_m, velocity, sin_tilt, shared: _force_sx(
                                f, delta, ddelta, shared["broken"], F_m,
-                               ca.fmax(shared["delta_max"], leading_compression(f, delta, sin_tilt)), velocity, sin_tilt)[2])
+                               *deepest_sx(shared["delta_max"], shared["tilt_max"], delta, sin_tilt), velocity, sin_tilt)[2])
 
 
 def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Function:
@@ -122,7 +129,7 @@ def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Func
         s, blocks = shared.symbols("s", ca.SX.sym)
         B, p, f = blocks["B"], blocks["p"], blocks["food"]
         delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mechanism, q, v, B, p, f, blocks["broken"],
-                                                                  blocks["z_home"], blocks["delta_max"])
+                                                                  blocks["z_home"], blocks["delta_max"], blocks["tilt_max"])
         F_m = maxwell_force(CASADI, f, blocks["F_m"], blocks["bFe"], bFe, stage["elapsed"])
         F = force(f, delta, ddelta, F_m, velocity, sin_tilt, blocks)
         r = residual_function(m)(q, v, a, N, stage["tau"], B, F, blocks["friction"], p)
@@ -139,24 +146,26 @@ def food_step_kernel(mechanism: str) -> KernelSpec:
 
 
 def food_function(mechanism: str) -> ca.Function:
-    """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, z_home) -> delta (m), ddelta (m/s), delta_max
-    (m, the deepest leading compression with the state's), bFe, F_v, F_n (N), F (3, the force on the mandible in {S},
-    N), cos_tilt, sin_tilt and its rate (1/s)."""
+    """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, tilt_max, z_home) -> delta (m), ddelta (m/s),
+    delta_max (m, with the state's) and tilt_max, bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N),
+    cos_tilt, sin_tilt."""
     m = symbols(mechanism)
 
     def build():
         n = n_coordinates(mechanism)
         q, dq, B, f = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("B", 3), ca.SX.sym("food", N_FOOD)
-        broken, F_m, delta_max0, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("delta_max"), ca.SX.sym("z_home")
-        delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0)
-        _, _, cos_tilt, _, sin_tilt_rate = bite_point_function(mechanism)(q, dq, B, m.p)
-        delta_max = ca.fmax(delta_max0, leading_compression(f, delta, sin_tilt))
-        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, velocity, sin_tilt)
-        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, z_home],
-                           [delta, ddelta, delta_max, bFe, F_v, F_n, F, cos_tilt, sin_tilt, sin_tilt_rate],
-                           ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "z_home"],
-                           ["delta", "ddelta", "delta_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "sin_tilt",
-                            "sin_tilt_rate"], {"cse": True})
+        broken, F_m, z_home = ca.SX.sym("broken"), ca.SX.sym("F_m"), ca.SX.sym("z_home")
+        delta_max0, tilt_max0 = ca.SX.sym("delta_max"), ca.SX.sym("tilt_max")
+        delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mechanism, q, dq, B, m.p, f, broken, z_home, delta_max0,
+                                                                  tilt_max0)
+        cos_tilt = bite_point_function(mechanism)(q, dq, B, m.p)[2]
+        delta_max, tilt_max = deepest_sx(delta_max0, tilt_max0, delta, sin_tilt)
+        F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, tilt_max, velocity, sin_tilt)
+        return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, tilt_max0, z_home],
+                           [delta, ddelta, delta_max, tilt_max, bFe, F_v, F_n, F, cos_tilt, sin_tilt],
+                           ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "tilt_max_before", "z_home"],
+                           ["delta", "ddelta", "delta_max", "tilt_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "sin_tilt"],
+                           {"cse": True})
 
     return cached_graph(m, ("food-quantities-face",), build)
 
@@ -214,34 +223,36 @@ class FoodPlant(Plant):
     def shared(self) -> np.ndarray:
         """s of :func:`food_step_kernel` with the food's state at zero (:meth:`step_shared` sets it)."""
         return FOOD_SHARED.pack(**PLANT_SHARED.unpack(super().shared()), food=self._f, broken=0.0, F_m=0.0, bFe=0.0,
-                                delta_max=0.0, z_home=self._z_home)
+                                delta_max=0.0, tilt_max=0.0, z_home=self._z_home)
 
     def shared_at(self, s0: np.ndarray, state: PlantState) -> np.ndarray:
         """s of a step from ``state``: ``s0`` (:meth:`shared`) with the food's state at the step's start."""
         s = s0.copy()
         blocks, food = FOOD_SHARED.split(s), state.internal.food
         blocks["broken"][:], blocks["F_m"][:], blocks["bFe"][:] = food.broken, food.F_m, food.bFe
-        blocks["delta_max"][:] = food.delta_max
+        blocks["delta_max"][:], blocks["tilt_max"][:] = food.delta_max, food.tilt_max
         return s
 
-    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float) -> FoodState:
-        """The food's state at one plant state, ``delta_max`` the deepest compression before it."""
+    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float, tilt_max: float) -> FoodState:
+        """The food's state at one plant state, ``delta_max`` the deepest compression before it and ``tilt_max`` sin of
+        the tilt there."""
         if self._fn is None:
             self._fn = native(food_quantities_kernel(self.mechanism))
-        delta, ddelta, deepest, bFe, F_v, F_n, _, _, sin_tilt, sin_tilt_rate = (np.asarray(v).flat[0] for v in self._fn(
-            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, self._z_home))
+        delta, ddelta, deepest, tilt, bFe, F_v, F_n, _, _, sin_tilt = (np.asarray(v).flat[0] for v in self._fn(
+            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, tilt_max, self._z_home))
         return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
-                         float(ddelta), float(sin_tilt), float(sin_tilt_rate))
+                         float(ddelta), float(sin_tilt), float(tilt))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0)))
+        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0, 0.0)))
 
     def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
         food = start.internal.food
-        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max).bFe
+        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max, food.tilt_max).bFe
         F_m = float(maxwell_force(NUMPY, self._f, food.F_m, food.bFe, bFe, h))
-        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max)))
+        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max,
+                                                                                food.tilt_max)))
 
     # ---------------------------------------------------------------------------------------------- events
 
@@ -253,7 +264,7 @@ class FoodPlant(Plant):
         """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
         (:func:`chewbot.food.law.guards`)."""
         return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max, state.sin_tilt,
-                      state.sin_tilt_rate)
+                      state.tilt_max)
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
         """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
@@ -302,8 +313,9 @@ class FoodPlant(Plant):
         self.events.append({"t": float(after.t), "event": EVENTS[first], "delta_m": after.internal.food.delta})
         if EVENTS[first] == "fracture":
             now = after.internal.food
-            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max, now.sin_tilt)
-            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max))
+            broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max, now.sin_tilt,
+                                                    now.tilt_max)
+            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max), now.tilt_max)
             after = replace(after, internal=replace(after.internal, food=food))
         return after
 
@@ -316,9 +328,10 @@ class FoodPlant(Plant):
         broken = np.array([s.food.broken for s in internal], float)
         F_m = np.array([s.food.F_m for s in internal], float)
         delta_max = np.array([s.food.delta_max for s in internal], float)
-        delta, _, _, _, _, F_n, F, cos_tilt, sin_tilt, _ = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq,
+        tilt_max = np.array([s.food.tilt_max for s in internal], float)
+        delta, _, _, _, _, _, F_n, F, cos_tilt, sin_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq,
                                                                     self._B, self._p, self._f, broken, F_m, delta_max,
-                                                                    np.full(len(t), self._z_home))
+                                                                    tilt_max, np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
                       "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "F_m": F_m, "delta_max": delta_max,
                       "height": self.food.height - permanent_set(NUMPY, self._f, broken, delta_max)}
@@ -379,5 +392,5 @@ def start_gap(plant_model, side: str, q0, dq0) -> float:
     return float(gap(plant_model, side, q0, dq0)["gap"][0])
 
 
-__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "food_checks", "food_function", "food_geometry_sx", "food_quantities_kernel",
+__all__ = ["EVENTS", "EVENT_TOLERANCE", "FOOD_INPUTS", "FOOD_SHARED", "STEP_STATE", "FoodPlant", "FoodState", "deepest_sx", "food_checks", "food_function", "food_geometry_sx", "food_quantities_kernel",
            "food_stage", "food_step_kernel", "stage_with_food", "start_gap"]
