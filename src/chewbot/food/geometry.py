@@ -150,9 +150,9 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
 
 def _face_functions(model: Model, side: str):
     """The lower tooth translated (alpha = beta = 0, Y = 0: its face parallel to the upper tooth) as a function of X:
-    (X, X_c, g) -> the bite point's horizontal slide from where it is at X_c (2, m) and its first and second
-    derivatives along the gap g (m), X = X(g) solving B_z(X) = B_z(home) - g, by the implicit function theorem with
-    exact derivatives; and the residual B_z(X) - B_z(home) + g for Newton's method."""
+    Newton's method on the residual B_z(X) - B_z(home) + g; (X, X_c) -> the bite point's horizontal slide from where
+    it is at X_c (2, m) and its first and second derivatives along the gap g (m), X = X(g) solving B_z(X) = B_z(home)
+    - g, by the implicit function theorem with exact derivatives; and the residual."""
     from chewbot.compiled.cache import folded
 
     params = folded(model)
@@ -171,7 +171,7 @@ def _face_functions(model: Model, side: str):
         z_home = float(np.asarray(model.molar(side), float)[2])
         residual = ca.Function("face_residual", [X, g], [P[2] - z_home + g])
         return ca.rootfinder("face_path", "newton", residual, {"abstol": PATH_TOLERANCE, "max_iter": 50,
-                                                                "error_on_fail": False}), levels
+                                                                "error_on_fail": False}), levels, residual
 
     return cached_graph(params, ("food-face-path", side), build)
 
@@ -210,8 +210,15 @@ def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, s
     g, dg, ddg = (np.asarray(x, float).reshape(n) for x in (g, dg, ddg))
     if not slide > 0:
         raise TaskError(f"the slide bound must be positive, not {slide / factor('mm'):g} mm")
-    solver, levels = _face_functions(model, side)
-    X = np.asarray(solver.map(n + 1)(np.zeros((1, n + 1)), np.append(g, contact_gap)[None, :])).ravel()
+    solver, levels, residual = _face_functions(model, side)
+    gaps = np.append(g, contact_gap)[None, :]
+    X = np.asarray(solver.map(n + 1)(np.zeros((1, n + 1)), gaps)).ravel()
+    miss = np.abs(np.asarray(residual.map(n + 1)(X[None, :], gaps)).ravel())
+    if not np.all(miss <= 1e-9):
+        k = int(np.argmax(~(miss <= 1e-9)))
+        raise KinematicsError(f"the lower tooth cannot be translated to a gap of {gaps[0, k] / factor('mm'):.4g} mm "
+                              f"with its face parallel (position error {miss[k]:.3g} m)", sample=min(k, n - 1),
+                              time=float(t[min(k, n - 1)]))
     X_c = X[-1]
     v, dv, ddv = (np.asarray(a) for a in levels.map(n)(X[None, :n], np.full((1, n), X_c)))
     v, dv, ddv = v.T, dv.T, ddv.T
