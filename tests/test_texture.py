@@ -176,6 +176,7 @@ def test_a_missed_compression_exits_4(tmp_path):
     (["--compression", "50", "--distance", "3"], "give one"),
     (["--trigger-force", "0"], "--trigger-force 0"),
     (["--friction", "maybe"], "friction"),
+    (["--slide", "0"], "slide"),
 ])
 def test_tpa_refuses_bad_settings(tmp_path, args, message):
     r = runner.invoke(app, ["tpa", "--food", "cheddar", *args, "--out", str(tmp_path / "x")])

@@ -133,6 +133,11 @@ def _print(record: dict, out: Path) -> None:
         stdout.print(f"trigger {p['trigger_force_N']:g} N at t = {p['trigger_time_s']:.4g} s, height there "
                      f"{p['height_at_trigger_mm']:.4g} mm; compression {how} to a gap of {p['deepest_gap_mm']:.4g} mm at "
                      f"{p['test_speed_mm_s']:g} mm/s; friction {record['options']['friction']}", highlight=False, markup=False)
+    face = record.get("face")
+    if face:
+        stdout.print(f"faces at the deepest point: tilt {face['tilt_deg']:.3g} deg, gap spread across the sample "
+                     f"{face['spread_mm']:.3g} mm, slide {face['slide_mm']:.3g} mm (bound {face['slide_bound_mm']:g} mm)",
+                     highlight=False, markup=False)
     columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
     stdout.print("measure".ljust(20) + "".join(c.rjust(12) for c in columns), highlight=False, markup=False)
     for m in MEASURES:
