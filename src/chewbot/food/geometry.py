@@ -39,6 +39,13 @@ APPROACH = 1e-3
 # e of the smoothed sin(tilt) (module docstring): it changes sin(tilt) by at most 1e-9, the half-spread of the
 # compression across a 10 mm face by at most 5e-12 m.
 SIN_TILT_SMOOTHING = 1e-9
+# The face's path keeps each condyle this far behind the front of its socket (m), the translation capped smoothly
+# over CAP_SCALE (m); where the face's rotation carries a condyle past it, the cap is lowered and the path made again,
+# at most CAP_PASSES times, until no condyle is more than CAP_TOLERANCE (m) past it.
+SOCKET_MARGIN = 0.2e-3
+CAP_SCALE = 0.3e-3
+CAP_PASSES = 6
+CAP_TOLERANCE = 1e-6
 
 
 def bite_point_function(mechanism: str) -> ca.Function:
@@ -149,10 +156,10 @@ def molar_path_task(model: Model, side: str, t, g, dg, ddg, name: str = "texture
 
 
 def _face_functions(model: Model, side: str):
-    """The lower tooth translated (alpha = beta = 0, Y = 0: its face parallel to the upper tooth) as a function of X:
-    Newton's method on the residual B_z(X) - B_z(home) + g; (X, X_c) -> the bite point's horizontal slide from where
-    it is at X_c (2, m) and its first and second derivatives along the gap g (m), X = X(g) solving B_z(X) = B_z(home)
-    - g, by the implicit function theorem with exact derivatives; and the residual."""
+    """The lower tooth translated (alpha = beta = 0, Y = 0: its face parallel to the upper tooth) by X along {S}'s x
+    (the bite point then moves by X horizontally): Newton's method on the residual B_z(X) - B_z(home) + g; X's first
+    and second derivatives along the gap g, dX/dg = -1 / B_z'(X), by the implicit function theorem with exact
+    derivatives; the residual; and the condyles' x in {S} (2,) at a pose q (Euler angles)."""
     from chewbot.compiled.cache import folded
 
     params = folded(model)
@@ -160,57 +167,69 @@ def _face_functions(model: Model, side: str):
     def build():
         s = symbolic(params, ORIENTATION)
         B = ca.DM(np.asarray(model.molar(side), float))
-        X, X_c, g = ca.SX.sym("X"), ca.SX.sym("X_c"), ca.SX.sym("g")
+        X, g = ca.SX.sym("X"), ca.SX.sym("g")
         point = ca.Function("molar", [s.q], [s.point(B)])
-        P = point(ca.vertcat(X, 0, 0, 0))
-        dP, ddP = ca.jacobian(P, X), ca.jacobian(ca.jacobian(P, X), X)
-        dX = -1.0 / dP[2]  # B_z(X(g)) = B_z(home) - g
-        ddX = -ddP[2] * dX**2 / dP[2]
-        slide = P[:2] - point(ca.vertcat(X_c, 0, 0, 0))[:2]
-        levels = ca.Function("face_levels", [X, X_c], [slide, dP[:2] * dX, ddP[:2] * dX**2 + dP[:2] * ddX])
-        z_home = float(np.asarray(model.molar(side), float)[2])
-        residual = ca.Function("face_residual", [X, g], [P[2] - z_home + g])
+        Z = point(ca.vertcat(X, 0, 0, 0))[2]
+        dZ, ddZ = ca.jacobian(Z, X), ca.jacobian(ca.jacobian(Z, X), X)
+        dX = -1.0 / dZ  # B_z(X(g)) = B_z(home) - g
+        levels = ca.Function("face_levels", [X], [dX, -ddZ * dX**2 / dZ])
+        residual = ca.Function("face_residual", [X, g], [Z - float(B[2]) + g])
+        condyles = ca.Function("condyles_x", [s.q], [ca.vertcat(s.point(model.hkp.T_L)[0], s.point(model.hkp.T_R)[0])])
         return ca.rootfinder("face_path", "newton", residual, {"abstol": PATH_TOLERANCE, "max_iter": 50,
-                                                                "error_on_fail": False}), levels, residual
+                                                                "error_on_fail": False}), levels, residual, condyles
 
     return cached_graph(params, ("food-face-path", side), build)
 
 
 def _bounded(v, dv, ddv, bound: float):
     """sigma(v) = v (1 + (|v| / L)^8)^(-1/8) (L = ``bound``) and its first and second derivatives along the gap, from
-    those of v (N, 2): the slide v, smoothly kept below L (|sigma| < L; sigma = v (1 - O((|v| / L)^8)) well inside
-    it, |sigma| = 0.917 L at |v| = L, 0.994 L at 1.5 L)."""
-    w = np.sum(v * v, axis=1) / bound**2  # (|v| / L)^2
-    dw = 2 * np.sum(v * dv, axis=1) / bound**2
-    ddw = 2 * np.sum(dv * dv + v * ddv, axis=1) / bound**2
+    those of v (N,): the slide v, smoothly kept below L (|sigma| < L; sigma = v (1 - O((|v| / L)^8)) well inside it,
+    |sigma| = 0.917 L at |v| = L, 0.996 L at 1.5 L)."""
+    w = v * v / bound**2  # (|v| / L)^2
+    dw = 2 * v * dv / bound**2
+    ddw = 2 * (dv * dv + v * ddv) / bound**2
     psi = (1 + w**4) ** -0.125
     dpsi_dw = -0.5 * w**3 * (1 + w**4) ** -1.125
     ddpsi_dw = -1.5 * w**2 * (1 + w**4) ** -1.125 + 2.25 * w**6 * (1 + w**4) ** -2.125
     dpsi = dpsi_dw * dw
     ddpsi = ddpsi_dw * dw**2 + dpsi_dw * ddw
-    return (v * psi[:, None], dv * psi[:, None] + v * dpsi[:, None],
-            ddv * psi[:, None] + 2 * dv * dpsi[:, None] + v * ddpsi[:, None])
+    return v * psi, dv * psi + v * dpsi, ddv * psi + 2 * dv * dpsi + v * ddpsi
+
+
+def _capped(x, dx, ddx, cap: float, scale: float = CAP_SCALE):
+    """min(x, cap) smoothly, x - s log(1 + e^((x - cap) / s)) (s = ``scale``: within 0.7 s of the cap where x reaches
+    it, x itself 3 s below it to 5 % of s), and its first and second derivatives along the gap from x's."""
+    z = (x - cap) / scale
+    soft = np.logaddexp(0.0, z)
+    sig = np.exp(z - soft)  # 1 / (1 + e^-z)
+    d1 = 1.0 - sig
+    d2 = -sig * (1.0 - sig) / scale
+    return x - scale * soft, d1 * dx, d2 * dx**2 + d1 * ddx
 
 
 def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, slide: float,
                    name: str = "texture test") -> Task:
     """The texture test's path (the four coordinates over the stroke) that keeps the lower tooth's face as parallel to
-    the upper one as a horizontal slide of the bite point of at most ``slide`` (m) from where it is at ``contact_gap``
-    (m, the sample's top) allows, the bite point at gaps ``g`` (m) with rates ``dg``, ``ddg`` at times ``t``.
+    the upper one as the condyles' sockets and a horizontal slide of the bite point of at most ``slide`` (m) from
+    where it is at ``contact_gap`` (m, the sample's top) allow, the bite point at gaps ``g`` (m) with rates ``dg``,
+    ``ddg`` at times ``t``.
 
     The robot can keep its face parallel only by translating it (alpha = beta = 0), and its condyles' planes then
-    make the bite point slide as it goes down (:func:`_face_functions`: about 0.9 mm forward per mm down on the
-    target). The bite point follows that slide, smoothly bounded by ``slide`` (:func:`_bounded`), and is held at the
-    bounded slide: there the lower tooth tilts (beta) just as far as the gap needs, alpha pinned at 0
-    (:func:`molar_path_task` with the slide as its shift). Within the bound the face is parallel; beyond it the tilt is
-    the least at that depth for a slide of the bounded length in the planes' direction. Every sample is solved at once
-    (CasADi's Newton mapped over the samples), the rates from exact first and second derivatives."""
+    make the bite point move forward as it goes down, by X(g) (:func:`_face_functions`: about 0.9 mm per mm of gap on
+    the target). That translation is capped smoothly (:func:`_capped`) where a condyle would reach the front of its
+    socket (less :data:`SOCKET_MARGIN`); the bite point follows the capped translation from where it is at the
+    sample's top, its slide from there smoothly bounded by ``slide`` (:func:`_bounded`), and the lower tooth tilts
+    (beta, alpha pinned at 0: :func:`molar_path_task` with the bite point's position as its shift) just as far as the
+    gap needs there. Where the rotation carries a condyle past the cap's margin, the cap is lowered (the secant on the
+    excess) and the path made again (a few passes over the whole path, each vectorised). Within the bound and the sockets the
+    face is parallel; beyond them the tilt is the least at that depth for the bite point's position. Every sample is
+    solved at once (CasADi's Newton mapped over the samples), the rates from exact first and second derivatives."""
     t = np.asarray(t, float)
     n = t.size
     g, dg, ddg = (np.asarray(x, float).reshape(n) for x in (g, dg, ddg))
     if not slide > 0:
         raise TaskError(f"the slide bound must be positive, not {slide / factor('mm'):g} mm")
-    solver, levels, residual = _face_functions(model, side)
+    solver, levels, residual, condyles = _face_functions(model, side)
     gaps = np.append(g, contact_gap)[None, :]
     X = np.asarray(solver.map(n + 1)(np.zeros((1, n + 1)), gaps)).ravel()
     miss = np.abs(np.asarray(residual.map(n + 1)(X[None, :], gaps)).ravel())
@@ -219,15 +238,26 @@ def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, s
         raise KinematicsError(f"the lower tooth cannot be translated to a gap of {gaps[0, k] / factor('mm'):.4g} mm "
                               f"with its face parallel (position error {miss[k]:.3g} m)", sample=min(k, n - 1),
                               time=float(t[min(k, n - 1)]))
-    X_c = X[-1]
-    v, dv, ddv = (np.asarray(a) for a in levels.map(n)(X[None, :n], np.full((1, n), X_c)))
-    v, dv, ddv = v.T, dv.T, ddv.T
-    s, ds, dds = _bounded(v, dv, ddv, slide)
-    offset = np.asarray(levels(X_c, 0.0)[0]).ravel()  # B_xy(X_c) - B_xy(0)
-    shift = (offset + s, ds * dg[:, None], dds * (dg**2)[:, None] + ds * ddg[:, None])
-    task = molar_path_task(model, side, t, g, dg, ddg, name=name, shift=shift)
+    dX, ddX = (np.asarray(a).ravel() for a in levels.map(n + 1)(X[None, :]))
+    front = float(model.hkp.x_range[1]) - SOCKET_MARGIN
+    cap = front - max(float(model.hkp.T_L[0]), float(model.hkp.T_R[0]))  # the translation that brings a condyle there
+    previous = None
+    for _ in range(CAP_PASSES):
+        x, dx, ddx = _capped(X, dX, ddX, cap)
+        v, dv, ddv = _bounded(x[:n] - x[n], dx[:n], ddx[:n], slide)
+        shift = np.column_stack([x[n] + v, np.zeros(n)])
+        rates = np.column_stack([dv * dg, np.zeros(n)]), np.column_stack([ddv * dg**2 + dv * ddg, np.zeros(n)])
+        task = molar_path_task(model, side, t, g, dg, ddg, name=name, shift=(shift, *rates))
+        excess = float(np.max(evaluate(condyles, task.q)[0])) - front
+        if excess <= CAP_TOLERANCE:
+            break
+        # the secant on the excess as a function of the cap (nearly linear: the face's rotation takes back about
+        # half of the cap's change), the first pass taking the cap back by the excess itself
+        step = excess if previous is None else excess * (cap - previous[0]) / (excess - previous[1])
+        previous = (cap, excess)
+        cap -= step + CAP_TOLERANCE
     return Task(name=task.name, t=task.t, coords=task.coords, q=task.q, dq=task.dq, ddq=task.ddq, force=task.force,
-                side=side, source="texture test (the face as parallel as the slide bound allows)",
+                side=side, source="texture test (the face as parallel as the sockets and the slide bound allow)",
                 meta={"generator": "tpa", "pin": "alpha", "slide_bound_m": slide})
 
 
