@@ -409,9 +409,9 @@ def test_the_food_sample_is_drawn_compressed_by_the_gap_and_crushed(food_run_fol
     """The sample's cylinder (report.html.sample_vertices) from results.csv: its bottom centre at the bite point, its
     rim 5 mm around it in the lower tooth's plane; its top cut off at the upper tooth (z = B_z at home) where the
     centre's fibre is compressed, so that the drawn height at its centre is the gap; elsewhere its height is its
-    unloaded height, h0 before the fracture and, crushed, h0 - (1 - r) lambda_max after it, lambda_max
-    the deepest compression of its most compressed fibre (delta + a sin tilt, over the rows: to 1 um, the travel between
-    two rows at 1 ms near the turn is below 0.1 um)."""
+    unloaded height at the centre, h0 before the fracture and, crushed, h0 - (1 - r) delta_max after it, delta_max
+    the deepest compression of the face's centre (over the rows: to 1 um, the travel between two rows at 1 ms near
+    the turn is below 0.1 um)."""
     from chewbot.food.geometry import gap
 
     m = model("target")
@@ -429,8 +429,7 @@ def test_the_food_sample_is_drawn_compressed_by_the_gap_and_crushed(food_run_fol
     assert np.allclose(np.linalg.norm(V[~pressed, 1] - V[~pressed, 0], axis=1), rows["food_height"][~pressed], atol=1e-12)
     broken = rows["food_broken"] > 0
     assert broken.any() and not broken[0] and np.all(rows["food_height"][~broken] == 4e-3)
-    lead = 4e-3 - g["gap"] + 5e-3 * np.sin(g["tilt"])
-    assert rows["food_height"][-1] == pytest.approx(4e-3 - 0.9 * lead.max(), abs=1e-6)
+    assert rows["food_height"][-1] == pytest.approx(4e-3 - 0.9 * (4e-3 - g["gap"]).max(), abs=1e-6)
 
 
 @pytest.mark.browser

@@ -44,9 +44,9 @@ from chewbot.simulation.simulator import simulate
 
 # The bound on the bite point's horizontal slide from the sample's top (m), where --slide does not give one: a tenth
 # of a 10 mm sample's face. The target's condyles' planes make the bite point slide about 0.9 mm per mm down while the
-# face stays parallel: within 1 mm the first 1.1 mm of a stroke keep the faces parallel, and beyond it the tilt is
-# about 0.64 degrees per mm less than with the bite point held still (a 10 mm sample at 50 %: 2.5 degrees at the
-# deepest point instead of 3.2, none at contact instead of 6.4).
+# face stays parallel: within 1 mm the first 1.1 mm of a stroke keep the faces parallel (where the sockets allow), and
+# a 10 mm sample at 50 % tilts 3.1 degrees at its top and 0.1 at the deepest point instead of 6.4 and 3.2 with the
+# bite point held still (docs/food.md).
 SLIDE = 1e-3
 # The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
 TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
