@@ -4,7 +4,8 @@ in the plant, its measures and its validity checks.
 :func:`resolve_tpa` resolves the test's options once (:class:`TpaOptions`: the protocol of a texture analyser, the
 robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it as a texture analyser does:
 
-1. **The trigger.** The molar point approaches from rest at h0 + ``approach`` along {S}'s z at the pre-test speed
+1. **The trigger.** The molar point approaches from rest ``approach`` above the sample's highest point
+   (:func:`start_gap`) along {S}'s z at the pre-test speed
    on the path that keeps the lower tooth's face as parallel to the upper one as a horizontal slide of at most
    ``slide`` from the sample's top allows (:func:`chewbot.food.geometry.face_path_task`) until the plant's food force
    (the analyser's load cell, the law integrated over the tilted face) reaches the trigger force; the gap there, the reference's, is the sample's height h_t as the analyser
@@ -197,11 +198,27 @@ def check_height(model: Model, food: Food, side: str) -> float:
     return h_max
 
 
-def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
-    """The time (s) the plant's food force first reaches the trigger force on the approach from h0 + approach at the
-    pre-test speed, interpolated between the ticks (the approach simulated until then)."""
+def start_gap(options: TpaOptions, model: Model, food: Food) -> float:
+    """The gap (m) the test starts from: ``approach`` above the sample's highest point. Where the path tilts the face
+    at the sample's top by theta, the face's edge stands a sin(theta) above its centre (a the face's radius), so the
+    start is h0 + approach + a sin(theta), theta the path's tilt at h0 + approach (once: the tilt changes by about
+    0.64 degrees per mm of gap, the edge's height then by a hundredth of a millimetre per millimetre of a 10 mm
+    face, well inside the approach)."""
     p = options.protocol
     start = food.height + p.approach
+    if food.diameter is None:
+        return start
+    deepest = p.target_gap(food.height)
+    task = face_path_task(model, options.side, np.array([0.0, 1.0]), np.array([start, deepest]), np.zeros(2), np.zeros(2),
+                          food.height, options.slide)
+    return start + food.diameter / 2 * float(np.sin(gap(model, options.side, task.q[:1])["tilt"][0]))
+
+
+def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
+    """The time (s) the plant's food force first reaches the trigger force on the approach from :func:`start_gap` at
+    the pre-test speed, interpolated between the ticks (the approach simulated until then)."""
+    p = options.protocol
+    start = start_gap(options, model, food)
     reach = p.approach + TRIGGER_SEARCH
     while True:
         t = np.arange(int(np.ceil((HOLD + p.blend + reach / p.pre_test_speed) * options.rate)) + 1) / options.rate
@@ -230,7 +247,7 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     h_max = check_height(plant_model, food, options.side)
     step("the approach, until the trigger", stage="simulation")
     t_trigger = find_trigger(options, model, food, check)
-    profile = options.protocol.profile(food.height + options.protocol.approach, t_trigger, options.rate)
+    profile = options.protocol.profile(start_gap(options, model, food), t_trigger, options.rate)
     t = profile.times()
     task = face_path_task(model, options.side, t, *profile.path(t), food.height, options.slide,
                           name=f"texture test of the {food.name}")
@@ -317,5 +334,6 @@ def tpa_from_log(options: TpaOptions) -> tuple[TpaAnalysis, dict, dict]:
 
 
 __all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "SLIDE", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult", "check_height",
+           "start_gap",
            "estimate_from_log", "estimate_trigger", "find_trigger", "resolve_tpa", "run_tpa", "simulated_log",
            "texture_checks", "tpa_from_log"]
