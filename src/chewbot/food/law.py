@@ -55,7 +55,8 @@ How the state changes (:data:`FOOD_EVENTS`, :func:`guards`, :func:`fracture_stat
 * ``delta_max`` is continuous: max(delta_max at a step's start, delta) where delta is monotonic in the step, and
   ``tilt_max`` follows sin theta while delta is the deepest so far; they stop where the compression turns (the
   ``turn`` event, a kink of the force of a crushed or plastic sample);
-* ``broken`` jumps from 0 to 1 at the ``fracture`` event (delta / h0 = fracture_strain), and F_m jumps with it by
+* ``broken`` jumps from 0 to 1 at the ``fracture`` event ((delta + a sin(theta)) / h0 = fracture_strain: the face's
+  most compressed fibre, where the sample is strained most), and F_m jumps with it by
   the ratio of b F_e after to F_e before (the factor b when r = 1);
 * the law's other kinks, located as events so that no integrator step straddles them: ``contact`` (u + c = 0),
   ``teeth`` (delta = h0), ``adhesion`` (F_d + F_m = -adhesion_N), ``yield`` (delta = yield_strain h0 while it is
@@ -366,15 +367,18 @@ def fracture_state(xp, f, delta, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0):
 
 def guards(f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0) -> np.ndarray:
     """The guard functions of :data:`FOOD_EVENTS` at one state (NumPy; NaN: not armed there): an event is where its
-    guard changes sign. ``yield`` and ``turn`` are armed only where the compression is the deepest so far (they
-    change the permanent set), ``fracture`` while intact, ``adhesion`` in contact."""
+    guard changes sign. ``fracture`` is read on the face's most compressed fibre, delta + a sin(theta) (the sample
+    breaks where it is strained most; delta itself with parallel faces), armed while intact; ``yield`` and ``turn``
+    at the centre, armed only where the compression is the deepest so far (they change the permanent set);
+    ``adhesion`` in contact."""
     h0 = float(_p(f, "h0"))
+    strained = delta + float(_p(f, "radius")) * sin_tilt
     _, F_v = normal_force(NUMPY, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max)
     contact = float(in_contact(NUMPY, f, delta, broken, delta_max, sin_tilt, tilt_max))
     deepest = delta >= delta_max
     sets = broken or float(_p(f, "plastic_fraction")) > 0 and delta_max >= float(_p(f, "yield_strain")) * h0
     return np.array([contact, delta - h0,
-                     delta / h0 - float(_p(f, "fracture_strain")) if not broken else np.nan,
+                     strained / h0 - float(_p(f, "fracture_strain")) if not broken else np.nan,
                      float(F_v) + float(_p(f, "adhesion")) if contact > 0 else np.nan,
                      delta - float(_p(f, "yield_strain")) * h0 if float(_p(f, "plastic_fraction")) > 0 and deepest else np.nan,
                      ddelta if sets and deepest else np.nan])

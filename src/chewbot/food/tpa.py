@@ -605,17 +605,18 @@ def ideal_test(food, protocol: Protocol = Protocol(), rate: float = 1000.0, tilt
     delta = h0 - g
     events = []
     broken = np.zeros(t.size)
-    if food.fracture_strain is not None:
-        strain = delta / h0 - food.fracture_strain
+    if food.fracture_strain is not None:  # on the face's most compressed fibre (chewbot.food.law.guards)
+        edge = (food.diameter or 0.0) / 2 * sin_tilt
+        strain = (delta + edge) / h0 - food.fracture_strain
         over = np.flatnonzero(strain >= 0)
         if over.size:
             j = int(over[0])
             t_f = t[j] if strain[j] == 0 or j == 0 else brentq(
-                lambda tt: (h0 - profile.path(np.array([tt]))[0][0]) / h0 - food.fracture_strain, t[j - 1], t[j],
+                lambda tt: (h0 - profile.path(np.array([tt]))[0][0] + edge) / h0 - food.fracture_strain, t[j - 1], t[j],
                 xtol=1e-13, rtol=4 * np.finfo(float).eps)
             _, dg_f, _ = profile.path(np.array([t_f]))
             t = np.concatenate([t[:j], [t_f, t_f], t[j:]])
-            g = np.concatenate([g[:j], [h0 * (1 - food.fracture_strain)] * 2, g[j:]])
+            g = np.concatenate([g[:j], [h0 * (1 - food.fracture_strain) + edge] * 2, g[j:]])
             dg = np.concatenate([dg[:j], [dg_f[0]] * 2, dg[j:]])
             delta = h0 - g
             broken = (np.arange(t.size) > j).astype(float)
