@@ -46,6 +46,7 @@ SOCKET_MARGIN = 0.2e-3
 CAP_SCALE = 0.3e-3
 CAP_PASSES = 6
 CAP_TOLERANCE = 1e-6
+CAP_STRIDE = 20
 
 
 def bite_point_function(mechanism: str) -> ca.Function:
@@ -241,14 +242,21 @@ def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, s
     dX, ddX = (np.asarray(a).ravel() for a in levels.map(n + 1)(X[None, :]))
     front = float(model.hkp.x_range[1]) - SOCKET_MARGIN
     cap = front - max(float(model.hkp.T_L[0]), float(model.hkp.T_R[0]))  # the translation that brings a condyle there
+
+    def path(cap: float, k: np.ndarray) -> Task:
+        x, dx, ddx = _capped(X[np.append(k, n)], dX[np.append(k, n)], ddX[np.append(k, n)], cap)
+        m = k.size
+        v, dv, ddv = _bounded(x[:m] - x[m], dx[:m], ddx[:m], slide)
+        shift = np.column_stack([x[m] + v, np.zeros(m)])
+        rates = np.column_stack([dv * dg[k], np.zeros(m)]), np.column_stack([ddv * dg[k]**2 + dv * ddg[k], np.zeros(m)])
+        return molar_path_task(model, side, t[k], g[k], dg[k], ddg[k], name=name, shift=(shift, *rates))
+
+    # the cap is found on every CAP_STRIDE-th sample, the first and the last (the condyles move by micrometres between
+    # them), then the path made on all
+    coarse = np.unique(np.r_[0:n:CAP_STRIDE, n - 1])
     previous = None
     for _ in range(CAP_PASSES):
-        x, dx, ddx = _capped(X, dX, ddX, cap)
-        v, dv, ddv = _bounded(x[:n] - x[n], dx[:n], ddx[:n], slide)
-        shift = np.column_stack([x[n] + v, np.zeros(n)])
-        rates = np.column_stack([dv * dg, np.zeros(n)]), np.column_stack([ddv * dg**2 + dv * ddg, np.zeros(n)])
-        task = molar_path_task(model, side, t, g, dg, ddg, name=name, shift=(shift, *rates))
-        excess = float(np.max(evaluate(condyles, task.q)[0])) - front
+        excess = float(np.max(evaluate(condyles, path(cap, coarse).q)[0])) - front
         if excess <= CAP_TOLERANCE:
             break
         # the secant on the excess as a function of the cap (nearly linear: the face's rotation takes back about
@@ -256,6 +264,7 @@ def face_path_task(model: Model, side: str, t, g, dg, ddg, contact_gap: float, s
         step = excess if previous is None else excess * (cap - previous[0]) / (excess - previous[1])
         previous = (cap, excess)
         cap -= step + CAP_TOLERANCE
+    task = path(cap, np.arange(n))
     return Task(name=task.name, t=task.t, coords=task.coords, q=task.q, dq=task.dq, ddq=task.ddq, force=task.force,
                 side=side, source="texture test (the face as parallel as the sockets and the slide bound allow)",
                 meta={"generator": "tpa", "pin": "alpha", "slide_bound_m": slide})
