@@ -64,6 +64,16 @@ def plant_log(task_path: Path, plant: dict[str, float], sigma_tau: float = 0.0, 
     return noisy(log, sigma_tau, seed)
 
 
+def current_log(task_path: Path, plant: dict[str, float], sigma_i: float = 0.0, seed: int = 0) -> RobotLog:
+    """The log of the excitation on the plant as a robot with a drive records it: the simulation's angles and exact
+    rates, and the motors' currents the controller commanded (no torques), with Gaussian noise of ``sigma_i`` A."""
+    r = excited(str(task_path), tuple(sorted(plant.items())))
+    k, s = r.kinematics, r.simulation
+    current = s.current + sigma_i * np.random.default_rng(seed).standard_normal(s.current.shape)
+    return RobotLog("excitation (currents)", s.t, k.theta, k.dtheta, k.ddtheta, None, np.zeros((s.t.size, 3)),
+                    np.arange(s.t.size) + 2, current=current)
+
+
 @functools.cache
 def excited(task_path: str, plant: tuple = ()):
     """chewbot simulate of the excitation task on the plant (``plant``: sorted overrides): computed torque with the

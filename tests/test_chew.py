@@ -109,9 +109,6 @@ def test_the_plant_force_is_the_bulk_law_then_the_beds():
     assert np.allclose(intact[0][:, 0], bulk[6][:, 0], atol=1e-12) and np.allclose(intact[1], bulk[7], atol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive in the built-in robot and the softened bed the first cycle's stroke does not end inside it (the "
-    "force does not return to zero before the cycle's end): strokes per cycle [0, 1] for [1, 1]"))
 def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):
     """After the kernel's fracture the rows' food force is the bed's law at the rows' gap and bed; the bed's height
     the plant carried is that of the bolus replayed from the strokes; one stroke per cycle; mass conserved (1e-9)."""
@@ -228,9 +225,6 @@ def test_a_sequence_that_leaves_the_workspace_exits_4_with_its_reason(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "with the drive's rotors the strokes' peak force grows from 100 N to 243 N over the 25 cycles (closing force "
-    "100 N): X50 0.761 mm (b 1.29, monotone) and the bearing-load check fails in the late cycles"))
 def test_peanut_after_25_cycles_is_a_human_bolus():
     """Hutchings et al. 2012: X50 1.18-1.26 mm, b 1.17-1.28 after 20-26 chews; the issue's target: X50 within 15 % of
     1.22 mm and b within 1.0-1.5 after 25 cycles; X50 falls at every cycle; no failed check (the bearings' loads with
@@ -244,3 +238,8 @@ def test_peanut_after_25_cycles_is_a_human_bolus():
     assert np.all(np.diff(x50) < 0)
     failed = [ch.name for ch in chewing.checks if ch.severity == "failure" and ch.passed is False]
     assert not failed, failed
+    # the closing force (100 N) with the drive's rotors: the strokes peaked at 97-135 N (measured; 243 N before the
+    # hybrid law's stiffness of a stiffening bed), the worst where the estimate takes the bed's first compression for
+    # a linear food's; 1.4 times the closing force bounds it with a stroke's variation to spare
+    peaks = [r.peak_force for r in chewing.records[1:]]
+    assert max(peaks) <= 1.4 * cycle.closing_force_N, peaks

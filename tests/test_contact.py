@@ -16,12 +16,15 @@ import pytest
 from scipy.optimize import minimize
 
 from chewbot.analysis.checks import run_checks
+from chewbot.compiled.kernels import evaluate
 from chewbot.dynamics.registry import inverse_dynamics
+from chewbot.dynamics.g1 import CONTROLLER_MARGIN_N
 from chewbot.dynamics.contact import normal_force_map, normal_forces, unilateral_minimum_norm
 from chewbot.dynamics.options import GOALS
 from chewbot.errors import InfeasibleError
 from chewbot.model import Contact
 from chewbot.model.params import load_model
+from chewbot.simulation.controllers.law import inverse_dynamics_function
 from chewbot.bench.reference import _equations, slsqp_distribution
 
 from support import default_kinematics, model, without_drive
@@ -267,3 +270,27 @@ def test_unilateral_contact_is_refused_for_the_6rss(tmp_path):
     result = _cli("run", "--model", "6rss", "--contact", "unilateral", "--out", str(tmp_path / "x"))
     assert result.exit_code == 2 and "6RSS has no HKP contacts" in result.output
     assert not (tmp_path / "x").exists()
+
+
+def test_controller_newton_euler_unilateral_equals_the_distribution_solver():
+    """The controller's compiled per-sample Newton-Euler graph with the unilateral contact (fixed cost: the free
+    optimum, the two faces, the corner) against the whole-task solver's active sets, G1 with friction over the chewing
+    cycle: the controller keeps its margin CONTROLLER_MARGIN_N above the preload, so the graph on a model with a 2 N
+    preload is the solver on the same model with a 2 N + margin preload, where the bilateral optimum leaves N_R below
+    that bound at most of the 800 samples and N_L at many: the same torques to rounding (the two run the same Newton
+    iteration on the same expressions; 1e-12 N m is rounding on torques of ~1 N m), and different from the bilateral
+    ones by more than the test's resolution."""
+    m = dataclasses.replace(without_drive("target"), contact=Contact(2.0))
+    bound = 2.0 + CONTROLLER_MARGIN_N
+    kin = cycle()
+    uni = inverse_dynamics(dataclasses.replace(m, contact=Contact(bound)), kin, "newton-euler", contact="unilateral",
+                           goal="min-torque")
+    free = inverse_dynamics(m, kin, "newton-euler", goal="min-torque")
+    below = (N_of(free) < bound).sum(axis=0)
+    assert below[0] > 300 and below[1] > 700 and uni.info["constrained_samples"] == 0
+    args = (kin.q, kin.dq, kin.ddq, m.molar(kin.side), kin.force, m.vector())
+    tau = evaluate(inverse_dynamics_function("target", "newton-euler", "min-torque", True, "unilateral"), *args)[0]
+    tau_free = evaluate(inverse_dynamics_function("target", "newton-euler", "min-torque", True), *args)[0]
+    assert np.abs(tau - uni.tau).max() <= 1e-12
+    assert np.abs(tau_free - free.tau).max() <= 1e-12
+    assert np.abs(uni.tau - free.tau).max() > 1e-2

@@ -5,6 +5,9 @@ the measured crank angles and the filtered difference), tick by tick, to 1e-9 of
 above rounding (the two evaluate the same graphs, one folded and compiled with -O2, one with p as an input at -O1:
 measured 1e-16 on the same ticks, 1e-13 between two closed loops) and far below any difference of algorithm (one
 Gauss-Newton step fewer, a filter off by one tick, a reference off by one sample all show at 1e-4 or more).
+The built-in models have a drive: the C step is then given the encoders' counts and commands currents, held against
+the currents the Python loop makes of its controller's torques to the same 1e-9 (of the largest current), for the
+same reasons (the loss law's inverse is the same eight Newton steps in both; measured 5e-16).
 """
 
 from __future__ import annotations
@@ -112,6 +115,8 @@ def test_exported_step_equals_the_python_controller_tick_by_tick(kind):
     assert c.metrics["stopped"] is None and py.metrics["stopped"] is None
     same_run = c.info["simulation"]["exported"]
     assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE and same_run["status_bits_seen"] == []
+    # the drive robot: the step read the encoders' counts and its currents are the Python controller's
+    assert same_run["encoder_counts"] and same_run["current_relative"] <= TOLERANCE and same_run["largest_abs_current_A"] > 0.1
     a, b = tau_cmd(c.table), tau_cmd(py.table)
     assert a.shape == b.shape == (5001, 6)
     assert np.max(np.abs(a - b)) <= TOLERANCE * np.max(np.abs(b))
@@ -123,8 +128,37 @@ def test_exported_step_with_noisy_encoders_sees_what_the_python_controller_sees(
     on the same ticks as without noise."""
     c = compute(resolve(noise_rad=1e-4, seed=2, exported=True), exported=ExportedController)
     same_run = c.info["simulation"]["exported"]
-    assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE
+    assert same_run["ticks"] == 5001 and same_run["relative"] <= TOLERANCE and same_run["current_relative"] <= TOLERANCE
     assert c.info["simulation"]["sensor"]["noise_rad"] == 1e-4 and c.metrics["stopped"] is None
+
+
+def test_exported_step_on_a_coarse_encoder_commands_the_python_controllers_currents():
+    """A coarse encoder (200 counts per motor turn: 6.2e-4 rad at the crank, ten times the built-in one's) on the
+    robot and in the controller's model, over the first chewing cycle of the default task (1.0 to 1.8 s): the step,
+    given whole counts, commands the currents the Python loop commands on the same ticks (1e-9 of the largest); the
+    angles it turned the counts into are on the encoder's grid (whole counts to 1e-9 of a count), and the currents differ from a
+    run with the built-in encoder by far more than that (the quantisation is felt: the test can fail)."""
+    from chewbot.model import drive
+
+    runs = {}
+    for counts in (200.0, 2000.0):
+        sets = {"drive.encoder_counts_per_rev": counts}
+        options = resolve("computed-torque", exported=True, overrides=sets, plant_overrides=sets)
+        task = build(options).task.window(1000, 1801)
+        captured = []
+
+        def exported(controller, rate, captured=captured):
+            captured.append(ExportedController(controller, rate))
+            return captured[-1]
+
+        result = compute(options, task=task, exported=exported)
+        same_run = result.info["simulation"]["exported"]
+        assert same_run["ticks"] == 801 and same_run["encoder_counts"] and result.metrics["stopped"] is None
+        assert same_run["current_relative"] <= TOLERANCE and same_run["relative"] <= TOLERANCE
+        runs[counts] = np.array(captured[0].c_currents)
+        last = np.asarray(captured[0].library.context.theta_last) / drive.count_angle(drive.of(captured[0].model))
+        assert np.max(np.abs(last - np.rint(last))) < 1e-9  # the last tick's angles: whole counts
+    assert np.max(np.abs(runs[200.0] - runs[2000.0])) > 1e3 * TOLERANCE * np.max(np.abs(runs[2000.0]))
 
 
 def test_exported_on_an_imported_recording_from_the_command_line(tmp_path):
@@ -449,3 +483,37 @@ def test_export_refuses_a_log_of_a_failing_loop_and_takes_a_gains_file(tmp_path)
     for bad, words in ((["--controller", "feedforward"], "pd or computed-torque"), (["--method", "euler"], "--method")):
         done = runner.invoke(app, ["export-controller", *bad, "--no-log", "--out", str(tmp_path / "x")])
         assert done.exit_code == 2 and words in done.output, done.output
+
+
+def test_step_counts_reads_the_encoders_and_commands_currents_through_the_drive(step):
+    """``chewbot_ctrl_step_counts``: counts at the motors are the angles counts * 2 pi / (counts per turn N) (the same
+    torques as ``chewbot_ctrl_step`` on those angles, exactly); the crank rates are the filtered difference of the
+    angles (the sensor's formula, written out here); the currents are the drive's loss law inverted at those rates,
+    checked by the forward law (the crank torque of k_t i equals the output torque to 1e-12 relative); a changed
+    torque constant in the configuration scales the currents; without an encoder the counts are refused (BAD_INPUT)."""
+    from chewbot.model import drive
+
+    lib, spec = step
+    d = spec.model.drive
+    angle = drive.count_angle(d)
+    home_counts = np.rint(home(spec) / angle)
+    ticks = [home_counts + np.array([0, 1, -1, 2, -2, 3]) * k for k in range(4)]  # cranks turning both ways
+    lib.init(0.0)
+    plain = [lib.step(0.001 * k, c * angle)[0] for k, c in enumerate(ticks)]
+    lib.init(0.0)
+    rates, b = np.zeros(6), np.exp(-2 * np.pi * spec.cutoff * 0.001)
+    for k, c in enumerate(ticks):
+        current, status = lib.step_counts(0.001 * k, c)
+        assert status == 0 and np.array_equal(lib.tau, plain[k])
+        if k:
+            rates = b * rates + (1 - b) * (c - ticks[k - 1]) * angle / 0.001
+        assert np.allclose(lib.fields["dtheta"], rates, rtol=1e-12, atol=1e-12)
+        back = drive.crank_torque(d, drive.torque_of_current(d, current), lib.fields["dtheta"])
+        assert np.max(np.abs(back - lib.tau)) <= 1e-12 * np.max(np.abs(lib.tau))
+    assert np.any(lib.fields["dtheta"] > 0) and np.any(lib.fields["dtheta"] < 0)
+    lib.fields["torque_constant"][0] *= 2
+    doubled, _ = lib.step_counts(0.004, ticks[-1])
+    assert np.allclose(doubled * 2, lib.tau_motor / d.torque_constant, rtol=1e-12)
+    lib.fields["encoder_counts"][0] = 0.0
+    _, status = lib.step_counts(0.005, ticks[-1])
+    assert status & STATUS_BITS["BAD_INPUT"] and status & STATUS_BITS["HOLDING"]

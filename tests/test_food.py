@@ -195,13 +195,13 @@ def test_fracture_state_and_guards():
     assert broken == 1 and float(F_m) == pytest.approx(0.7 * 0.2, rel=1e-14)
     crush = food_from_dict({"food": {**CYLINDER, "fracture_strain": 0.3, "stiffness_after_fracture": 0.5}})
     v, df = crush.vector(), 2.4e-3
-    g = guards(v, df - 1e-9, 1e-3, 0, 0.0, df - 1e-9)
-    g2 = guards(v, df + 1e-9, 1e-3, 0, 0.0, df + 1e-9)
+    g = guards(NUMPY, v, df - 1e-9, 1e-3, 0, 0.0, df - 1e-9)
+    g2 = guards(NUMPY, v, df + 1e-9, 1e-3, 0, 0.0, df + 1e-9)
     assert g[2] < 0 < g2[2]  # fracture
-    gb = guards(v, df, 1e-3, 1, 0.0, df)
-    assert np.isnan(gb[2]) and gb[5] > 0 and guards(v, df, -1e-3, 1, 0.0, df)[5] < 0  # disarmed; the turn
+    gb = guards(NUMPY, v, df, 1e-3, 1, 0.0, df)
+    assert np.isnan(gb[2]) and gb[5] > 0 and guards(NUMPY, v, df, -1e-3, 1, 0.0, df)[5] < 0  # disarmed; the turn
     h_set = df * 0.9
-    assert guards(v, h_set - 1e-9, -1e-3, 1, 0.0, df)[0] < 0 < guards(v, h_set + 1e-9, -1e-3, 1, 0.0, df)[0]
+    assert guards(NUMPY, v, h_set - 1e-9, -1e-3, 1, 0.0, df)[0] < 0 < guards(NUMPY, v, h_set + 1e-9, -1e-3, 1, 0.0, df)[0]
 
 
 def test_face_integrals_are_the_cross_sections_integral():

@@ -40,7 +40,8 @@ SLSQP_SAMPLES = 50  # consecutive samples from t = 2 s (inside a bite); SLSQP co
 BOTH = ("target", "6rss")
 EA, EP = "euler-angles", "euler-parameters"
 RUN_CASES = {"run, hessian": ["run"], "run, newton-euler G1 with friction": ["run", "--method", "newton-euler"],
-             "chew, peanut, 25 cycles": ["chew", "--food", "peanut", "--cycles", "25"]}
+             "chew, peanut, 25 cycles": ["chew", "--food", "peanut", "--cycles", "25"],
+             "tpa, cheddar": ["tpa", "--food", "cheddar"]}
 LONG_SAMPLES = (10_000, 100_000, 1_000_000)
 
 
@@ -284,8 +285,8 @@ def _chewbot(*args: str) -> list[str]:
 
 def bench_commands(repeats: int = 7, progress: Progress = SILENT) -> dict[str, Timing]:
     """Wall time of ``chewbot run`` on the default task (Hessian; Newton–Euler G1 with friction), of ``chewbot chew``
-    (the peanut, 25 cycles), all outputs, warm kernel cache, and of ``chewbot --help``: separate processes,
-    interleaved."""
+    (the peanut, 25 cycles), of ``chewbot tpa`` (the cheddar, the default protocol: two simulations, the estimate,
+    the folder), all outputs, warm kernel cache, and of ``chewbot --help``: separate processes, interleaved."""
     with tempfile.TemporaryDirectory() as tmp:
         runs = {label: partial(_quiet, _chewbot(*args, "--out", str(Path(tmp) / f"run{k}"), "--force", "-q"))
                 for k, (label, args) in enumerate(RUN_CASES.items())}
@@ -697,6 +698,7 @@ def _commands_table(timings: dict[str, Timing]) -> list[str]:
     lines = ["What a user waits for (separate processes, warm kernel cache, default task, all outputs):", "",
              "| command | wall time (s) | runs |", "|---|---|---|"]
     lines += [f"| `chewbot {' '.join(RUN_CASES.get(t.label, ['--help']))}` | {t.per_sample(1)} | {len(t.times)} |" for t in timings.values()]
+    lines += ["", f"- `chewbot tpa` / `chewbot run` (Hessian): {compare(timings['tpa, cheddar'], timings['run, hessian']).text()}"]
     return lines + [""]
 
 

@@ -20,20 +20,21 @@ from chewbot.task import WINDOW_S
 
 
 def identify(
-    log: Path = typer.Argument(..., help="The robot log (CSV): t, theta1..6 (optional dtheta1..6, ddtheta1..6), tau1..6, optional Fx, Fy, Fz; units in brackets."),
+    log: Path = typer.Argument(..., help="The robot log (CSV): t, theta1..6 (optional dtheta1..6, ddtheta1..6), tau1..6 (N*m) or the motors' currents i1..6 (A; read through the model's drive, whose torque constant and efficiency are then estimated), optional Fx, Fy, Fz; units in brackets, e.g. i1[mA]."),
     model: str = typer.Option("target", "--model", help="The start model: a built-in model (target, 6rss, ...) or a TOML parameter file."),
     out: Path = typer.Option(..., "--out", help="The model file to write (TOML); the table of estimates goes beside it, *.identification.csv."),
     side: Side = typer.Option(Side.left, "--side", help="Molar where the logged bite force acts."),
     window: float = typer.Option(WINDOW_S, "--window", min=0.0, help="Length (s) of the Savitzky-Golay window that estimates the rates the log does not give."),
-    fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.inertia_g_mm2, cranks.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad); repeatable."),
+    fix: list[str] = typer.Option([], "--fix", metavar="KEY", help="Keep this key at the model's value (mandible.inertia_g_mm2, cranks.inertia_g_mm2, friction.hkp_coulomb, friction.hkp_viscous_Ns_per_m, friction.actuator_coulomb, friction.actuator_viscous_Nms_per_rad, drive.torque_constant_mNm_per_A, drive.gear_efficiency); repeatable."),
     free: list[str] = typer.Option([], "--free", metavar="KEY", help="Estimate this key too, which the model file gives by default: mandible.mass_g (the weighed mass, in g; a log of torques identifies it as long as no drive's torque constant is estimated with it); repeatable."),
     max_relative_se: float = typer.Option(MAX_RELATIVE_SE, "--max-relative-se", min=0.0, help="A parameter whose standard error exceeds this fraction of its magnitude is not identifiable from the log and is held at the start (the largest first, then the fit is repeated)."),
     force: bool = typer.Option(False, "--force", help="Replace the output files if chewbot wrote them."),
 ) -> None:
-    """Estimate the friction, the crank inertias and the mandible's inertia from a robot log (crank angles and measured torques).
+    """Estimate the friction, the crank inertias and the mandible's inertia from a robot log (crank angles and measured torques or motor currents).
 
     Recovers the mandible's motion from the crank angles, fits the HKP and actuator friction, each crank's total
-    axial inertia and the mandible's inertia that the torques identify by bounded nonlinear least squares (the HKP
+    axial inertia and the mandible's inertia, and from a log of currents on a model with a drive its torque
+    constant and gearbox efficiency, that the torques identify by bounded nonlinear least squares (the HKP
     normal forces of every sample eliminated; the mandible's mass is the model file's, the weighed one, unless
     --free), prints the identified combinations with standard errors, the condition number and what the log cannot
     identify, and writes the model with the estimates in place (listed under `identified`), their covariance and the

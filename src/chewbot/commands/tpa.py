@@ -43,7 +43,7 @@ def tpa(
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not --model (built-in name or TOML file, e.g. target or robot.toml)."),
     plant_set: list[str] = typer.Option([], "--plant-set", metavar="KEY=VALUE", help="Override one number of the plant's model only (as chewbot simulate --plant-set, e.g. mandible.mass_g=408): the model error the controller and the estimator do not know; repeatable."),
     friction: Switch = typer.Option(Switch.on, "--friction", help="on|off: the robot's HKP and actuator friction (the model's coefficients), in the plant, in the controller's Newton-Euler model and in the estimator (as chewbot estimate-force --friction)."),
-    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain of the test's position loop, the crosshead controller (keys crosshead.frequency_Hz (Hz, default 100), crosshead.damping (1), crosshead.integral_Hz (Hz, 20); e.g. crosshead.integral_Hz=10); repeatable."),
+    gain: list[str] = typer.Option([], "--gain", metavar="KEY=VALUE", help="Override one gain of the test's position loop, the crosshead controller (keys crosshead.frequency_Hz (Hz, default 100), crosshead.damping (1), crosshead.integral_Hz (Hz, 20)), or of its force observer (observer.cutoff_Hz (Hz, 200): the low-pass of the force fed forward); e.g. crosshead.integral_Hz=10; repeatable."),
     log: Path | None = typer.Option(None, "--log", show_default=False, help="A robot's logged two-bite test (chewbot identify's log: t, theta1..6, tau1..6; units in brackets): the measures from its angles and torques through the bite-force estimator, no simulation."),
     out: Path = typer.Option(..., "--out", help="Folder to write: tpa.json, task.csv and results.csv (simulated), force_time.png, force_displacement.png, tpa.html."),
     force: bool = flag("--force", help=FORCE_HELP),
@@ -52,11 +52,13 @@ def tpa(
 ) -> None:
     """Run texture profile analysis with the robot: two bites of a food sample, Bourne's measures.
 
-    As a texture analyser: the molar point of --side approaches the sample from h0 + 1 mm at --pre-test-speed until
+    As a texture analyser: the molar point of --side approaches the sample from 1 mm above its highest point at --pre-test-speed until
     the food's force reaches --trigger-force (the sample's height h_t is the gap there), compresses it by
     --compression % of h_t (or --distance mm) at --speed, withdraws at --post-test-speed to h_t, pauses --pause s, and
-    bites again, its face kept as parallel to the upper tooth as a horizontal slide within --slide mm allows. The robot, with its friction (--friction), holds the path under the crosshead
-    controller (computed torque with integral action). tpa.json holds
+    bites again, its face kept as parallel to the upper tooth as a horizontal slide within --slide mm allows. The robot,
+    with its friction (--friction), holds the path under the crosshead controller (computed torque with integral
+    action, the force observer's estimate of the sample's force fed forward, its redundant torques keeping both
+    condyles pressed on their planes). tpa.json holds
     Bourne's measures twice, "plant" (the food's force in the simulation) and "estimated" (from the crank angles and
     torques through the bite-force estimator, as on the real robot), their definitions, the protocol as run and the
     checks: compression reached and speed held within 1 %, teeth met, a condyle lifted, the energy readings in [0, 1].
@@ -93,12 +95,15 @@ def tpa(
         if log is not None:
             record = _from_log(options, out, force, inputs)
         else:
-            from chewbot.outputs.tpa import write_tpa
+            from chewbot.outputs.tpa import tpa_folder
+            from chewbot.simulation.run import input_files
             from chewbot.simulation.texture import run_tpa
 
             with progress(quiet, "tpa", total=TPA_STEPS) as step:
-                result = run_tpa(options, progress=step, check=check_interrupted)
-                write_tpa(result, out, force=force, progress=step)
+                # the simulation's files are written by a second process while this one estimates the force
+                with tpa_folder(out, force, input_files(options.simulation), step) as folder:
+                    result = run_tpa(options, progress=step, check=check_interrupted, simulated=folder.simulated)
+                    folder.finish(result)
             record = result.record()
     if not quiet:
         _print(record, out)

@@ -329,7 +329,7 @@ class NativeFunction:
         return functools.partial(self._c, self._arg, self._res, self._iw, self._w, 0)
 
     def _check_count(self, inputs) -> None:
-        if len(inputs) != self.function.n_in():
+        if len(inputs) != len(self._in):
             raise ValueError(f"{self.name}: {len(inputs)} inputs given, it takes {self.function.n_in()} "
                              f"({', '.join(self.function.name_in())})")
 
@@ -338,6 +338,9 @@ class NativeFunction:
         fn = self.function
         with self._lock:  # the buffers are shared, and ctypes releases the GIL during the call
             for i, (buf, x) in enumerate(zip(self._in, inputs)):
+                if type(x) is np.ndarray and x.shape == buf.shape:  # a vector as the kernel takes it (most calls in a loop)
+                    buf[:] = x
+                    continue
                 x = np.ravel(np.asarray(x, dtype=float), order="F")
                 if x.size != buf.size:
                     raise ValueError(f"{self.name}: input {fn.name_in(i)} has {x.size} entries, expected {buf.size}")

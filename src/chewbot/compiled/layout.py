@@ -17,6 +17,7 @@ stage); :meth:`split`, :meth:`pack` and :meth:`unpack` keep them.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -52,6 +53,11 @@ class Layout:
 
     def slices(self) -> dict[str, slice]:
         """Each block's rows."""
+        return dict(self._slices)
+
+    @cached_property
+    def _slices(self) -> dict[str, slice]:
+        # computed once per layout: a simulation packs and splits at every integrator step
         out, at = {}, 0
         for name, size in self.blocks:
             out[name] = slice(at, at + size)
@@ -67,8 +73,8 @@ class Layout:
     def split(self, x) -> dict:
         """The blocks of ``x`` (NumPy array or CasADi expression, laid out along its rows) by name."""
         if isinstance(x, np.ndarray):
-            return {name: x[s] for name, s in self.slices().items()}
-        return {name: x[s, :] for name, s in self.slices().items()}
+            return {name: x[s] for name, s in self._slices.items()}
+        return {name: x[s, :] for name, s in self._slices.items()}
 
     def pack(self, columns: int | None = None, **values) -> np.ndarray:
         """The vector of these blocks (every block given by name; a scalar fills its block, a matrix is laid out column
@@ -80,7 +86,7 @@ class Layout:
             raise ValueError(f"pack {', '.join(self.names)}: missing {sorted(missing)}, unknown {sorted(unknown)}")
         shape = (self.size,) if columns is None else (self.size, columns)
         out = np.empty(shape)
-        for name, s in self.slices().items():
+        for name, s in self._slices.items():
             value = np.asarray(values[name], float)
             if columns is None:
                 value = np.ravel(value, order="F")

@@ -63,6 +63,9 @@ UNKNOWNS = ("Fx", "Fy", "Fz", "N_L", "N_R")
 # two steps reach the piece's minimiser to ~1e-12 N on the default task), and damped steps on the smoothed model.
 PATTERN_STEPS = 3
 POLISH_STEPS = 6
+# A sample whose polishing step is below this relative to its unknowns (1 + the largest abs(u), N) has converged to
+# rounding: its line search is skipped (it could only move u by rounding, and its cost rarely falls by it).
+POLISH_FLOOR = 1e-12
 HALVINGS = 6
 # A pattern's minimiser counts as having its signs down to this far on the wrong side (N): the smoothing of abs(N)
 # (DELTA_N) blurs the kink over that width anyway.
@@ -296,13 +299,18 @@ def solve_states(model: Model, theta, q, dq, ddq, tau, *, side: str = "left", co
         raise ValueError(f"tau must be ({n}, 6), not {tau.shape}")
     fn = kernel if kernel is not None else native(residual_kernel(model.mechanism))
     B, p, fl = model.molar(side), model.vector(), 1.0 if friction else 0.0
-    u, free = solve(lambda u, signs: evaluate(fn, theta, q, dq, ddq, B, u, tau, signs, fl, p), n, contact, fl)
+    def residual(u, signs, rows=slice(None)):
+        return evaluate(fn, theta[rows], q[rows], dq[rows], ddq[rows], B, u, tau[rows], signs, fl, p)
+
+    theta, q, dq, ddq = (np.asarray(x, float) for x in (theta, q, dq, ddq))
+    u, free = solve(residual, n, contact, fl)
     return u, free, tuple(evaluate(fn, theta, q, dq, ddq, B, u, tau, np.zeros(2), fl, p)) if residuals else None
 
 
 def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, np.ndarray]:
     """u (n, 5) minimising |r|^2 at every sample, and which unknowns are free (n, 5) (False: held at a bound).
-    ``residual(u, signs)`` -> r (n, 6), G (n, 6, 5) (module docstring)."""
+    ``residual(u, signs, rows)`` -> r (k, 6), G (k, 6, 5) at the samples ``rows`` (default: all), u (k, 5) there
+    (module docstring)."""
     r0, G0 = residual(np.zeros((n, 5)), np.zeros(2))
     everything = np.ones(5, dtype=bool)
     start = _lstsq(G0, -r0, everything)  # the friction-free answer: exact without friction, r being affine in u
@@ -334,29 +342,33 @@ def solve(residual, n: int, contact: str, friction: float) -> tuple[np.ndarray, 
 
 
 def _polish(residual, u, free, contact):
-    """Damped Gauss-Newton on the smoothed model (signs 0), the held unknowns kept, all samples at once."""
+    """Damped Gauss-Newton on the smoothed model (signs 0), the held unknowns kept, all samples at once; the line
+    search on the samples whose step is above :data:`POLISH_FLOOR`, a halving on those whose step was not accepted
+    yet."""
     zero = np.zeros(2)
     r, G = residual(u, zero)
     cost = np.einsum("ij,ij->i", r, r)
+    patterns = [(pattern, np.all(free == pattern, axis=1)) for pattern in np.unique(free, axis=0)]
     for _ in range(POLISH_STEPS):
         step = np.zeros_like(u)
-        for pattern in np.unique(free, axis=0):
-            rows = np.all(free == pattern, axis=1)
+        for pattern, rows in patterns:
             step[rows] = _lstsq(G[rows], -r[rows], pattern)
-        alpha = np.ones(u.shape[0])
-        accepted = np.zeros(u.shape[0], bool)
+        left, alpha = np.flatnonzero(np.abs(step).max(axis=1) > POLISH_FLOOR * (1.0 + np.abs(u).max(axis=1))), 1.0
+        if not left.size:
+            break
         for _ in range(HALVINGS):
-            trial = u + alpha[:, None] * step
+            trial = u[left] + alpha * step[left]
             if contact == "unilateral":
                 trial[:, 3:] = np.maximum(trial[:, 3:], 0.0)
-            rt, Gt = residual(trial, zero)
+            rt, Gt = residual(trial, zero, left)
             ct = np.einsum("ij,ij->i", rt, rt)
-            good = ~accepted & (ct <= cost)
-            u[good], r[good], G[good], cost[good] = trial[good], rt[good], Gt[good], ct[good]
-            accepted |= good
-            if accepted.all():
+            good = ct <= cost[left]
+            rows = left[good]
+            u[rows], r[rows], G[rows], cost[rows] = trial[good], rt[good], Gt[good], ct[good]
+            left = left[~good]
+            if not left.size:
                 break
-            alpha[~accepted] /= 2
+            alpha /= 2
     return u
 
 

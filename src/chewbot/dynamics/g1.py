@@ -67,14 +67,28 @@ def g1_kernel(mechanism: str = "target", orientation: str = G1_ORIENTATION,
 
     return KernelSpec("g1_target", build, (mechanism, orientation, iterations), mechanism)
 
+# A controller's unilateral distribution keeps N_L, N_R this far (N) above contact.preload_N: the plant's normal forces
+# differ from the ones the controller plans by what its model and its force estimate miss (the estimate's lag, the
+# torques held over a tick). Held at the bare bound, the carrot's test (chewbot tpa --food carrot, the drive on) left
+# N_R at -0.0042 N on 48 samples, where the controller's face put it at 0 N; 1 N is 240 times that miss and 1 % of
+# the carrot's 100 N peak.
+CONTROLLER_MARGIN_N = 1.0
+
 
 def distribution_function(params: SymbolicModel, orientation: str, goal: str, friction: float,
-                          iterations: int = G1_ITERATIONS) -> ca.Function:
+                          iterations: int = G1_ITERATIONS, unilateral: bool = False, margin: float = 0.0) -> ca.Function:
     """One sample's distribution of the target's redundant torques by ``goal`` (seed 001, Sect. 4.5), at a fixed cost:
     (D, p) -> tau, N, grad, step, limits, D the sample's Newton-Euler data (:func:`coefficients_kernel` in
     ``orientation``), ``friction`` 0.0 or 1.0 (a constant of the graph). The best piecewise least-squares start
     (:func:`chewbot.dynamics.formulations.newton_euler.start_sx`), then ``iterations`` safeguarded Newton steps on the goal's
-    |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values."""
+    |r|^2 (see :func:`g1_kernel`); grad and step at the answer (both ~0 at the optimum), the 24 limit values.
+
+    ``unilateral``: N_L, N_R >= ``contact.preload_N`` (the unilateral contact, docs/contact.md) by the active sets of
+    the two bounds, as the distribution solver's :func:`chewbot.dynamics.distribution.solve` does: the free optimum
+    where it respects them; else the best of the admissible optima on the faces (one force held at the preload, the
+    other by ``iterations`` safeguarded Newton steps) and the corner (both at the preload). On the faces and the
+    corner grad is the gradient along the free unknowns only (zero along a held one), so it stays ~0 at the answer.
+    ``margin`` (N): the bounds are ``contact.preload_N`` + margin (a controller's, :data:`CONTROLLER_MARGIN_N`)."""
     def build():
         model = params
         extra, _ = parameter_input(model)
@@ -83,34 +97,64 @@ def distribution_function(params: SymbolicModel, orientation: str, goal: str, fr
         out = forces_sx(model, Dsym, N, friction)
         r = goal_residual(model, goal, Dsym, N, friction)
         J = ca.sumsqr(r)
-        H, g = ca.hessian(J, N)
-        Jr = ca.jacobian(r, N)
-        H_gn = 2 * ca.mtimes(Jr.T, Jr) + 1e-12 * ca.SX.eye(2)
-        convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
-        p = -ca.solve(ca.if_else(convex, H, H_gn), g)
-        slope = ca.dot(g, p)
         value = ca.Function("distribution_value", [Dsym, N, *extra], [J])
-        Np = N  # no acceptable step: stay
-        for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
-            alpha = 0.5**k
-            trial = N + alpha * p
-            Np = ca.if_else(value(Dsym, trial, *extra) <= J + ARMIJO * alpha * slope, trial, Np)
-        # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
-        # is taken (the quadratic-convergence region), as the distribution solver does
-        Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
-        step = ca.Function("distribution_step", [Dsym, N, *extra], [Np])
+
+        def newton(free: tuple[int, ...]) -> tuple[ca.Function, ca.Function]:
+            """The safeguarded Newton step on the unknowns ``free`` (the others held), and at N the gradient along
+            them and the size of the step Newton proposes there."""
+            Nf = N[list(free)]
+            H, g = ca.hessian(J, Nf)
+            Jr = ca.jacobian(r, Nf)
+            n = len(free)
+            H_gn = 2 * ca.mtimes(Jr.T, Jr) + 1e-12 * ca.SX.eye(n)
+            convex = ca.logic_and(H[0, 0] > 0, ca.det(H) > 0)
+            pf = -ca.solve(ca.if_else(convex, H, H_gn), g)
+            p = ca.SX.zeros(2)
+            grad = ca.SX.zeros(2)
+            for k, j in enumerate(free):
+                p[j], grad[j] = pf[k], g[k]
+            slope = ca.dot(g, pf)
+            Np = N  # no acceptable step: stay
+            for k in reversed(range(HALVINGS)):  # the longest acceptable step wins: it is tested last
+                alpha = 0.5**k
+                trial = N + alpha * p
+                Np = ca.if_else(value(Dsym, trial, *extra) <= J + ARMIJO * alpha * slope, trial, Np)
+            # where the predicted decrease is below the rounding of J, Armijo's test is noise: the full Newton step
+            # is taken (the quadratic-convergence region), as the distribution solver does
+            Np = ca.if_else(-slope <= MEASURABLE * J, N + p, Np)
+            return (ca.Function("distribution_step", [Dsym, N, *extra], [Np]),
+                    ca.Function("distribution_stationary", [Dsym, N, *extra], [grad, ca.norm_2(pf)]))
+
+        def iterate(free: tuple[int, ...], Nk):
+            step, stationary = newton(free)
+            for _ in range(iterations):
+                Nk = step(Dsym, Nk, *extra)
+            return (Nk, *stationary(Dsym, Nk, *extra))
+
         start = ca.Function("distribution_start", [Dsym, *extra], [start_sx(model, goal, Dsym)])
         dth = Dsym[-6:]
         lim = ca.vertcat(out["tau"], out["tau"] * dth, out["axial"], out["radial"])
+        final = ca.Function("distribution_final", [Dsym, N, *extra], [out["tau"], lim])
         # the Newton step proposed at the answer: ~0 only at a stationary point, whatever the line search did
-        final = ca.Function("distribution_final", [Dsym, N, *extra], [out["tau"], g, ca.norm_2(p), lim])
-        Nk = start(Dsym, *extra)
-        for _ in range(iterations):
-            Nk = step(Dsym, Nk, *extra)
-        tau, grad, newton_step, limits = final(Dsym, Nk, *extra)
+        Nk, grad, newton_step = iterate((0, 1), start(Dsym, *extra))
+        if unilateral:
+            pre = model.contact.preload + margin
+            corner = ca.vertcat(pre, pre)
+            best = (corner, ca.SX.zeros(2), ca.SX(0.0), value(Dsym, corner, *extra))
+            for held in (0, 1):  # the face N_held = preload, the other free from its clamped free optimum
+                free = 1 - held
+                N0 = ca.SX.zeros(2)
+                N0[held], N0[free] = pre, ca.fmax(Nk[free], pre)
+                Nf, gf, sf = iterate((free,), N0)
+                Jf = value(Dsym, Nf, *extra)
+                better = ca.logic_and(Nf[free] >= pre, Jf < best[3])
+                best = tuple(ca.if_else(better, a, b) for a, b in zip((Nf, gf, sf, Jf), best))
+            admissible = ca.logic_and(Nk[0] >= pre, Nk[1] >= pre)
+            Nk, grad, newton_step = (ca.if_else(admissible, a, b) for a, b in zip((Nk, grad, newton_step), best[:3]))
+        tau, limits = final(Dsym, Nk, *extra)
         return ca.Function("distribution", [Dsym, *extra], [tau, Nk, grad, newton_step, limits])
 
-    return cached_graph(params, ("distribution", orientation, goal, friction, iterations), build)
+    return cached_graph(params, ("distribution", orientation, goal, friction, iterations, unilateral, margin), build)
 
 
 def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> dict[str, np.ndarray]:
@@ -121,15 +165,18 @@ def g1_distribution(model: Model, kin: Kinematics, side: str | None = None) -> d
     return dict(zip(("tau", "N", "grad", "step", "limits"), out))
 
 
-def sample_torques(mechanism: str, goal: str = "min-torque", friction: bool = True) -> ca.Function:
+def sample_torques(mechanism: str, goal: str = "min-torque", friction: bool = True,
+                   contact: str = "bilateral") -> ca.Function:
     """A controller's Newton–Euler inverse dynamics of one sample (:class:`~chewbot.dynamics.base.Sample`): the
-    sample's data and, on the target, the distribution of ``goal`` at a fixed cost (:func:`distribution_function`);
-    the 6RSS's torques in closed form. The model's friction where ``friction``."""
+    sample's data and, on the target, the distribution of ``goal`` at a fixed cost (:func:`distribution_function`;
+    ``contact="unilateral"``: with N_L, N_R >= ``contact.preload_N`` + :data:`CONTROLLER_MARGIN_N`); the 6RSS's torques
+    in closed form. The model's friction where ``friction``."""
     s = Sample.of(mechanism)
     m = s.params
     ea = Orientation.euler_angles.value
     D = coefficients_kernel(mechanism, ea).graph()(s.kinematics["theta"], s.q, s.dq, s.ddq, s.F, s.B, m.p)[0]
     fl = 1.0 if friction else 0.0
     if m.has_hkp:
-        return s.function(distribution_function(m, ea, goal, fl)(D, m.p)[0])
+        return s.function(distribution_function(m, ea, goal, fl, unilateral=contact == "unilateral",
+                                                margin=CONTROLLER_MARGIN_N)(D, m.p)[0])
     return s.function(forces_sx(m, D, ca.SX(0, 1), fl)["tau"])

@@ -76,8 +76,8 @@ FORMULATIONS: dict[str, Formulation] = {f.name: f for f in (
     Formulation("newton-euler", newton_euler.newton_euler, newton_euler.kernels, g1.sample_torques,
                 "Newton-Euler with friction and the optimal distribution of the redundant torques (seed 001, Sect. 4)",
                 orientations=(EA, EP), options=("side", "contact", "goal", "friction", "strict"),
-                kernel_options=("goal",), sample_options=("goal", "friction"), carries=True, checks=True,
-                defaults=(("goal", "min-torque"), ("friction", True))),
+                kernel_options=("goal",), sample_options=("goal", "friction", "contact"), carries=True, checks=True,
+                defaults=(("goal", "min-torque"), ("friction", True), ("contact", "bilateral"))),
 )}
 METHODS = tuple(FORMULATIONS)
 assert set(DEFAULT_METHOD) == {EA, EP} and set(DEFAULT_METHOD.values()) <= set(FORMULATIONS)

@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from chewbot.compiled.cache import cached_graph, symbols
-from chewbot.compiled.kernels import evaluate
+from chewbot.compiled.kernels import KernelSpec, evaluate, native
 from chewbot.errors import KinematicsError, TaskError
 from chewbot.kinematics.symbolic import symbolic
 from chewbot.kinematics.task import TARGET_COORDS, Task
@@ -67,6 +67,20 @@ def bite_point_function(mechanism: str) -> ca.Function:
     return cached_graph(m, ("food-bite-point-face",), build)
 
 
+def bite_point_kernel(mechanism: str) -> KernelSpec:
+    """:func:`bite_point_function` compiled: a whole trajectory's gaps in one C loop."""
+    from chewbot.model.symbolic import c_name
+
+    name = f"bite_point_{c_name(mechanism)}"
+
+    def build(params):
+        fn = bite_point_function(mechanism)
+        x = fn.sx_in()
+        return ca.Function(name, x, fn.call(x), fn.name_in(), fn.name_out(), {"cse": True})
+
+    return KernelSpec(name, build, (mechanism, "food-bite-point-face"), mechanism)
+
+
 def home_height(model: Model, side: str) -> float:
     """B_z at the home pose (m): {M} coincides with {S} there."""
     return float(np.asarray(model.molar(side), float)[2])
@@ -77,7 +91,7 @@ def gap(model: Model, side: str, q, dq=None) -> dict[str, np.ndarray]:
     point (N, 3; m, in {S}) along states ``q``, ``dq`` (N, n) in Euler angles."""
     q = np.atleast_2d(np.asarray(q, float))
     dq = np.zeros_like(q) if dq is None else np.atleast_2d(np.asarray(dq, float))
-    point, velocity, cos_tilt, sin_tilt = evaluate(bite_point_function(model.mechanism), q, dq,
+    point, velocity, cos_tilt, sin_tilt = evaluate(native(bite_point_kernel(model.mechanism)), q, dq,
                                                    np.asarray(model.molar(side), float), model.vector())
     return {"gap": home_height(model, side) - point[:, 2], "rate": -velocity[:, 2], "sliding": velocity[:, :2],
             "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "point": point}
@@ -297,4 +311,5 @@ def largest_height(model: Model, side: str) -> float:
     return largest_gap(model, side) - APPROACH
 
 
-__all__ = ["APPROACH", "SIN_TILT_SMOOTHING", "bite_point_function", "face_path_task", "gap", "home_height", "largest_gap", "largest_height", "molar_path_task"]
+__all__ = ["APPROACH", "SIN_TILT_SMOOTHING", "bite_point_function", "bite_point_kernel", "face_path_task", "gap", "home_height",
+           "largest_gap", "largest_height", "molar_path_task"]

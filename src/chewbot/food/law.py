@@ -365,23 +365,25 @@ def fracture_state(xp, f, delta, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0):
     return 1.0, F_m * after / xp.fmax(before, 1e-300), delta_max
 
 
-def guards(f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0) -> np.ndarray:
-    """The guard functions of :data:`FOOD_EVENTS` at one state (NumPy; NaN: not armed there): an event is where its
-    guard changes sign. ``fracture`` is read on the face's most compressed fibre, delta + a sin(theta) (the sample
+def guards(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0):
+    """The guard functions of :data:`FOOD_EVENTS` at a state, in that order (NaN: not armed there): an event is where
+    its guard changes sign. ``fracture`` is read on the face's most compressed fibre, delta + a sin(theta) (the sample
     breaks where it is strained most; delta itself with parallel faces), armed while intact; ``yield`` and ``turn``
     at the centre, armed only where the compression is the deepest so far (they change the permanent set);
-    ``adhesion`` in contact."""
-    h0 = float(_p(f, "h0"))
-    strained = delta + float(_p(f, "radius")) * sin_tilt
-    _, F_v = normal_force(NUMPY, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max)
-    contact = float(in_contact(NUMPY, f, delta, broken, delta_max, sin_tilt, tilt_max))
+    ``adhesion`` in contact. ``xp``: :data:`NUMPY` (a list of the six, each an array of the samples) or
+    :data:`CASADI` (the plant's compiled step evaluates them)."""
+    h0, yield_depth = _p(f, "h0"), _p(f, "yield_strain") * _p(f, "h0")
+    strained = delta + _p(f, "radius") * sin_tilt
+    _, F_v = normal_force(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max)
+    contact = in_contact(xp, f, delta, broken, delta_max, sin_tilt, tilt_max)
     deepest = delta >= delta_max
-    sets = broken or float(_p(f, "plastic_fraction")) > 0 and delta_max >= float(_p(f, "yield_strain")) * h0
-    return np.array([contact, delta - h0,
-                     strained / h0 - float(_p(f, "fracture_strain")) if not broken else np.nan,
-                     float(F_v) + float(_p(f, "adhesion")) if contact > 0 else np.nan,
-                     delta - float(_p(f, "yield_strain")) * h0 if float(_p(f, "plastic_fraction")) > 0 and deepest else np.nan,
-                     ddelta if sets and deepest else np.nan])
+    plastic = _p(f, "plastic_fraction") > 0
+    sets = xp.fmax(broken, plastic * (delta_max >= yield_depth)) > 0.5
+    return [contact, delta - h0,
+            xp.where(broken < 0.5, strained / h0 - _p(f, "fracture_strain"), math.nan),
+            xp.where(contact > 0, F_v + _p(f, "adhesion"), math.nan),
+            xp.where(plastic * deepest > 0.5, delta - yield_depth, math.nan),
+            xp.where(sets * deepest > 0.5, ddelta, math.nan)]
 
 
 # ------------------------------------------------------------------------------------------- files

@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 from chewbot.compiled.kernels import evaluate, native
 from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, n_unknowns
 from chewbot.identification import MAX_RELATIVE_SE, RCOND
-from chewbot.identification.parameters import INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
+from chewbot.identification.parameters import DRIVE, INERTIA, N_X, NAMES, phi_bounds, phi_of, p_with, x_of_phi
 from chewbot.identification.regressor import ORIENTATION, jacobian_kernel, normal_force_kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.model import Model
@@ -59,10 +59,16 @@ class Evaluation:
 
 
 class ReducedProblem:
-    """The residual of a log with the normal forces eliminated, as a function of x (:meth:`evaluate_at`)."""
+    """The residual of a log with the normal forces eliminated, as a function of x (:meth:`evaluate_at`).
 
-    def __init__(self, model: Model, kin: Kinematics, tau: np.ndarray, used: np.ndarray | None = None, check=None):
-        self.model, self.kin, self.tau = model, kin, np.asarray(tau, dtype=float)
+    ``tau``: the measured torques (n, 6) N*m; or, for a log of currents whose drive is estimated, a function of x
+    giving them and their derivatives with respect to x's :data:`~chewbot.identification.parameters.DRIVE` entries
+    (n, 6, 2): the residual r = tau(x) - tau_measured(x) then takes -d tau_measured / d x into its Jacobian, and the
+    normal forces' optimality d g / d x (g = (d r / d N)' r) takes -(d r / d N)' d tau_measured / d x."""
+
+    def __init__(self, model: Model, kin: Kinematics, tau, used: np.ndarray | None = None, check=None):
+        self.model, self.kin = model, kin
+        self.measured = tau if callable(tau) else (lambda x, tau=np.asarray(tau, dtype=float): (tau, None))
         self.used = np.ones(kin.n, dtype=bool) if used is None else used  # samples in the fit; others weigh 0
         self.nN = n_unknowns(model.mechanism)
         self.B = model.molar(kin.side)
@@ -82,17 +88,25 @@ class ReducedProblem:
         p = p_with(self.model, x)
         n = self.kin.n
         N = np.zeros((n, 0))
+        tau, dtau = self.measured(x)
         if self.nN:
             (D, _, _) = evaluate(self.coefficients, *self.inputs, self.B, p)
-            N = self._N = normal_forces(self.normal, D, self.tau, p, self._N)
-        r, dr_dN, dr_dx, H_NN, H_Nx = evaluate(self.jacobian, *self.inputs, self.B, N, self.tau, x, p)
+            N = self._N = normal_forces(self.normal, D, tau, p, self._N)
+        r, dr_dN, dr_dx, H_NN, H_Nx = evaluate(self.jacobian, *self.inputs, self.B, N, tau, x, p)
         r = r * self.used[:, None]
         if not jacobian:
             return Evaluation(x, r, N)
+        dr_dx = dr_dx.reshape(n, 6, N_X)
+        if dtau is not None:
+            dr_dx[:, :, DRIVE] -= dtau
         if self.nN:
-            dN_dx = -np.linalg.solve(H_NN.reshape(n, self.nN, self.nN), H_Nx.reshape(n, self.nN, N_X))
-            dr_dx = dr_dx.reshape(n, 6, N_X) + np.einsum("nij,njk->nik", dr_dN.reshape(n, 6, self.nN), dN_dx)
-        return Evaluation(x, r, N, (dr_dx.reshape(n, 6, N_X) * self.used[:, None, None]).reshape(n * 6, N_X))
+            dr_dN = dr_dN.reshape(n, 6, self.nN)
+            H_Nx = H_Nx.reshape(n, self.nN, N_X)
+            if dtau is not None:
+                H_Nx[:, :, DRIVE] -= np.einsum("nji,njk->nik", dr_dN, dtau)
+            dN_dx = -np.linalg.solve(H_NN.reshape(n, self.nN, self.nN), H_Nx)
+            dr_dx = dr_dx + np.einsum("nij,njk->nik", dr_dN, dN_dx)
+        return Evaluation(x, r, N, (dr_dx * self.used[:, None, None]).reshape(n * 6, N_X))
 
 
 def normal_forces(kernel, D: np.ndarray, tau: np.ndarray, p: np.ndarray, warm: np.ndarray | None = None) -> np.ndarray:

@@ -17,7 +17,8 @@ from chewbot.identification import MAX_RELATIVE_SE, RCOND
 from chewbot.identification.estimate import Fit, ReducedProblem, fit
 from chewbot.identification.log import RobotLog
 from chewbot.identification.motion import LogMotion, log_motion
-from chewbot.identification.parameters import CRANKS, GROUPS, HKP, INDEX, INERTIA, N_X, PARAMETERS, group_entries, x_of
+from chewbot.identification.parameters import (CRANKS, DRIVE, GROUPS, HKP, INDEX, INERTIA, N_X, PARAMETERS, group_entries,
+                                               x_of)
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.task import smoothing
@@ -36,8 +37,9 @@ class Identification:
     ``x0``, ``x``: start and estimate; ``se``: standard errors (0 where not estimated); ``status`` per parameter:
     ``estimated`` (``(at its bound)`` added where a bound holds it), ``held`` (not identifiable from the log: kept at
     the start; the reason in ``fit.reasons``), ``fixed`` (by ``--fix``), ``given`` (the model file's value, as the
-    parameter's ``given`` says, unless ``--free``), ``not in the model`` (the 6RSS has no HKP) or ``no arm`` (R = 0
-    in the file: R mu_c cannot be written back);
+    parameter's ``given`` says, unless ``--free``), ``not in the model`` (the 6RSS has no HKP; a model without a
+    drive has no torque constant or efficiency), ``not in the log`` (the drive's numbers from a log of torques) or
+    ``no arm`` (R = 0 in the file: R mu_c cannot be written back);
     ``held_directions``: the non-identifiable combinations, each {parameter name: coefficient in file units};
     ``identified``: the parameter-file keys that were estimated.
     """
@@ -94,7 +96,7 @@ class Identification:
                 out[key] = float(x[NAMES_INDEX["R*mu_c"]] / self.model.friction.actuator_arm)
             else:
                 j = next(j for j, p in enumerate(PARAMETERS) if p.group == key)
-                out[key] = float(x[j])
+                out[key] = float(PARAMETERS[j].in_file_units(x[j]))
         return out
 
     def uncertainty(self) -> dict[str, object]:
@@ -186,13 +188,19 @@ def references(model: Model, x0: np.ndarray) -> np.ndarray:
     return ref
 
 
-def default_status(model: Model, fix: tuple[str, ...] = (), free: tuple[str, ...] = ()) -> list[str]:
+def default_status(model: Model, fix: tuple[str, ...] = (), free: tuple[str, ...] = (), currents: bool = False) -> list[str]:
     """The status of each parameter before the fit: "" (to estimate), ``fixed`` (a key of ``fix``), ``given`` (the
-    file's value by default, unless its key is in ``free``), ``not in the model`` (the 6RSS has no HKP) or ``no
-    arm`` (R = 0 in the file: R mu_c cannot be written back)."""
+    file's value by default, unless its key is in ``free``), ``not in the model`` (the 6RSS has no HKP, a model
+    without a drive no torque constant or efficiency), ``not in the log`` (the drive's numbers, unless ``currents``:
+    the torques are read from the log's currents through the model's drive) or ``no arm`` (R = 0 in the file: R mu_c
+    cannot be written back)."""
     status = ["" for _ in PARAMETERS]
     for j, p in enumerate(PARAMETERS):
-        if p.group in fix:
+        if p.drive and model.drive is None:
+            status[j] = "not in the model"
+        elif p.drive and not currents:
+            status[j] = "not in the log"
+        elif p.group in fix:
             status[j] = "fixed"
         elif p.given and p.group not in free:
             status[j] = "given"
@@ -204,7 +212,8 @@ def default_status(model: Model, fix: tuple[str, ...] = (), free: tuple[str, ...
 
 
 def estimated_by_default(model: Model) -> np.ndarray:
-    """(N_X,) True for the parameters ``chewbot identify`` estimates without --fix or --free."""
+    """(N_X,) True for the parameters ``chewbot identify`` estimates from a log of torques without --fix or --free
+    (what an excitation is designed for: the drive's numbers from currents come on top)."""
     return np.array([s == "" for s in default_status(model)])
 
 
@@ -212,7 +221,8 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
              fix: tuple[str, ...] = (), rcond: float = RCOND, max_relative_se: float = MAX_RELATIVE_SE,
              progress: Progress = SILENT, check=None, free: tuple[str, ...] = ()) -> Identification:
     """Estimate the friction, the crank inertias and the mandible's inertia of ``model`` from ``log`` (see the
-    module docstring).
+    module docstring), and where the log gives currents and the model has a drive, its torque constant and efficiency
+    (the cranks' torques of the currents through the drive with the two estimated).
 
     ``fix``: parameter-file keys (:data:`chewbot.identification.parameters.GROUPS`) kept at the model's values;
     ``free``: keys of the parameters given by the file by default (the weighed mass) to estimate too;
@@ -233,18 +243,29 @@ def identify(model: Model, log: RobotLog, side: str = "left", window_s: float = 
     progress("motion from the crank angles")
     motion = log_motion(model, log, side, window_s)
     x0 = x_of(model)
-    status = default_status(model, fix, free)
+    currents = model.drive is not None and log.reads(model) == "currents"
+    status = default_status(model, fix, free, currents)
     notes = []
     if status[NAMES_INDEX["R*mu_c"]] == "no arm":
         notes.append("friction.actuator_arm_mm is 0: the actuators' Coulomb friction R mu_c cannot be written back as "
                      "mu_c; it is not estimated")
+    if currents:
+        notes.append(f"the cranks' torques are the log's currents through the model's drive (gear ratio "
+                     f"{model.drive.gear_ratio:g} given; its torque constant and efficiency estimated unless --fix): the "
+                     "currents' scale is fixed by gravity on the given mandible mass, the efficiency by the samples "
+                     "where the cranks back-drive their motors")
     free = np.array([s == "" for s in status])
     used = motion.moving()
     if used.sum() < 10 * free.sum():
         raise ChewbotError(f"{log.source}: only {int(used.sum())} of {log.n} samples have every crank turning (faster than "
                            f"{motion.min_speed:.3g} rad/s): too "
                            "little motion to identify friction; log a longer or livelier motion")
-    problem = ReducedProblem(model, motion.kin, log.crank_torques(model, motion.kin.dtheta), used, check)
+    dtheta = motion.kin.dtheta
+    if currents and any(status[j] == "" for j in DRIVE):
+        measured = lambda x: log.current_torques(model, dtheta, x[DRIVE[0]], x[DRIVE[1]])  # noqa: E731
+    else:  # the drive's numbers, if any, at the model's
+        measured = log.crank_torques(model, dtheta)
+    problem = ReducedProblem(model, motion.kin, measured, used, check)
     progress("the start model")
     result = fit(problem, x0, free, references(model, x0), motion.window_samples, rcond, max_relative_se, progress)
     progress("results")

@@ -21,12 +21,15 @@ simulation is a log too: the other columns that its run.json lists are skipped.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 from chewbot.errors import TaskError
+from chewbot.model import Drive
 from chewbot.model import drive as drive_law
 from chewbot.task.csvio import FORCES, columns_beside, read_signals
 
@@ -74,6 +77,16 @@ class RobotLog:
             return drive_law.crank_torque(d, drive_law.torque_of_current(d, self.current), np.asarray(dtheta, float))
         return self.tau
 
+    def current_torques(self, model, dtheta: np.ndarray, torque_constant: float, efficiency: float):
+        """The cranks' torques (N, 6) N*m of the logged currents through ``model``'s drive with its torque constant
+        and efficiency replaced by ``torque_constant`` (N m/A) and ``efficiency``, at the crank rates ``dtheta`` (N, 6)
+        rad/s, and their exact derivatives with respect to the two, (N, 6, 2) (the loss law differentiated by CasADi)."""
+        n = self.current.size
+        out = _current_torque_function().map(n)(self.current.ravel(), np.asarray(dtheta, float).ravel(),
+                                                model.drive.gear_ratio, torque_constant, efficiency)
+        tau, d = (np.asarray(o) for o in out)
+        return tau.reshape(self.current.shape), d.T.reshape(*self.current.shape, 2)
+
     def reads(self, model) -> str:
         """What :meth:`crank_torques` reads for ``model``: ``"currents"`` or ``"torques"``."""
         return "currents" if self.current is not None and (model.drive is not None or self.tau is None) else "torques"
@@ -81,6 +94,16 @@ class RobotLog:
     def where(self, i: int) -> str:
         """``line 12 (t = 0.011 s)``: sample ``i`` as a person finds it in the file."""
         return f"line {self.lines[i]} (t = {self.t[i]:.6g} s)"
+
+
+@functools.cache
+def _current_torque_function() -> ca.Function:
+    """(i, dtheta, N, k_t, eta) -> tau, d tau / d (k_t, eta): one crank's torque of its motor's current through the
+    loss law (:func:`chewbot.model.drive.crank_torque`), and its gradient."""
+    i, w, ratio, k, eta = (ca.SX.sym(name) for name in ("i", "dtheta", "N", "k_t", "eta"))
+    d = Drive(0.0, ratio, eta, k, 0.0)
+    tau = drive_law.crank_torque(d, drive_law.torque_of_current(d, i), w)
+    return ca.Function("current_torque", [i, w, ratio, k, eta], [tau, ca.jacobian(tau, ca.vertcat(k, eta))])
 
 
 def read_log(path: str | Path) -> RobotLog:

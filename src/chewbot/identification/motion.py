@@ -84,36 +84,37 @@ def fit_poses(model: Model, theta: np.ndarray, where=None) -> tuple[np.ndarray, 
     p = model.vector()
     n, k = theta.shape[0], model.dof
     q = np.zeros((n, k))
-    zeros = np.zeros((n, k))
+    zeros = np.zeros(k)  # the rates, the same at every sample
     it_theta, it_J = KINEMATICS_OUTPUTS.index("theta"), KINEMATICS_OUTPUTS.index("J_theta1_angles")
 
-    def residual(q):
+    def residual(q, rows=slice(None)):
         out = evaluate(fn, q, zeros, zeros, p)
-        return _wrap(theta - out[it_theta]), out[it_J]
+        return _wrap(theta[rows] - out[it_theta]), out[it_J]
 
     res, J = residual(q)
+    trial, J_trial = np.empty_like(res), np.empty_like(J)
     for _ in range(MAX_ITERATIONS):
         step = _lstsq(J, res)
         # Backtracking per sample: far from home a full step can leave the workspace (no inverse kinematics) or
-        # overshoot; it is halved until the angles' residual is finite and smaller.
+        # overshoot; it is halved until the angles' residual is finite and smaller (a halving evaluates the samples
+        # still worse, alone).
         cost = np.sum(res**2, axis=1)
-        alpha = np.ones(n)
+        alpha, rows = np.ones(n), np.arange(n)
         for _ in range(30):
-            trial, J_trial = residual(q + alpha[:, None] * step)
-            worse = ~(np.sum(trial**2, axis=1) <= cost) & np.isfinite(step).all(axis=1)
+            trial[rows], J_trial[rows] = residual(q[rows] + alpha[rows, None] * step[rows], rows)
+            worse = ~(np.sum(trial[rows] ** 2, axis=1) <= cost[rows]) & np.isfinite(step[rows]).all(axis=1)
             if not worse.any():
                 break
-            alpha[worse] /= 2
+            rows = rows[worse]
+            alpha[rows] /= 2
         if not (np.isfinite(step).all() and np.isfinite(trial).all()):
             bad = ~(np.isfinite(step).all(axis=1) & np.isfinite(trial).all(axis=1))
             i = int(np.flatnonzero(bad)[0])
             raise KinematicsError(f"{where(i) if where else f'sample {i}'}: the crank angles give no pose of the model "
                                   "(out of reach or singular)")
-        q, res, J = q + alpha[:, None] * step, trial, J_trial
+        q, res, J = q + alpha[:, None] * step, trial.copy(), J_trial.copy()
         if np.abs(alpha[:, None] * step).max() < STEP_TOL:
             break
-    out = evaluate(fn, q, zeros, zeros, p)
-    res = _wrap(theta - out[it_theta])
     rms = np.sqrt(np.mean(res**2, axis=1))
     bad = np.flatnonzero(~(rms <= MAX_ANGLE_RESIDUAL))
     if bad.size:

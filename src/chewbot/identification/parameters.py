@@ -8,14 +8,15 @@ rho = R mu_c of the actuators' friction arm and Coulomb coefficient (the only wa
 actuators' viscous coefficient c_A. Each friction coefficient is one number shared by the six actuators or the
 two contacts, as in the parameter file. The first moment of the mandible is not a parameter: {M} is at its
 mass centre by the model's convention (docs/identification.md). The mass is the weighed one by default
-(``given``): it is the scale the torques are measured in once a drive's torque constant is estimated too.
+(``given``): it is the scale the torques are measured in once a drive's torque constant is estimated too (gravity on
+the known mass fixes the currents' scale; with the mass free too, every parameter and 1/k_t scale together).
 
 The estimator works in ``phi``, a parametrisation in which every value within simple bounds is a physical body:
 m > 0, the crank inertias > 0, and the mandible's inertia through the Cholesky factor L of its second moment of
 mass about O_M, Sigma = integral of r r' dm = L L' (lower triangular, positive diagonal), I = trace(Sigma) 1 - Sigma.
 Sigma positive definite is exactly the condition that I is positive definite and its principal moments satisfy
 the strict triangle inequality (the pseudo-inertia of a body with its frame at the mass centre). The friction
-entries of phi are those of x, bounded below by 0.
+entries of phi are those of x, bounded below by 0; the efficiency is at most 1 (a gearbox gives no power).
 """
 
 from __future__ import annotations
@@ -37,8 +38,9 @@ class Parameter:
     unit, the file's unit, the file key it belongs to (``group``, what ``--fix`` names),
     the entry of p it sets (``p_key``, a name of :func:`chewbot.model.vector.parameter_index`), what combination of
     the robot's properties the torques identify (``combination``), its lower bound in phi as a fraction of its start
-    (``floor``: None where it may be any real, 0 for a coefficient that may vanish), and ``given``: why it is held
-    at the file's value unless freed (``--free``), empty where it is estimated by default."""
+    (``floor``: None where it may be any real, 0 for a coefficient that may vanish), its upper bound in phi (``ceiling``,
+    SI; None: none), ``given``: why it is held at the file's value unless freed (``--free``), empty where it is
+    estimated by default, and ``drive``: True for the drive's numbers, which only a log of currents identifies."""
 
     name: str
     key: str
@@ -49,6 +51,8 @@ class Parameter:
     combination: str
     floor: float | None = 0.0
     given: str = ""
+    ceiling: float | None = None
+    drive: bool = False
 
     def in_file_units(self, value):
         """``value`` (SI) in the file's unit."""
@@ -76,6 +80,12 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("c_A", "friction.actuator_viscous_Nms_per_rad", "N*m*s/rad", "N*m*s/rad",
               "friction.actuator_viscous_Nms_per_rad", "friction.actuator_viscous",
               "the actuators' viscous coefficient (the six actuators)"),
+    Parameter("k_t", "drive.torque_constant_mNm_per_A", "N*m/A", "mN*m/A", "drive.torque_constant_mNm_per_A",
+              "drive.torque_constant", "the motors' torque constant (the six alike), the scale of the currents: fixed by "
+              "gravity on the weighed mandible mass", floor=1e-2, drive=True),
+    Parameter("eta", "drive.gear_efficiency", "1", "1", "drive.gear_efficiency", "drive.efficiency",
+              "the gearboxes' efficiency (the six alike): the ratio of the torques driving (eta N k_t i) to back-driven "
+              "(N k_t i / eta)", floor=0.2, ceiling=1.0, drive=True),
 )
 N_X = len(PARAMETERS)
 NAMES = tuple(p.name for p in PARAMETERS)
@@ -97,6 +107,8 @@ def _block(group: str) -> slice:
 INERTIA = _block("mandible.inertia_g_mm2")
 CRANKS = _block("cranks.inertia_g_mm2")
 HKP = tuple(group_entries("friction.hkp_coulomb")) + tuple(group_entries("friction.hkp_viscous_Ns_per_m"))  # none on the 6RSS
+K_T, ETA = INDEX["k_t"], INDEX["eta"]
+DRIVE = np.array([K_T, ETA])  # the entries a log of currents identifies (their order: the measured torques' derivatives)
 _P_INDEX = {p.name: parameter_index(p.p_key) for p in PARAMETERS}
 _COULOMB = parameter_index("friction.actuator_coulomb")
 
@@ -178,9 +190,11 @@ def x_of_phi(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def phi_bounds(phi0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of phi: each row's ``floor`` times its start (friction >= 0; the mass and the crank
     inertias at least 1e-4 of their start: a body lighter than that is not the robot's, and strictly inside, the
-    loader's checks hold); the diagonal of L at least 1e-4 of its start, its other entries free."""
+    loader's checks hold; the torque constant at least 1e-2 of its start, the efficiency at least 0.2 of it, where the
+    loss law's inverse stays monotonic); the diagonal of L at least 1e-4 of its start, its other entries free; above,
+    each row's ``ceiling`` (the efficiency's 1)."""
     lo = np.array([-np.inf if p.floor is None else p.floor * phi0[j] for j, p in enumerate(PARAMETERS)])
     for k, (a, b) in enumerate(_L_ENTRIES):
         if a == b:
             lo[INERTIA.start + k] = 1e-4 * phi0[INERTIA.start + k]
-    return lo, np.full(N_X, np.inf)
+    return lo, np.array([np.inf if p.ceiling is None else p.ceiling for p in PARAMETERS])

@@ -86,12 +86,17 @@ def gearbox_loss(drive, tau_motor, dtheta):
     return (drive.gear_ratio * tau_motor - crank_torque(drive, tau_motor, dtheta)) * dtheta
 
 
+def count_angle(drive) -> float:
+    """The crank's angle of one encoder count (rad): 2 pi / (counts N), counted at the motor (a drive with an encoder)."""
+    return 2 * np.pi / (drive.encoder_counts * drive.gear_ratio)
+
+
 def quantise(drive, theta):
-    """Crank angles (rad) as the motors' encoders read them: on the grid of 2 pi / (counts N) rad, the nearest count
+    """Crank angles (rad) as the motors' encoders read them: on the grid of :func:`count_angle`, the nearest count
     (NumPy; the angle unchanged without an encoder)."""
     if not drive.encoder_counts:
         return np.asarray(theta, float)
-    step = 2 * np.pi / (drive.encoder_counts * drive.gear_ratio)
+    step = count_angle(drive)
     return np.round(np.asarray(theta, float) / step) * step
 
 

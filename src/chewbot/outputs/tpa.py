@@ -4,11 +4,19 @@ own files (results.csv with the food's columns, run.json, its figures and report
 the force-time and force-displacement figures and tpa.html, written whole through :func:`chewbot.files.atomic_folder`
 and recognised later by tpa.json (key ``chewbot_tpa``). From a robot's log (``chewbot tpa --log``) the folder has
 tpa.json, the two figures and tpa.html.
+
+The simulation's files depend on the simulation alone: :func:`tpa_folder` has a second process write them (forked
+where a second core is free, as ``chewbot run``'s figures are drawn) while this one estimates the force from the
+torques and measures the test, then writes the test's own files.
 """
 
 from __future__ import annotations
 
 import html
+import os
+import signal
+import traceback
+from contextlib import contextmanager
 from pathlib import Path
 
 from chewbot.files import Marker, atomic_folder, to_json
@@ -22,19 +30,107 @@ TASK_FILE = "task.csv"  # the test's point path, a task for chewbot simulate --f
 
 def write_tpa(result, out: Path, force: bool = False, progress: Progress = SILENT) -> Path:
     """Write the folder of a simulated texture test (:class:`chewbot.simulation.texture.TpaResult`)."""
-    from chewbot.outputs.simulation import write_into
     from chewbot.simulation.run import input_files
+
+    with tpa_folder(out, force, input_files(result.simulation.options), progress, parallel=False) as folder:
+        folder.simulated(result.simulation)
+        folder.finish(result)
+    return Path(out)
+
+
+def write_simulation_files(simulation, folder: Path, progress: Progress = SILENT) -> None:
+    """The simulation's own files of a texture test (:class:`chewbot.simulation.run.SimulateResult`): those of
+    ``chewbot simulate`` and task.csv."""
+    from chewbot.outputs.simulation import write_into
     from chewbot.task.csvio import task_table
 
-    out = Path(out)
-    c = result.curves
-    curves = {"plant": (c["t"], c["gap_plant"], c["force_plant"]), "estimated": (c["t"], c["gap_estimated"], c["force_estimated"])}
-    with atomic_folder(out, force, TPA_FOLDER, inputs=input_files(result.simulation.options)) as tmp:
-        write_into(result.simulation, tmp, progress)
-        task_table(result.simulation.task).to_csv(tmp / TASK_FILE)  # plain CSV: the folder's tpa.json is chewbot's marker
-        record = result.record()
-        _write_common(tmp, record, curves, result.food.height, result.food.name)
-    return out
+    write_into(simulation, folder, progress)
+    task_table(simulation.task).to_csv(folder / TASK_FILE)  # plain CSV: the folder's tpa.json is chewbot's marker
+
+
+class TpaFolder:
+    """The temporary folder of a simulated texture test (:func:`tpa_folder`): :meth:`simulated` starts writing the
+    simulation's files, :meth:`finish` writes the test's own once they are written."""
+
+    def __init__(self, path: Path, progress: Progress, parallel: bool):
+        self.path, self.progress, self.parallel = path, progress, parallel
+        self.pid, self.report = None, None
+
+    def simulated(self, simulation) -> None:
+        """Write the simulation's files (:func:`write_simulation_files`): in a forked process where a second core is
+        free, else here."""
+        if not (self.parallel and hasattr(os, "fork") and len(os.sched_getaffinity(0)) > 1):
+            write_simulation_files(simulation, self.path, self.progress)
+            return
+        self.progress("writing the simulation's files (results.csv, run.json, figures, report.html) beside the estimate")
+        read, write = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:  # the writing process: never returns into the caller's frames
+            code = 0
+            try:
+                signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C reaches the process group: just stop
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                os.close(read)
+                write_simulation_files(simulation, self.path)
+            except BaseException:
+                code = 1
+                os.write(write, traceback.format_exc().encode()[-20000:])
+            finally:
+                os._exit(code)
+        os.close(write)
+        self.report = read
+
+    def wait(self) -> None:
+        """Wait for the writing process; its failure raised here (RuntimeError with its traceback)."""
+        if self.pid is None:
+            return
+        _, status = os.waitpid(self.pid, 0)
+        self.pid = None
+        message = b""
+        while chunk := os.read(self.report, 65536):
+            message += chunk
+        os.close(self.report)
+        self.report = None
+        if status != 0:
+            raise RuntimeError("writing the simulation's files failed in the writing process:\n" + message.decode(errors="replace"))
+
+    def stop(self) -> None:
+        """Stop the writing process at once (an error or a signal here)."""
+        if self.pid is not None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+                os.waitpid(self.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+            self.pid = None
+        if self.report is not None:
+            os.close(self.report)
+            self.report = None
+
+    def finish(self, result) -> None:
+        """The test's own files (tpa.json, the force-time and force-displacement figures, tpa.html), after the
+        simulation's."""
+        c = result.curves
+        curves = {"plant": (c["t"], c["gap_plant"], c["force_plant"]),
+                  "estimated": (c["t"], c["gap_estimated"], c["force_estimated"])}
+        self.progress("drawing the force-time and force-displacement figures")
+        _write_common(self.path, result.record(), curves, result.food.height, result.food.name, before_json=self.wait)
+
+
+@contextmanager
+def tpa_folder(out: Path, force: bool, inputs=(), progress: Progress = SILENT, parallel: bool = True):
+    """The folder of a simulated texture test, written whole (:func:`chewbot.files.atomic_folder`): yields a
+    :class:`TpaFolder`, whose :meth:`~TpaFolder.simulated` is called with the simulation as soon as it is done (the
+    writing process, with ``parallel``, then writes its files while the caller estimates the force) and
+    :meth:`~TpaFolder.finish` with the test's result. On an error or a signal the writing process is stopped and
+    nothing is left."""
+    with atomic_folder(Path(out), force, TPA_FOLDER, inputs=inputs) as tmp:
+        folder = TpaFolder(tmp, progress, parallel)
+        try:
+            yield folder
+            folder.wait()
+        finally:
+            folder.stop()
 
 
 def write_tpa_log(record: dict, curve: dict, height: float | None, name: str, out: Path, force: bool = False, inputs=()) -> Path:
@@ -45,11 +141,15 @@ def write_tpa_log(record: dict, curve: dict, height: float | None, name: str, ou
     return out
 
 
-def _write_common(folder: Path, record: dict, curves: dict, height: float | None, name: str) -> None:
+def _write_common(folder: Path, record: dict, curves: dict, height: float | None, name: str, before_json=None) -> None:
+    """The figures, tpa.json and tpa.html; ``before_json()`` is called before tpa.json, the folder's marker, is written
+    (the simulation's files are complete by then)."""
     from chewbot.report.tpa_figures import force_displacement, force_time
 
     force_time(curves, record.get("anchors", {}), folder / "force_time.png", name)
     force_displacement(curves, folder / "force_displacement.png", height, name)
+    if before_json is not None:
+        before_json()
     (folder / TPA_FILE).write_text(to_json(record))
     (folder / "tpa.html").write_text(tpa_html(record), encoding="utf-8")
 

@@ -45,6 +45,9 @@ STATIONARITY_TOL = 1e-6
 # A frame of the penalised fit is inside the admissible set when it breaks no bound by more than this (mm in a
 # socket, robotfit.REACH_UNIT of sine squared on a chain; the penalty's optimum lies about 1e-5 outside).
 PROJECTED_TOL = 1e-3
+# A frame whose penalised fit is inside with errors this far (mm, deg) within the tolerances passes without the SQP
+# (:func:`within`).
+SCREEN_MARGIN = 1e-2
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,27 +105,54 @@ def fit_to_robot(model: Model, p: np.ndarray, R: np.ndarray, point=None, positio
 
 def screened_fit(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float,
                  orientation_weight_per_deg: float, min_transmission_deg: float, enough: float) -> tuple[np.ndarray, np.ndarray]:
-    """The registration search's fit, where only the frames whose weighted residual abs(r) exceeds ``enough`` count:
-    step 1 of the module, then the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`) of
-    the frames whose optimum is not admissible, in one compiled call. A frame that the penalised fit brings inside
-    (to :data:`PROJECTED_TOL`) with abs(r) <= ``enough`` has an admissible pose that good, so the constrained
-    optimum's abs(r) is no larger: it needs no SQP. The others are solved by the SQP of step 2, started from the
-    penalised fit. Returns the scaled unknowns z (N, n) (the SQP's optimum where it ran, 0 where no admissible pose
-    was found) and whether each frame has an admissible pose."""
+    """The registration search's fit, where only the frames whose weighted residual abs(r) exceeds ``enough`` count
+    (:func:`_screened`, good: abs(r) <= ``enough``). Returns the scaled unknowns z (N, n) (the SQP's optimum where
+    it ran, 0 where no admissible pose was found) and whether each frame has an admissible pose."""
     fns = fit_functions(model, min_transmission_deg)
     settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+    z, ok = _screened(fns, p, R, targets(p, R), settings, lambda z, target: _cost(fns, z, target, settings) <= enough**2)
+    return np.where(ok[:, None], z, 0.0), ok
+
+
+def within(model: Model, p: np.ndarray, R: np.ndarray, point, position_weight_per_mm: float, orientation_weight_per_deg: float,
+           min_transmission_deg: float, tolerances: tuple[float, float]) -> np.ndarray:
+    """Whether each frame's admissible pose nearest to the recorded one (:func:`fit_to_robot`) has its position and
+    orientation errors within ``tolerances`` (mm, deg): :func:`_screened`, good where the penalised fit's errors are
+    within the tolerances less :data:`SCREEN_MARGIN` (far above how far it may lie outside: an admissible pose
+    that near is as good to 1e-3 mm), the others judged by the SQP's optimum. The verdict of the share's
+    bisection, which needs no pose."""
+    fns = fit_functions(model, min_transmission_deg)
+    settings = settings_vector(model, point, position_weight_per_mm, orientation_weight_per_deg)
+
+    def good(z, target):
+        pos, ori, _ = fns.errors(z, target, settings)
+        return (pos <= tolerances[0] - SCREEN_MARGIN) & (ori <= tolerances[1] - SCREEN_MARGIN)
+
     target = targets(p, R)
+    z, ok = _screened(fns, p, R, target, settings, good)
+    pos, ori = np.full(len(z), np.inf), np.full(len(z), np.inf)
+    if ok.any():
+        pos[ok], ori[ok], _ = fns.errors(z[ok], target[ok], settings)
+    return ok & (pos <= tolerances[0]) & (ori <= tolerances[1])
+
+
+def _screened(fns: FitFunctions, p, R, target, settings, good) -> tuple[np.ndarray, np.ndarray]:
+    """Step 1 of the module, then the penalised fit (:meth:`~chewbot.recordings.robotfit.FitFunctions.projected`)
+    of the frames whose optimum is not admissible, in one compiled call; a frame that the penalised fit brings
+    inside (to :data:`PROJECTED_TOL`) where ``good(z, target)`` (rows) holds keeps it: an admissible pose that good
+    exists, so the constrained optimum is no worse. The others are solved by the SQP of step 2, started from the
+    penalised fit. Returns z (N, n) and whether each frame has an admissible pose."""
     z, last, outside = _unconstrained(fns, p, R, target, settings)
     ok = np.ones(len(z), dtype=bool)
     rows = np.flatnonzero(outside.any(axis=1) | ~(last <= STEP_TOL))
     if rows.size:
         start, off = fns.projected(z[rows], target[rows], settings)
-        good = (off <= PROJECTED_TOL) & (np.sqrt(_cost(fns, start, target[rows], settings)) <= enough)
+        kept = (off <= PROJECTED_TOL) & good(start, target[rows])
         z[rows] = start
-        polish = rows[~good]
+        polish = rows[~kept]
         if polish.size:
-            z[polish], ok[polish] = _constrained(fns, start[~good], target[polish], settings)
-    return np.where(ok[:, None], z, 0.0), ok
+            z[polish], ok[polish] = _constrained(fns, start[~kept], target[polish], settings)
+    return z, ok
 
 
 def _unconstrained(fns: FitFunctions, p, R, target, settings):

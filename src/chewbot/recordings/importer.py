@@ -234,7 +234,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
     progress("rigid fit")
     points = to_base(rec.positions, reg.rotation, reg.origin)
     if tracked:
-        rigid = _tracked_point(model, b, points, rec.markers)
+        rigid = point_path(model, b, points, rec.markers)
     elif reg.markers is None:
         if collinear(points[0]):
             raise RecordingError(f"{rec.source}: {rec.where(0)}: the markers lie on one line (or nearly) and do not "
@@ -252,7 +252,7 @@ def import_motion(recording: str | Path, registration: str | Path | Registration
         """The registered motion at ``factor`` times the scales: an incisal point's displacement, with the hinge
         guess of the scaled point; a rigid body's displacement and rotation angle (:func:`scale_motion`)."""
         if tracked:
-            moved = _tracked_point(model, b, points, rec.markers, factor * scale)
+            moved = point_path(model, b, points, rec.markers, factor * scale)
             return moved.p, moved.R
         return scale_motion(rigid.p, rigid.R, factor * scale, factor * angle_scale)
 
@@ -331,15 +331,22 @@ def tracked_point(model: Model, name: str | None) -> np.ndarray:
             "condyle_right": model.hkp.T_R}.get(name, model.incisor)
 
 
-def _tracked_point(model: Model, b: np.ndarray, points: np.ndarray, names: tuple[str, ...], scale: float = 1.0) -> RigidFit:
+def point_path(model: Model, b: np.ndarray, points: np.ndarray, names: tuple[str, ...], scale: float = 1.0) -> RigidFit:
     """A point path: the markers' mean (in {S}) is the point b of {M}, its displacement from the first frame times
     ``scale``; the mandible's orientation per frame is a guess, the rotation about the condylar axis that lowers b
     as far as it dropped below the first frame (:func:`~chewbot.recordings.robotfit.hinge_beta`), weighed little in
-    the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts b on the point. The markers' distances from moving in
-    parallel with their mean are the rigid-fit residual."""
+    the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts b on the point. The rigid-fit residual is the markers'
+    distances from the rigid body they form in the first frame, fitted to every frame (they keep their distances, as
+    a face-bow triangle does); that they turn little against the excursion is the detection's rule
+    (:func:`~chewbot.recordings.anatomy.detect`), not a residual: issue 28's analyser, turning up to 1.4 deg, moves
+    its points up to 1.65 mm from moving in parallel with their mean. One marker has none; two, or markers on one line, the change of each
+    one's distance from their mean (a line's turn keeps those)."""
     mean = points.mean(axis=1)
     offsets = points - mean[:, None]
-    distances = np.linalg.norm(offsets - offsets[:1], axis=2)
+    if points.shape[1] >= 3 and not collinear(points[0]):
+        distances = rigid_fit(points[0], points, names).distances
+    else:
+        distances = np.abs(np.linalg.norm(offsets, axis=2) - np.linalg.norm(offsets[:1], axis=2))
     mean = mean[0] + scale * (mean - mean[0])
     beta = hinge_beta(model, b, mean[:, 2] - mean[0, 2])
     R = Rotation.from_euler("y", beta[:, None]).as_matrix()

@@ -52,7 +52,7 @@ from chewbot.errors import RecordingError
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import RigidPrior, rigid_prior
-from chewbot.recordings.fit import fit_to_robot, screened_fit, settings_vector
+from chewbot.recordings.fit import fit_to_robot, screened_fit, settings_vector, within
 from chewbot.recordings.rigid import kabsch
 from chewbot.recordings.robotfit import REGISTRATION_CONST, REGISTRATION_X, fit_functions, registration_functions
 from chewbot.units import factor
@@ -138,31 +138,31 @@ def box(n_turn: int, n_shift: int, free: bool = True) -> list[tuple[float, float
     return [(-t, t)] * n_turn + [(-s, s)] * n_shift
 
 
-def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, float, object, bool]:
-    """The search of the module docstring, for any registration: ``verdict(x, s, rows=None)`` -> (each frame
-    passes (N,) or each of ``rows``, the fit) at the unknowns x (0: the prior) and the scale s; ``objective(x, s)`` -> (value, gradient);
-    ``bounds`` of x (L-BFGS-B). Returns x, the share, its fit and whether the prior was refined."""
+def search(verdict, fitted, objective, bounds, progress: Progress) -> tuple[np.ndarray, float, object, bool]:
+    """The search of the module docstring, for any registration: ``verdict(x, s, rows=None)`` -> whether each frame
+    passes (N,) (or each of ``rows``) at the unknowns x (0: the prior) and the scale s, which needs no pose
+    (:func:`chewbot.recordings.fit.within`); ``fitted(x, s)`` -> the fit of every frame (RobotFit), computed once,
+    at the share found; ``objective(x, s)`` -> (value, gradient); ``bounds`` of x (L-BFGS-B). Returns x, the share,
+    its fit and whether the prior was refined."""
     n = len(bounds)
 
     def share_of(x, lo=0.0):
-        ok, fit = verdict(x, 1.0)
+        ok = verdict(x, 1.0)
         if ok.all():
-            return 1.0, fit
-        hi, best, failing = 1.0, None, np.flatnonzero(~ok)
+            return 1.0
+        hi, failing = 1.0, np.flatnonzero(~ok)
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
-            ok_few = verdict(x, mid, failing)[0]  # the frames that failed last first: one failing decides
+            ok_few = verdict(x, mid, failing)  # the frames that failed last first: one failing decides
             if not ok_few.all():
                 hi, failing = mid, failing[~ok_few]
                 continue
-            ok_mid, fit_mid = verdict(x, mid)
+            ok_mid = verdict(x, mid)
             if ok_mid.all():
-                lo, best = mid, fit_mid
+                lo = mid
             else:
                 hi, failing = mid, np.flatnonzero(~ok_mid)
-        if best is None and lo > 0:  # no scale above the one it started from passed: that one's fit
-            best = verdict(x, lo)[1]
-        return lo, best
+        return lo
 
     def refine(x, s):
         progress(f"refining the registration around its prior at scale {s:.4g}")
@@ -171,37 +171,39 @@ def search(verdict, objective, bounds, progress: Progress) -> tuple[np.ndarray, 
         return res.x
 
     x = np.zeros(n)
-    prior_share, prior_fit = share_of(x)
+    prior_share = share_of(x)
     if prior_share == 1.0:
-        return x, 1.0, prior_fit, False
+        return x, 1.0, fitted(x, 1.0), False
     lo, hi = prior_share, 1.0
     x1 = refine(x, 1.0)
-    if verdict(x1, 1.0)[0].all():
+    if verdict(x1, 1.0).all():
         x, lo = x1, 1.0
     else:
         for _ in range(SCALE_BISECTIONS):
             mid = 0.5 * (lo + hi)
             xm = refine(x, mid)
-            if verdict(xm, mid)[0].all():
+            if verdict(xm, mid).all():
                 lo, x = mid, xm
             else:
                 hi = mid
-    share, fit = share_of(x, lo)
-    if fit is None and prior_fit is None:
+    share = share_of(x, lo)
+    if share == 0.0:
         raise RecordingError("--fit-registration: the robot reaches no scale of the recording registered at its prior, not "
                              "even its first frame within --max-residual (is it a motion of the jaw, and does tracked "
                              "name the point it gives?)")
     if share < prior_share:  # never below the prior
-        return np.zeros(n), prior_share, prior_fit, False
-    return x, share, fit, True
+        return np.zeros(n), prior_share, fitted(np.zeros(n), prior_share), False
+    return x, share, fitted(x, share), True
 
 
-def limited_by(verdict, x, share) -> tuple[np.ndarray, str]:
+def limited_by(verdict, fitted, x, share) -> tuple[np.ndarray, str]:
     """The frames that fail just above the share, and the constraints they break."""
     if share >= 1.0:
         return np.zeros(0, dtype=int), ""
-    ok_above, fit_above = verdict(x, min(1.0, share + 2.0**-BISECTIONS))
+    above = min(1.0, share + 2.0**-BISECTIONS)
+    ok_above = verdict(x, above)
     frames = np.flatnonzero(~ok_above)
+    fit_above = fitted(x, above)
     broken = [nm for nm, b in zip(fit_above.constraint_names, fit_above.outside[~ok_above].any(axis=0)) if b]
     return frames, ", ".join(broken) if broken else "the residual tolerance (--max-residual)"
 
@@ -244,9 +246,11 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
 
     def verdict(x, s, rows=None):
         target, _ = poses(x, s, np.arange(N) if rows is None else rows)
-        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg)
-        ok = fit.admissible & (fit.position_error_mm <= tolerances[0]) & (fit.orientation_error_deg <= tolerances[1])
-        return ok, fit
+        return within(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg, tolerances)
+
+    def fitted(x, s):
+        target, _ = poses(x, s, np.arange(N))
+        return fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), point, *weights, min_transmission_deg)
 
     def objective(x, s):
         counter[0] += 1
@@ -262,8 +266,8 @@ def fit_registration(model: Model, positions: np.ndarray, names: tuple[str, ...]
         return value, np.einsum("ka,kab->b", g, J) / len(search_rows) + 2 * PULL * x
 
     bounds = box(3, 3) + box(3, 3, free=markers is None)
-    x, share, fit, refined = search(verdict, objective, bounds, progress)
-    limiting_frames, limiting = limited_by(verdict, x, share)
+    x, share, fit, refined = search(verdict, fitted, objective, bounds, progress)
+    limiting_frames, limiting = limited_by(verdict, fitted, x, share)
     u = REGISTRATION_X.split(x)
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
     A = turn @ prior.rotation

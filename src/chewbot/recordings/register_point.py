@@ -40,7 +40,7 @@ from scipy.spatial.transform import Rotation
 from chewbot.model import Model
 from chewbot.progress import SILENT, Progress
 from chewbot.recordings.anatomy import point_prior
-from chewbot.recordings.fit import fit_to_robot, screened_fit
+from chewbot.recordings.fit import fit_to_robot, screened_fit, within
 from chewbot.recordings.register import PULL, FoundRegistration, angle_deg, box, limited_by, search
 from chewbot.recordings.robotfit import POINT_CONST, POINT_X, fit_functions, point_registration_functions
 from chewbot.units import factor
@@ -92,8 +92,12 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
 
     def verdict(x, s, rows=None):
         target, _ = graphs.targets(unknowns(x), d if rows is None else d[rows], const(s))
-        fit = fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_import, min_transmission_deg)
-        return fit.admissible & (fit.position_error_mm <= tolerance_mm), fit
+        return within(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_import, min_transmission_deg,
+                      (tolerance_mm, np.inf))
+
+    def fitted(x, s):
+        target, _ = graphs.targets(unknowns(x), d, const(s))
+        return fit_to_robot(model, target[:, :3], _unflat(target[:, 3:]), b, *weights_import, min_transmission_deg)
 
     def objective(x, s):
         counter[0] += 1
@@ -108,8 +112,8 @@ def fit_point_registration(model: Model, positions: np.ndarray, b: np.ndarray, r
         value = 0.5 * np.mean(excess**2) + (~ok).sum() / len(search_rows) + PULL * x @ x
         return value, np.einsum("ka,kab->b", g, J) / len(search_rows) + 2 * PULL * x
 
-    x, share, fit, refined = search(verdict, objective, box(3, 3), progress)
-    limiting_frames, limiting = limited_by(verdict, x, share)
+    x, share, fit, refined = search(verdict, fitted, objective, box(3, 3), progress)
+    limiting_frames, limiting = limited_by(verdict, fitted, x, share)
     u = POINT_X.split(unknowns(x))
     turn = Rotation.from_rotvec(u["turn"] * DEG).as_matrix()
     A = turn @ prior.rotation

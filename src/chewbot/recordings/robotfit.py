@@ -22,12 +22,16 @@ Interface: :class:`FitFunctions`, whose methods take NumPy arrays, samples first
 
 from __future__ import annotations
 
+import os
+import sys
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-from chewbot.compiled.cache import KERNELS, cached_graph, folded
+from chewbot.compiled.cache import cached_graph, folded
 from chewbot.compiled.kernels import compiled, evaluate
 from chewbot.compiled.layout import Layout
 from chewbot.analysis.checks import NEAR_SINGULAR_DEG
@@ -71,13 +75,32 @@ PENALTY = 1e3
 REACH_UNIT = 0.01
 PROJECTION_ITERATIONS = 40
 _SQP = {
-    "qpsol": "qrqp", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,  # "regularize" slows it tenfold here; clipping keeps 3 iterations
-    # the QP's own feasibility tolerance (1e-8 by default) would accept a pose a few nanometres outside a socket
-    "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
-                      "constr_viol_tol": 1e-13},
+    # qpOASES (an active-set solver for small dense QPs, bundled with CasADi): on the frames of the analyser like
+    # issue 28's that end 10-40 mm beyond the reach, qrqp took up to 5 ms per QP and left 12 of 141 frames
+    # unconverged (stalled at costs up to 78 higher); qpOASES solved all 141 to a stationary point, ten times
+    # faster, never at a higher cost (to 4e-12). Eigenvalues clipped where the Hessian is indefinite: qpOASES wants
+    # a convex QP, and clipping keeps 3 iterations where "regularize" took ten times more
+    "qpsol": "qpoases", "convexify_strategy": "eigen-clip", "max_iter_eig": 10000,
+    "qpsol_options": {"printLevel": "none", "error_on_fail": False},
     "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
     "error_on_fail": False, "tol_pr": 1e-12, "tol_du": 1e-10, "max_iter": SQP_ITERATIONS,
 }
+
+
+@contextmanager
+def _quiet():
+    """Standard output closed at the file descriptor for a while: qpOASES prints its licence notice on stdout from C++
+    whenever it makes a solver's memory, whatever its printLevel (casadi/casadi#1983, #3522), which would land in the
+    commands' output."""
+    sys.stdout.flush()
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,7 +123,7 @@ class FitFunctions:
     _errors: ca.Function
     _constraints: ca.Function
     _pose: ca.Function
-    _nlp: ca.Function
+    _nlp: Callable[[], ca.Function]
     _stationarity: ca.Function
     _sequential: ca.Function
     _extreme: ca.Function
@@ -154,20 +177,26 @@ class FitFunctions:
 
     def constrained(self, z0, target, settings) -> tuple[np.ndarray, np.ndarray]:
         """The constrained problem (SQP) for m samples at once, in one mapped call, each from its z0 (m, n); a
-        start that is not finite is replaced by the home pose. Returns z (m, n) and the multipliers lam_g
+        start that is not finite is replaced by the home pose. Each call makes its own solver (about 10 ms): qpOASES
+        starts each QP from the last one its memory solved, which moves answers by 1e-13 with what ran before, and
+        the registration search's path with them (its share on the suite's 2x chin cluster: 1 alone, 0.82 after
+        other imports in the same process); a fresh solver makes every call's answer depend on its input alone. Returns z (m, n) and the multipliers lam_g
         (m, n_g), NaN for a sample whose functions could not be evaluated on the SQP's way."""
         m = z0.shape[0]
         z0 = np.where(np.isfinite(z0).all(axis=1, keepdims=True), z0, 0.0)
         params = np.vstack([target.T, np.tile(settings[:, None], (1, m))])
         bounds = {"lbg": np.tile(self.lbg[:, None], (1, m)), "ubg": np.tile(self.ubg[:, None], (1, m))}
+        nlp = self._nlp()
         try:
-            sol = KERNELS.mapped(self._nlp, m)(x0=z0.T, p=params, **bounds)
+            with _quiet():
+                sol = (nlp.map(m, "serial") if m > 1 else nlp)(x0=z0.T, p=params, **bounds)
             return np.asarray(sol["x"]).T.reshape(m, -1), np.asarray(sol["lam_g"]).T.reshape(m, -1)
         except RuntimeError:  # an evaluation failed (a pose where a chain's closure is undefined): find which, alone
             z, lam = np.full((m, self.n), np.nan), np.full((m, self.lbg.size), np.nan)
             for k in range(m):
                 try:
-                    sol = self._nlp(x0=z0[k], p=params[:, k], lbg=self.lbg, ubg=self.ubg)
+                    with _quiet():
+                        sol = self._nlp()(x0=z0[k], p=params[:, k], lbg=self.lbg, ubg=self.ubg)
                     z[k], lam[k] = np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel()
                 except RuntimeError:
                     pass
@@ -281,8 +310,12 @@ def _build(model: Model) -> FitFunctions:
     lam = ca.SX.sym("lam_g", g.numel())
     stationarity = ca.Function("fit_stationarity", [z, lam, target, settings],
                                [ca.gradient(f, z) + ca.mtimes(ca.jacobian(g, z).T, lam)])
-    nlp = ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod",
-                    {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}, _SQP)
+    problem = {"x": z, "p": ca.vertcat(target, settings), "f": f, "g": g}
+
+    def nlp() -> ca.Function:
+        with _quiet():
+            return ca.nlpsol(f"fit_nlp_{model.mechanism}", "sqpmethod", problem, _SQP)
+
     # the farthest a point of {M} reaches along a direction: minimise -d . (p + R b) in mm over the admissible poses
     reach = ca.SX.sym("reach", 6)
     extreme = ca.nlpsol(f"reach_nlp_{model.mechanism}", "ipopt",

@@ -37,7 +37,7 @@ from chewbot.compiled.kernels import KernelSpec, evaluate
 from chewbot.compiled.layout import Layout
 from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, bed_normal_force, comminution_of
 from chewbot.food.law import CASADI, FOOD_PARAMETERS, N_FOOD, maxwell_force, normal_force, tangential_force
-from chewbot.simulation.food import EVENTS, FOOD_SHARED, FoodPlant, FoodSolved, food_geometry_sx, stage_with_food
+from chewbot.simulation.food import EVENTS, FOOD_SHARED, FoodPlant, FoodSolved, food_ended, food_geometry_sx, stage_with_food
 from chewbot.simulation.food import build as food_plant
 from chewbot.simulation.forward import n_coordinates
 from chewbot.simulation.interfaces import Column, PlantCapabilities, PlantState
@@ -67,7 +67,8 @@ def bolus_step_kernel(mechanism: str) -> KernelSpec:
     """The plant's step with a bolus (:func:`chewbot.simulation.plant.step_kernel` on :func:`bolus_stage`)."""
     from chewbot.model.symbolic import c_name
 
-    return step_kernel(mechanism, f"bolus_step_{c_name(mechanism)}", lambda: bolus_stage(mechanism), ("bolus",), BOLUS_SHARED)
+    return step_kernel(mechanism, f"bolus_step_{c_name(mechanism)}", lambda: bolus_stage(mechanism), ("bolus",), BOLUS_SHARED,
+                       food_ended(mechanism))
 
 
 def bolus_function(mechanism: str) -> ca.Function:
@@ -146,7 +147,7 @@ class BolusPlant(FoodPlant):
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
         internal = state.internal
-        return replace(state, internal=BolusSolved(internal.z, internal.food, self.bolus, self.bolus.bed(self.table)))
+        return replace(state, internal=BolusSolved(internal.z, internal.food, internal.guards, self.bolus, self.bolus.bed(self.table)))
 
     def gap_and_force(self, internal: BolusSolved) -> tuple[float, float]:
         """The gap (m) and the food's normal force (N) at a state: the bulk law's, or once broken the bed's quasi-static
@@ -155,10 +156,10 @@ class BolusPlant(FoodPlant):
         g = self.food.height - food.delta
         return g, (float(bed_force(NUMPY, internal.bed, g)) if food.broken else food.F_n)
 
-    def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
+    def ended(self, start: PlantState, end: PlantState, h: float, outputs: dict) -> PlantState:
         """The food plant's end of a step, and the stroke: tracked while the force is positive, applied to the bolus
         where it falls to zero on a broken food."""
-        end = super().ended(start, end, h)
+        end = super().ended(start, end, h, outputs)
         s = end.internal
         g, force = self.gap_and_force(s)
         if force > 0:

@@ -300,7 +300,8 @@ def bolus_tpa(chewing: Chewing, shares_percent) -> list[dict]:
 def sequence_checks(chewing: Chewing, cycles: int) -> list:
     """The sequence's checks: ``sequence-completed`` (every cycle simulated: the robot stayed in its workspace),
     ``mass-conserved`` (the bolus's mass within 1e-9 relative of the portion's), ``x50-monotone`` (X50 never rises
-    where the sieving determines it), ``x50-reached`` (with --until-x50-mm); failures; with the simulation's own checks."""
+    where the sieving determines it), ``x50-reached`` (with --until-x50-mm); failures; with the simulation's own checks,
+    its ``force-tracking`` over the strokes (:func:`stroke_force_check`)."""
     from chewbot.analysis.checks import CheckResult
 
     records = chewing.records
@@ -330,8 +331,43 @@ def sequence_checks(chewing: Chewing, cycles: int) -> list:
         out.append(CheckResult("x50-reached", reached, 0 if reached else 1, None, None,
                                f"X50 {'reached' if reached else 'did not reach'} {chewing.target_x50_mm:g} mm in "
                                f"{len(records) - 1} cycles", "failure"))
-    return out + list(chewing.result.checks)
+    own = [c for c in (stroke_force_check(chewing),) if c is not None]
+    return out + own + [c for c in chewing.result.checks if c.name not in {o.name for o in own}]
+
+
+def stroke_force_check(chewing: Chewing):
+    """``force-tracking`` of a sequence under a controller that switches to force control (results.csv's
+    ``force_mode``), in place of the simulation's: the RMS of the food's force minus the reference within the
+    simulation's bound (10 % of the reference's peak) over the rows where the teeth press on the bolus under force
+    control, each stroke's first 4 / (2 pi ``force_frequency_Hz``) of the controller's gains left out (its force loop's
+    settling: a critically damped loop is within 10 % of a step after it). The simulation's counts every row of the
+    closing-force burst, which spans the middle half of the cycle, and the teeth reach a thinning bolus ever later in
+    it: the rows before are the cycle's, and at the touch the reference is a step of some 90 N. None where the
+    controller has no force mode."""
+    from chewbot.analysis.checks import CheckResult
+    from chewbot.simulation.run import FORCE_TRACKING_BOUND_PERCENT
+
+    table, sim = chewing.result.table, chewing.result.simulation
+    if "force_mode" not in table:
+        return None
+    f, f_ref = sim.quantities["force"], -chewing.result.reference.force_at(sim.t)[:, 2]
+    rows = np.flatnonzero((table["force_mode"] > 0.5) & (f > 0) & (f_ref > 0))
+    touch = np.maximum.accumulate(np.where(np.r_[True, np.diff(rows) > 1], sim.t[rows], -np.inf))  # each stroke's first
+    settle = 4 / (2 * np.pi * chewing.result.gains[chewing.result.options.controller.gains].force_frequency_Hz)
+    rows = rows[sim.t[rows] - touch >= settle]
+    if not rows.size:
+        return CheckResult("force-tracking", None, None, None, None, "not evaluated: the teeth never pressed on the bolus "
+                           "under force control beyond the force loop's settling", "failure")
+    e = f[rows] - f_ref[rows]
+    peak = float(f_ref.max())
+    rms = 100 * float(np.sqrt(np.mean(e**2))) / peak
+    ok = bool(rms <= FORCE_TRACKING_BOUND_PERCENT)
+    return CheckResult("force-tracking", ok, 0 if ok else int(rows.size), None, {"value": rms, "unit": "% RMS of the reference's peak"},
+                       f"the food's force followed the closing force to {rms:.3g} % RMS of its peak ({peak:.4g} N) over the "
+                       f"{rows.size} rows where the teeth pressed on the bolus under force control, {settle * 1e3:.3g} ms "
+                       f"after each touch (largest error {np.abs(e).max():.3g} N); allowed {FORCE_TRACKING_BOUND_PERCENT:g} %",
+                       "failure")
 
 
 __all__ = ["BURST_SHARE", "ChewError", "bump", "Chewing", "ChewingCycle", "CycleRecord", "chew", "chewing_task", "cycle_poses",
-           "cycles_for", "bolus_tpa", "repeated_task", "sequence_task", "HUMAN_X50_MM"]
+           "cycles_for", "bolus_tpa", "repeated_task", "sequence_task", "stroke_force_check", "HUMAN_X50_MM"]

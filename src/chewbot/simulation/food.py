@@ -12,11 +12,11 @@ CasADi's, exact. The food's state at a step's start is part of the step's shared
 (:data:`STEP_STATE` in :data:`FOOD_SHARED`); the plant's own state (:class:`FoodSolved`) carries it from step to step.
 
 Events. The law has kinks and one jump (:mod:`chewbot.food.law`, its guards :func:`chewbot.food.law.guards` in the
-order of :data:`~chewbot.food.law.FOOD_EVENTS`): contact, the teeth meeting (delta = h0), the fracture (delta / h0 =
-fracture_strain, which switches ``broken``: :func:`chewbot.food.law.fracture_state`), the adhesion clamp
+order of :data:`~chewbot.food.law.FOOD_EVENTS`): contact, the teeth meeting (delta = h0), the fracture ((delta + a sin theta) / h0 =
+fracture_strain on the face's most compressed fibre, which switches ``broken``: :func:`chewbot.food.law.fracture_state`), the adhesion clamp
 (F_d + F_m = -adhesion_N), the yield and the turn (where delta_max stops growing). Each is a guard function of the
-state; after every step the guards at its ends are compared,
-and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
+state, evaluated with the food's state at a step's end inside the compiled step (:func:`food_ended`: one C call a
+step); after every step the guards at its ends are compared, and where one changed sign the step is cut at the crossing: the crossing's step length is found by SciPy's ``brentq``
 on the guard of the step's end as a function of the step length (each evaluation one compiled Radau IIA step from
 the start), to :data:`EVENT_TOLERANCE`; the step is taken to just past it, the state switched (fracture), and the
 interval continued. No step straddles a kink, so the method keeps its order, and the fracture happens at its strain,
@@ -57,6 +57,11 @@ STEP_STATE = Layout.of(broken=1, F_m=1, bFe=1, delta_max=1, tilt_max=1)
 # vector, its state at the step's start, and B_z at home (m).
 FOOD_INPUTS = Layout.of(tau=6, elapsed=1)
 FOOD_SHARED = PLANT_SHARED + Layout.of(food=N_FOOD) + STEP_STATE + Layout.of(z_home=1)
+_ELAPSED = FOOD_INPUTS.slices()["elapsed"]
+# The food's state at a step's end, an output of the compiled step (:func:`food_ended`): F_m and b F_e (N), the
+# compression delta (m) and its rate (m/s), F_v and F_n (N), the deepest compression so far delta_max (m), sin of the
+# tilt there (tilt_max) and sin of the lower tooth's tilt at the end (sin_tilt).
+FOOD_END = Layout.of(F_m=1, bFe=1, delta=1, ddelta=1, F_v=1, F_n=1, delta_max=1, tilt_max=1, sin_tilt=1)
 
 
 @dataclass(frozen=True)
@@ -138,17 +143,41 @@ def stage_with_food(mechanism: str, name: str, shared: Layout, force) -> ca.Func
     return cached_graph(m, (name,), build)
 
 
+def food_ended(mechanism: str):
+    """The food's state at the end of a step as outputs of the compiled step (``ended`` of
+    :func:`chewbot.simulation.plant.step_kernel`): ``food_end`` laid out as :data:`FOOD_END` and the ``guards`` there
+    (:func:`chewbot.food.law.guards`), from the state at the step's start (the blocks of s, :data:`FOOD_SHARED`): b F_e
+    at the end, the Maxwell branch's force integrated exactly over the step for a linear change of b F_e
+    (:func:`chewbot.food.law.maxwell_force`), the food's quantities there (:func:`food_function`)."""
+
+    def ended(q1, v1, blocks, h):
+        fn = food_function(mechanism)
+        state = (q1, v1, blocks["B"], blocks["p"], blocks["food"], blocks["broken"])
+        before = (blocks["delta_max"], blocks["tilt_max"], blocks["z_home"])
+        bFe = fn(*state, 0.0, *before)[4]
+        F_m = maxwell_force(CASADI, blocks["food"], blocks["F_m"], blocks["bFe"], bFe, h)
+        delta, ddelta, delta_max, tilt_max, bFe, F_v, F_n, _, _, sin_tilt, g = fn(*state, F_m, *before)
+        end = dict(F_m=F_m, bFe=bFe, delta=delta, ddelta=ddelta, F_v=F_v, F_n=F_n, delta_max=delta_max, tilt_max=tilt_max,
+                   sin_tilt=sin_tilt)
+        return {"food_end": ca.vertcat(*(end[name] for name in FOOD_END.names)), "guards": g}
+
+    return ended
+
+
 def food_step_kernel(mechanism: str) -> KernelSpec:
-    """The plant's step with a food (:func:`chewbot.simulation.plant.step_kernel` on :func:`food_stage`)."""
+    """The plant's step with a food (:func:`chewbot.simulation.plant.step_kernel` on :func:`food_stage`), the food's
+    state and guards at its end among its outputs (:func:`food_ended`)."""
     from chewbot.model.symbolic import c_name
 
-    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), FOOD_SHARED)
+    return step_kernel(mechanism, f"food_step_{c_name(mechanism)}", lambda: food_stage(mechanism), ("food",), FOOD_SHARED,
+                       food_ended(mechanism))
 
 
 def food_function(mechanism: str) -> ca.Function:
     """The food at states: (q, dq, B, p, food, broken, F_m, delta_max, tilt_max, z_home) -> delta (m), ddelta (m/s),
     delta_max (m, with the state's) and tilt_max, bFe, F_v, F_n (N), F (3, the force on the mandible in {S}, N),
-    cos_tilt, sin_tilt."""
+    cos_tilt, sin_tilt, guards (the law's guards there over the tilted face, :func:`chewbot.food.law.guards`, in the
+    order of :data:`EVENTS`; NaN: not armed)."""
     m = symbols(mechanism)
 
     def build():
@@ -161,13 +190,14 @@ def food_function(mechanism: str) -> ca.Function:
         cos_tilt = bite_point_function(mechanism)(q, dq, B, m.p)[2]
         delta_max, tilt_max = deepest_sx(delta_max0, tilt_max0, delta, sin_tilt)
         F_n, F_v, F = _force_sx(f, delta, ddelta, broken, F_m, delta_max, tilt_max, velocity, sin_tilt)
+        g = ca.vertcat(*guards(CASADI, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max))
         return ca.Function("food", [q, dq, B, m.p, f, broken, F_m, delta_max0, tilt_max0, z_home],
-                           [delta, ddelta, delta_max, tilt_max, bFe, F_v, F_n, F, cos_tilt, sin_tilt],
+                           [delta, ddelta, delta_max, tilt_max, bFe, F_v, F_n, F, cos_tilt, sin_tilt, g],
                            ["q", "dq", "B", "p", "food", "broken", "F_m", "delta_max_before", "tilt_max_before", "z_home"],
-                           ["delta", "ddelta", "delta_max", "tilt_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "sin_tilt"],
-                           {"cse": True})
+                           ["delta", "ddelta", "delta_max", "tilt_max", "bFe", "F_v", "F_n", "F", "cos_tilt", "sin_tilt",
+                            "guards"], {"cse": True})
 
-    return cached_graph(m, ("food-quantities-face",), build)
+    return cached_graph(m, ("food-quantities-face-guards",), build)
 
 
 def food_quantities_kernel(mechanism: str) -> KernelSpec:
@@ -181,17 +211,19 @@ def food_quantities_kernel(mechanism: str) -> KernelSpec:
         inputs = fn.sx_in()
         return ca.Function(name, inputs, fn.call(inputs), fn.name_in(), fn.name_out())
 
-    return KernelSpec(name, build, (mechanism, "food-quantities-face"), mechanism)
+    return KernelSpec(name, build, (mechanism, "food-quantities-face-guards"), mechanism)
 
 
 @dataclass(frozen=True)
 class FoodSolved(Solved):
-    """The food plant's own state: the plant's (``z``) and the food's (``food``)."""
+    """The food plant's own state: the plant's (``z``), the food's (``food``) and the law's guards there (``guards``,
+    in the order of :data:`EVENTS`)."""
 
     food: FoodState = None
+    guards: np.ndarray = None
 
     def at(self, z: np.ndarray) -> FoodSolved:
-        return FoodSolved(z, self.food)
+        return FoodSolved(z, self.food, self.guards)
 
 
 @dataclass
@@ -233,52 +265,48 @@ class FoodPlant(Plant):
         blocks["delta_max"][:], blocks["tilt_max"][:] = food.delta_max, food.tilt_max
         return s
 
-    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float, tilt_max: float) -> FoodState:
+    def quantities(self, q, dq, broken: float, F_m: float, delta_max: float, tilt_max: float) -> tuple[FoodState, np.ndarray]:
         """The food's state at one plant state, ``delta_max`` the deepest compression before it and ``tilt_max`` sin of
-        the tilt there."""
+        the tilt there, and the law's guards there."""
         if self._fn is None:
             self._fn = native(food_quantities_kernel(self.mechanism))
-        delta, ddelta, deepest, tilt, bFe, F_v, F_n, _, _, sin_tilt = (np.asarray(v).flat[0] for v in self._fn(
-            q, dq, self._B, self._p, self._f, broken, F_m, delta_max, tilt_max, self._z_home))
-        return FoodState(int(broken), float(F_m), float(bFe), float(delta), float(F_v), float(F_n), float(deepest),
-                         float(ddelta), float(sin_tilt), float(tilt))
+        delta, ddelta, deepest, tilt, bFe, F_v, F_n, _, _, sin_tilt, g = self._fn(q, dq, self._B, self._p, self._f, broken, F_m,
+                                                                                  delta_max, tilt_max, self._z_home)
+        return (FoodState(int(broken), float(F_m), float(bFe[0]), float(delta[0]), float(F_v[0]), float(F_n[0]),
+                          float(deepest[0]), float(ddelta[0]), float(sin_tilt[0]), float(tilt[0])), np.ravel(g))
 
     def initial(self, t: float, q, dq) -> PlantState:
         state = super().initial(t, q, dq)
-        return replace(state, internal=FoodSolved(state.internal.z, self.quantities(q, dq, 0, 0.0, 0.0, 0.0)))
+        return replace(state, internal=FoodSolved(state.internal.z, *self.quantities(q, dq, 0, 0.0, 0.0, 0.0)))
 
-    def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        food = start.internal.food
-        bFe = self.quantities(end.q, end.dq, food.broken, 0.0, food.delta_max, food.tilt_max).bFe
-        F_m = float(maxwell_force(NUMPY, self._f, food.F_m, food.bFe, bFe, h))
-        return replace(end, internal=replace(end.internal, food=self.quantities(end.q, end.dq, food.broken, F_m, food.delta_max,
-                                                                                food.tilt_max)))
+    def ended(self, start: PlantState, end: PlantState, h: float, outputs: dict) -> PlantState:
+        """The food's state at the step's end, as the compiled step gave it (:func:`food_ended`)."""
+        F_m, bFe, delta, ddelta, F_v, F_n, delta_max, tilt_max, sin_tilt = outputs["food_end"].tolist()
+        food = FoodState(start.internal.food.broken, F_m, bFe, delta, F_v, F_n, delta_max, ddelta, sin_tilt, tilt_max)
+        return replace(end, internal=replace(end.internal, food=food, guards=outputs["guards"]))
 
     # ---------------------------------------------------------------------------------------------- events
 
     def guards_at(self, internal: FoodSolved) -> np.ndarray:
-        """The guard functions at the plant's own state (:meth:`guards` of its food's)."""
-        return self.guards(internal.food)
-
-    def guards(self, state: FoodState) -> np.ndarray:
-        """The guard functions at a food state, in the order of :data:`EVENTS` (NaN: not armed): the law's
-        (:func:`chewbot.food.law.guards`)."""
-        return guards(self._f, state.delta, state.ddelta, state.broken, state.F_m, state.delta_max, state.sin_tilt,
-                      state.tilt_max)
+        """The guard functions at the plant's own state, in the order of :data:`EVENTS` (NaN: not armed): the law's
+        (:func:`chewbot.food.law.guards`, over the tilted face), evaluated where the state was."""
+        return internal.guards
 
     def advance(self, state: PlantState, h: float, inputs) -> PlantState:
         """The state after h seconds under the torques of ``inputs``, held over the interval (their bite forces are not
         used: the food's force replaces them), with the food's events located (module docstring)."""
         if self._step is None:
             s0 = self.shared()
-            self._step = Step(native(self.step_kernel()), lambda state: self.shared_at(s0, state))
+            kernel = native(self.step_kernel())
+            self._step = Step(kernel, lambda state: self.shared_at(s0, state), tuple(kernel.name_out()))
 
         # the torques are held over the interval (the simulator's zero-order hold): read once, at the interval's own
         # step, whose inputs the simulator has ready (the bite forces of other steps' stages are not needed here)
-        tau = PLANT_INPUTS.unpack(inputs(state.t, h))["tau"].copy()
+        W = FOOD_INPUTS.pack(columns=STAGES, tau=PLANT_INPUTS.unpack(inputs(state.t, h))["tau"], elapsed=0.0)
 
-        def stage(t0: float, dt: float) -> np.ndarray:
-            return FOOD_INPUTS.pack(columns=STAGES, tau=tau, elapsed=C * dt)
+        def stage(t0: float, dt: float) -> np.ndarray:  # the step copies W in: one array for the interval's steps
+            W[_ELAPSED] = C * dt
+            return W
 
         n_steps = max(1, int(np.ceil(h / MAX_STEP - 1e-9)))
         end = state.t + h
@@ -315,8 +343,8 @@ class FoodPlant(Plant):
             now = after.internal.food
             broken, F_m, delta_max = fracture_state(NUMPY, self._f, now.delta, now.F_m, now.delta_max, now.sin_tilt,
                                                     now.tilt_max)
-            food = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max), now.tilt_max)
-            after = replace(after, internal=replace(after.internal, food=food))
+            food, g = self.quantities(after.q, after.dq, broken, float(F_m), float(delta_max), now.tilt_max)
+            after = replace(after, internal=replace(after.internal, food=food, guards=g))
         return after
 
     # ---------------------------------------------------------------------------------------------- rows
@@ -329,9 +357,9 @@ class FoodPlant(Plant):
         F_m = np.array([s.food.F_m for s in internal], float)
         delta_max = np.array([s.food.delta_max for s in internal], float)
         tilt_max = np.array([s.food.tilt_max for s in internal], float)
-        delta, _, _, _, _, _, F_n, F, cos_tilt, sin_tilt = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq,
-                                                                    self._B, self._p, self._f, broken, F_m, delta_max,
-                                                                    tilt_max, np.full(len(t), self._z_home))
+        delta, _, _, _, _, _, F_n, F, cos_tilt, sin_tilt, _ = evaluate(native(food_quantities_kernel(self.mechanism)), q, dq,
+                                                                       self._B, self._p, self._f, broken, F_m, delta_max,
+                                                                       tilt_max, np.full(len(t), self._z_home))
         quantities = {"compression": np.maximum(delta[:, 0], 0.0), "force": F_n[:, 0], "broken": broken, "delta": delta[:, 0],
                       "tilt": np.arctan2(sin_tilt[:, 0], cos_tilt[:, 0]), "F_m": F_m, "delta_max": delta_max,
                       "height": self.food.height - permanent_set(NUMPY, self._f, broken, delta_max)}

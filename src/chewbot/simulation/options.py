@@ -55,12 +55,15 @@ class Sensor(StrEnum):
 @dataclass(frozen=True)
 class ControllerDynamics:
     """A controller's inverse dynamics, resolved (:func:`chewbot.run.options.resolve_dynamics`): the formulation
-    ``method``, the ``goal`` of its distribution (None where it has none) and ``friction`` in the controller's model
-    (where the formulation takes friction, and the plant has it)."""
+    ``method``, the ``goal`` of its distribution (None where it has none), ``friction`` in the controller's model
+    (where the formulation takes friction, and the plant has it) and the ``contact`` its distribution keeps
+    (unilateral: N_L, N_R >= ``contact.preload_N``, where the formulation's per-sample graph takes it; the texture
+    test's, :func:`chewbot.simulation.texture.resolve_tpa`)."""
 
     method: str
     goal: Goal | None = None
     friction: bool = False
+    contact: Contact = Contact.bilateral
 
     @classmethod
     def resolved(cls, method: str | None = None, goal: str | None = None, friction: bool = False,
@@ -74,7 +77,7 @@ class ControllerDynamics:
 
     @property
     def key(self) -> tuple:
-        return (self.method, self.goal, bool(self.friction))
+        return (self.method, self.goal, bool(self.friction), *(() if self.contact == Contact.bilateral else (self.contact.value,)))
 
     def c_name(self) -> list[str]:
         """The parts of a kernel's C name: the method, and the options its per-sample graph takes."""
@@ -86,6 +89,8 @@ class ControllerDynamics:
             parts.append(self.goal or dict(f.defaults)["goal"])
         if "friction" in f.sample_options:
             parts.append("friction" if self.friction else "frictionless")
+        if "contact" in f.sample_options and self.contact != Contact.bilateral:
+            parts.append(self.contact.value)
         return parts
 
 

@@ -101,10 +101,13 @@ def held_stage(mechanism: str) -> ca.Function:
     return cached_graph(symbols(mechanism), ("held-stage",), build)
 
 
-def step_kernel(mechanism: str, name: str, stage: Callable[[], ca.Function], key: tuple, shared: Layout) -> KernelSpec:
+def step_kernel(mechanism: str, name: str, stage: Callable[[], ca.Function], key: tuple, shared: Layout,
+                ended: Callable | None = None) -> KernelSpec:
     """A compiled integrator step (:func:`chewbot.simulation.integrator.radau_step`) of the plant with the stage
     residual ``stage()``, followed by the crank angles, rates and workspace margin at the end of the step; s is laid
-    out as ``shared``, whose block ``p`` is the plant's numbers."""
+    out as ``shared``, whose block ``p`` is the plant's numbers. ``ended(q1, v1, blocks of s, h)``: the plant's own
+    state at the end of the step, a dict of outputs added after :data:`STEP_KERNEL_OUTPUTS` in its order (a food's,
+    so that a step is one call)."""
 
     def build(params):
         st = stage()
@@ -112,9 +115,11 @@ def step_kernel(mechanism: str, name: str, stage: Callable[[], ca.Function], key
         core = radau_step(f"{name}_radau", st, n, nN)
         ins = {nm: ca.MX.sym(nm, core.size1_in(i), core.size2_in(i)) for i, nm in enumerate(STEP_INPUTS)}
         q1, v1, z1, res = core(*ins.values())
-        theta, dtheta, margin = state_function(mechanism)(q1, v1, shared.split(ins["s"])["p"])
-        return ca.Function(name, list(ins.values()), [q1, v1, z1, res, theta, dtheta, margin], list(STEP_INPUTS),
-                           list(STEP_KERNEL_OUTPUTS))
+        blocks = shared.split(ins["s"])
+        theta, dtheta, margin = state_function(mechanism)(q1, v1, blocks["p"])
+        own = {} if ended is None else ended(q1, v1, blocks, ins["h"])
+        return ca.Function(name, list(ins.values()), [q1, v1, z1, res, theta, dtheta, margin, *own.values()],
+                           list(STEP_INPUTS), [*STEP_KERNEL_OUTPUTS, *own])
 
     return KernelSpec(name, build, (mechanism, *key), mechanism)
 
@@ -139,11 +144,12 @@ class Solved:
 
 @dataclass(frozen=True)
 class Step:
-    """A compiled step (:func:`step_kernel`, loaded) and ``shared(state)``, its s for a step from a state (its W, the
-    stage inputs, is given with each interval)."""
+    """A compiled step (:func:`step_kernel`, loaded), ``shared(state)``, its s for a step from a state (its W, the
+    stage inputs, is given with each interval), and the names of its ``outputs``."""
 
     kernel: object
     shared: Callable[[PlantState], np.ndarray]
+    outputs: tuple[str, ...] = STEP_KERNEL_OUTPUTS
 
 
 @dataclass
@@ -191,18 +197,19 @@ class Plant:
             state = self.interval(step, stage, state, h / n_steps, 0)
         return state
 
-    def ended(self, start: PlantState, end: PlantState, h: float) -> PlantState:
-        """The state at the end of a converged step of h seconds from ``start`` (the plant's own state updated)."""
+    def ended(self, start: PlantState, end: PlantState, h: float, outputs: dict) -> PlantState:
+        """The state at the end of a converged step of h seconds from ``start`` (the plant's own state updated from the
+        step's ``outputs`` by name)."""
         return end
 
     def interval(self, step: Step, stage: StageInputs, state: PlantState, h: float, depth: int) -> PlantState:
         """One step of h seconds from ``state``, split in halves where its iteration did not converge."""
         out = step.kernel(state.q, state.dq, state.internal.z, stage(state.t, h), step.shared(state), h)
-        out = dict(zip(STEP_KERNEL_OUTPUTS, out))
+        out = dict(zip(step.outputs, out))
         margin = float(out["margin"][0])
         if out["residual"][0] <= TOLERANCE or not margin > 0:  # converged, or ended outside the workspace (the caller stops)
             end = PlantState(state.t + h, out["q1"], out["v1"], out["theta"], out["dtheta"], margin, state.internal.at(out["z1"]))
-            return self.ended(state, end, h)
+            return self.ended(state, end, h, out)
         if depth >= MAX_SPLITS:
             raise SimulationError(f"the plant's equations of motion have no solution near t = {state.t:.6g} s (residual "
                                   f"{out['residual'][0]:.3g} N m after splitting the step {2 ** MAX_SPLITS} times); with friction "

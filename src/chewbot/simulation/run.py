@@ -27,6 +27,8 @@ import numpy as np
 
 from chewbot.compiled.kernels import evaluate, native, prepare_kernels
 from chewbot.errors import ChewbotError
+from chewbot.dynamics.g1 import CONTROLLER_MARGIN_N
+from chewbot.dynamics.options import Contact
 from chewbot.kinematics.functions import kinematics_kernel
 from chewbot.kinematics.motion import Kinematics
 from chewbot.kinematics.task import FULL_COORDS, TARGET_COORDS, Task
@@ -380,9 +382,12 @@ def loop_info(sim: Simulation, options: SimulationOptions, parts: Parts) -> dict
     return {"control": {"rate_Hz": sim.rate, "hold": "zero-order hold between ticks" if sim.rate else "evaluated at every integrator stage",
                         "reference": "quintic Hermite interpolation of the task's q, dq, ddq between its samples"},
             "controller": {"kind": row.name, "model": parts.model.name, "method": inverse.method, "goal": inverse.goal,
-                           "friction": inverse.friction, "bite_force_known": not options.bite_unknown, "gains": gains.as_dict(),
+                           "friction": inverse.friction, "contact": inverse.contact.value,
+                           **({"contact_margin_N": CONTROLLER_MARGIN_N} if inverse.contact == Contact.unilateral else {}),
+                           "bite_force_known": not options.bite_unknown, "gains": gains.as_dict(),
                            **({"force_observer": {"cutoff_Hz": parts.observer.cutoff,
-                                                  "method": "the bite-force estimator at each tick (docs/bite_force.md)"}}
+                                                  "method": "the bite-force estimator at each tick, one compiled kernel "
+                                                            "(chewbot.simulation.observer.tick_kernel, docs/bite_force.md)"}}
                               if parts.observer is not None else {})},
             "sensor": None if sensor is None else {"measured": True, "noise_rad": sensor.noise, "seed": sensor.seed, "velocity_cutoff_Hz": sensor.cutoff,
                                                    "estimator": "Gauss-Newton forward kinematics, filtered backward difference"}}

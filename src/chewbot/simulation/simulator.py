@@ -30,10 +30,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 
+import casadi as ca
 import numpy as np
 
-from chewbot.compiled.kernels import prepare_kernels
+from chewbot.compiled.kernels import KernelSpec, native, prepare_kernels
+from chewbot.compiled.layout import Layout
 from chewbot.errors import KinematicsError
 from chewbot.model import drive as drive_law
 from chewbot.simulation.forward import n_coordinates
@@ -122,8 +125,9 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
     limit = plant.model.limits.torque
     loop = plant.closed_loop(controller, reference, limit) if continuous else None
     reference.prepare(times)
+    drives = None if drive is None and plant.model.drive is None else (drive or drive_law.NEUTRAL, drive_law.of(plant.model))
     kernels = plant.kernels() + (loop.kernels() if continuous else controller.kernels())
-    prepare_kernels(kernels + (observer.kernels() if observer is not None else []))
+    prepare_kernels(kernels + (observer.kernels() if observer is not None else []) + ([drive_tick_kernel()] if drives else []))
 
     K, n = len(times), n_coordinates(plant.mechanism)
     q_ref, dq_ref, ddq_ref = reference.at(times)
@@ -136,7 +140,9 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
     if observer is not None:
         observer.start(times[0], q_ref[0], dq_ref[0])
     tau_k = np.zeros(6)
-    drives = None if drive is None and plant.model.drive is None else (drive or drive_law.NEUTRAL, drive_law.of(plant.model))
+    if drives is not None:
+        tick, numbers = native(drive_tick_kernel()), [DRIVE.pack(gear_ratio=d.gear_ratio, efficiency=d.efficiency,
+                                                                  torque_constant=d.torque_constant) for d in drives]
     current, applied, dtheta = np.zeros((K, 6)), np.zeros((K, 6)), np.zeros((K, 6))
     stopped, last = None, K - 1
     if not continuous:  # the bite force at the stages of each tick's step, all at once
@@ -152,11 +158,11 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
                     observed[k] = observer.update(times[k], seen.q, seen.dq, tau_k)
                 seen = replace(seen, force=observed[k, :3].copy())
             tau_cmd[k] = controller(times[k], seen)
-            tau_k = np.clip(tau_cmd[k], -limit, limit)
-            held = tau_k
             if drives is not None:  # the controller's current, the plant's torque of it
-                current[k] = drive_law.current(drives[0], drive_law.motor_torque(drives[0], tau_k, seen.dtheta))
-                held = applied[k] = drive_law.crank_torque(drives[1], drive_law.torque_of_current(drives[1], current[k]), state.dtheta)
+                tau_k, current[k], applied[k] = tick(tau_cmd[k], limit, seen.dtheta, state.dtheta, *numbers)
+                held = applied[k]
+            else:
+                held = tau_k = np.clip(tau_cmd[k], -limit, limit)
             inputs = _held(held, reference, (times[k], times[k + 1] - times[k], stage_force[k]) if k < K - 1 else None)
         if k == K - 1:
             break
@@ -193,6 +199,29 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
 
 
 _TAU, _F_B = (PLANT_INPUTS.slices()[name] for name in ("tau", "F_B"))
+# A drive's numbers as :func:`drive_tick_kernel` takes them (:class:`chewbot.model.Drive`'s fields).
+DRIVE = Layout.of(gear_ratio=1, efficiency=1, torque_constant=1)
+
+
+def drive_tick_kernel() -> KernelSpec:
+    """The drives at a tick, compiled (the loss law's Newton iteration is a few hundred NumPy calls a tick):
+    (tau_cmd (6), limit, the crank rates the controller sees and the plant's (6 each, rad/s), the controller's model's
+    drive and the plant's (:data:`DRIVE`)) -> the commands saturated at the limit (N m), the motors' currents the
+    controller commands for them through its drive (A), the crank torques the plant's drive makes of those currents
+    (N m) (:mod:`chewbot.model.drive`)."""
+
+    def build(params):
+        tau, limit, seen, rates = ca.SX.sym("tau_cmd", 6), ca.SX.sym("limit"), ca.SX.sym("dtheta_seen", 6), ca.SX.sym("dtheta", 6)
+        (c, ours), (p, theirs) = DRIVE.symbols("drive_c", ca.SX.sym), DRIVE.symbols("drive_p", ca.SX.sym)
+        ours, theirs = SimpleNamespace(**ours), SimpleNamespace(**theirs)
+        tau_k = ca.fmin(ca.fmax(tau, -limit), limit)
+        current = drive_law.current(ours, drive_law.motor_torque(ours, tau_k, seen))
+        applied = drive_law.crank_torque(theirs, drive_law.torque_of_current(theirs, current), rates)
+        return ca.Function("drive_tick", [tau, limit, seen, rates, c, p], [tau_k, current, applied],
+                           ["tau_cmd", "limit", "dtheta_seen", "dtheta", "drive_c", "drive_p"], ["tau", "current", "applied"],
+                           {"cse": True})
+
+    return KernelSpec("drive_tick", build, ("drive-tick",))
 
 
 def _held(tau: np.ndarray, reference: Reference, tick=None) -> StageInputs:

@@ -15,7 +15,9 @@ robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it
    approach's samples are the same, so the trigger comes where it came. The robot is the model's robot with its
    friction (``--friction on``); the position loop is the ``crosshead`` controller
    (:mod:`chewbot.simulation.controllers.crosshead`: computed torque with integral action), its inverse dynamics
-   Newton-Euler with the model's friction.
+   Newton-Euler with the model's friction, given the force observer's estimate of the sample's force, its
+   distribution of the redundant torques unilateral (N_L, N_R >= ``contact.preload_N`` +
+   :data:`chewbot.dynamics.g1.CONTROLLER_MARGIN_N`: both condyles pressed on their planes while the sample pushes).
 3. **The measures** (:func:`chewbot.food.tpa.analyse`, both readings) twice: ``plant``, from the food's force in the
    plant and the plant's gap, contact at the trigger force; ``estimated``, from what the robot logs, the crank angles
    and the torques, through the bite-force estimator with the model's friction (as ``chewbot estimate-force``), contact
@@ -30,10 +32,11 @@ robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from chewbot.dynamics.options import Contact
 from chewbot.food.geometry import face_path_task, gap, largest_height
 from chewbot.food.law import Food, load_food
 from chewbot.food.tpa import HOLD, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
@@ -52,6 +55,10 @@ SLIDE = 1e-3
 # The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
 TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
 TPA_METHOD = "newton-euler"
+# The contact the test is judged under (a condyle lifted off its plane is a failed check) and the controller's
+# distribution keeps: N_L, N_R >= contact.preload_N (+ the controller's margin), the redundant torques pressing the
+# condyles while the food pushes, its force fed forward from the force observer.
+TPA_CONTACT = Contact.unilateral
 # The estimate's contact force is at least this many times its noise (1.4826 MAD of its sample-to-sample
 # differences over sqrt 2: white noise's standard deviation, blind to a force that changes smoothly at 1 kHz): a
 # 5-sigma threshold, which noise alone crosses at about 3e-7 of the samples.
@@ -130,7 +137,9 @@ def resolve_tpa(food: str | None = None, *, compression: float | None = None, di
         raise OptionError("slide", f"must be a positive distance (mm), not {slide:g}")
     sim = resolve(TPA_CONTROLLER, model=model, side=side, method=TPA_METHOD, friction=bool(friction), rate=rate,
                   plant_file=plant_file, plant_overrides=plant_overrides, gain_overrides=gain_overrides, food=food,
-                  contact="unilateral")
+                  contact=TPA_CONTACT)
+    # the condyles rest on their planes: the controller distributes its redundant torques to keep them pressed
+    sim = replace(sim, inverse=replace(sim.inverse, contact=TPA_CONTACT))
     return TpaOptions(food, protocol, side, model, plant_file, plant_overrides, bool(friction), gain_overrides, rate, None, sim,
                       SLIDE if slide is None else slide * 1e-3)
 
@@ -238,8 +247,10 @@ def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> f
         reach = min(2 * reach, start)
 
 
-def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
-    """Trigger, test, measures and checks (module docstring)."""
+def run_tpa(options: TpaOptions, progress=None, check=None, simulated=None) -> TpaResult:
+    """Trigger, test, measures and checks (module docstring). ``simulated(result)``: called with the test's
+    simulation (:class:`~chewbot.simulation.run.SimulateResult`) as soon as it is done, before the estimate (the
+    command writes its files meanwhile)."""
     step = progress or (lambda msg, stage=None: None)
     step("food, protocol and trigger")
     food = load_food(options.food)
@@ -252,6 +263,8 @@ def run_tpa(options: TpaOptions, progress=None, check=None) -> TpaResult:
     task = face_path_task(model, options.side, t, *profile.path(t), food.height, options.slide,
                           name=f"texture test of the {food.name}")
     result = compute(options.simulation, progress=step, check=check, task=task)
+    if simulated is not None:
+        simulated(result)
     sim = result.simulation
     g_plant = gap(plant_model, options.side, sim.q, sim.dq)
     plant = analyse(sim.t, g_plant["gap"], sim.quantities["force"], options.protocol.trigger_force, label="plant")

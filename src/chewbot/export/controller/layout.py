@@ -69,6 +69,10 @@ CONFIG = Struct("chewbot_ctrl_config", "Settings, set to their defaults by chewb
     Field("transmission_min", "double", None, "near-singular below this (sin of the smallest transmission angle)", "1"),
     Field("distribution_step_tolerance", "double", None, "N: Newton-Euler distribution's last step", "N"),
     Field("max_hold_ticks", "double", None, "ticks the last torques are held while the estimate is unusable, then zero", ""),
+    Field("gear_ratio", "double", None, "drive: motor turns per crank turn (1 without a drive)", "1"),
+    Field("gear_efficiency", "double", None, "drive: the gearbox's efficiency in its loss law (1 without a drive)", "1"),
+    Field("torque_constant", "double", None, "drive: N m/A, the motor's torque per ampere (1 without a drive)", "N*m/A"),
+    Field("encoder_counts", "double", None, "drive: encoder counts per motor turn (0: no encoder, step_counts refuses)", ""),
 ))
 
 OUTPUTS = Struct("chewbot_ctrl_outputs", "What the last step computed (all doubles).", 36, (
@@ -83,6 +87,9 @@ OUTPUTS = Struct("chewbot_ctrl_outputs", "What the last step computed (all doubl
     Field("normal", "double", "NN", "HKP normal forces N_L, N_R (N)", "N"),
     Field("tau_cmd", "double", 6, "the control law's torques before saturation and rate limit (N m)", "N*m"),
     Field("tau", "double", 6, "the torques output (N m)", "N*m"),
+    Field("dtheta", "double", 6, "crank rates, the filtered difference of the angles (rad/s)", "rad/s"),
+    Field("tau_motor", "double", 6, "the motors' torques that give tau through the drive (N m)", "N*m"),
+    Field("current", "double", 6, "the motors' currents commanded, tau_motor / torque_constant (A)", "A"),
     Field("fk_residual", "double", None, "the estimate's scaled closure residual", "1", commented=False),
     Field("fk_step", "double", None, "the estimate's last Gauss-Newton step", "m, rad", joined=True),
     Field("conditioning", "double", None, "the estimate's conditioning, det(J'J)^(1/n) / (trace(J'J)/n)", "1", joined=True),
@@ -103,6 +110,8 @@ CONTEXT = Struct("chewbot_ctrl", "The context: the caller owns it (static, stack
     Field("q", "double", "NQ", "the estimator's state", "m, rad"),
     Field("dq", "double", "NQ", "the estimator's filtered rates", "m/s, rad/s", joined=True),
     Field("t_estimate", "double", None, "the time of the estimate", "s", joined=True),
+    Field("theta_last", "double", 6, "the angles of the last step (less the offsets)", "rad"),
+    Field("dtheta", "double", 6, "the crank rates' filter state", "rad/s", joined=True),
     Field("tau_last", "double", 6, "the torques output by the last step", "N*m", commented=False),
     Field("t_last", "double", None, "the time of the last step", "s", joined=True),
     Field("held_q_ref", "double", "NQ", "the last reference inside the workspace", "m, rad"),
@@ -116,6 +125,7 @@ CONTEXT = Struct("chewbot_ctrl", "The context: the caller owns it (static, stack
     Field("user_reference", "int", None, "1: the caller's reference, 0: the task table", "", commented=False),
     Field("estop", "int", None, "1: the emergency stop is on", "", joined=True),
     Field("started", "int", None, "1: a step has been taken", "", joined=True),
+    Field("angles_known", "int", None, "1: theta_last holds measured angles", "", joined=True),
     Field("latched", "unsigned", None, "the latched status bits (the watchdog)", "", commented=False),
     Field("arg", "const double*", "WORK_ARG", "the graphs' argument pointers", "", commented=False),
     Field("res", "double*", "WORK_RES", "the graphs' result pointers", "", commented=False),

@@ -91,13 +91,16 @@ class StepLibrary:
         ctx, dp = ctypes.POINTER(types[CONTEXT.name]), ctypes.POINTER(ctypes.c_double)
         for name, restype, argtypes in (("init", None, [ctx, ctypes.c_double, dp]), ("home", None, [ctx, dp]),
                                         ("step", ctypes.c_uint, [ctx, ctypes.c_double, dp, dp, ctypes.POINTER(ctypes.c_uint)]),
+                                        ("step_counts", ctypes.c_uint, [ctx, ctypes.c_double, ctypes.POINTER(ctypes.c_long), dp,
+                                                                        ctypes.POINTER(ctypes.c_uint)]),
                                         ("set_reference", None, [ctx, dp, dp, dp, dp]), ("use_task", None, [ctx]),
                                         ("set_estop", None, [ctx, ctypes.c_int]), ("clear_faults", None, [ctx])):
             function = getattr(self.lib, f"{PREFIX}_{name}")
             function.restype, function.argtypes = restype, argtypes
-        self._theta, self._tau = np.zeros(6), np.zeros(6)
+        self._theta, self._tau, self._counts = np.zeros(6), np.zeros(6), np.zeros(6, dtype=ctypes.c_long)
         self._status = ctypes.c_uint(0)
         self._p_theta, self._p_tau = self._theta.ctypes.data_as(dp), self._tau.ctypes.data_as(dp)
+        self._p_counts = self._counts.ctypes.data_as(ctypes.POINTER(ctypes.c_long))
         self.fields = {**double_views(self.context.config), **double_views(self.context.out)}
 
     def init(self, t0: float, offsets=None) -> None:
@@ -108,6 +111,12 @@ class StepLibrary:
         """One tick: the output torques (a copy) and the status word."""
         self._theta[:] = theta
         status = self.lib.chewbot_ctrl_step(self.ctx, float(t), self._p_theta, self._p_tau, ctypes.byref(self._status))
+        return self._tau.copy(), int(status)
+
+    def step_counts(self, t: float, counts) -> tuple[np.ndarray, int]:
+        """One tick from the encoders' counts at the motors: the commanded currents (A, a copy) and the status word."""
+        self._counts[:] = counts
+        status = self.lib.chewbot_ctrl_step_counts(self.ctx, float(t), self._p_counts, self._p_tau, ctypes.byref(self._status))
         return self._tau.copy(), int(status)
 
     def set_reference(self, q_ref, dq_ref, ddq_ref, force) -> None:
@@ -140,9 +149,12 @@ class StepLibrary:
 class ExportedController:
     """A simulation's controller that runs the exported C step (``chewbot simulate --exported``) on the measured crank
     angles of the state it is given (:attr:`chewbot.simulation.interfaces.State.theta`) and returns its commanded
-    torques (``tau_cmd``: before saturation; the simulator saturates them as it does the Python controller's). It
-    evaluates the Python controller ``python`` on the same tick's estimate too and keeps both, so a run states how
-    far the two are apart tick by tick (:meth:`comparison`)."""
+    torques (``tau_cmd``: before saturation; the simulator saturates them as it does the Python controller's). Where
+    the controller's model has a drive with an encoder, the step is given the encoders' counts at the motors (the
+    angles on the encoder's grid, :func:`chewbot.model.drive.quantise`, as whole counts: ``chewbot_ctrl_step_counts``)
+    and commands currents. It evaluates the Python controller ``python`` on the same tick's estimate too, and the
+    currents the simulator makes of its torques (saturated, through the model's drive at the state's crank rates),
+    and keeps both, so a run states how far the two are apart tick by tick (:meth:`comparison`)."""
 
     python: CompiledLaw
     rate: float
@@ -150,6 +162,8 @@ class ExportedController:
     library: StepLibrary | None = None
     c_torques: list = field(default_factory=list)
     py_torques: list = field(default_factory=list)
+    c_currents: list = field(default_factory=list)
+    py_currents: list = field(default_factory=list)
     statuses: list = field(default_factory=list)
 
     def __post_init__(self):
@@ -171,10 +185,19 @@ class ExportedController:
         if not self._started:
             self.library.init(t)
             self._started = True
-        self.library.step(t, state.theta)
+        d = drive.of(self.model)
+        if d.encoder_counts:
+            self.c_currents.append(self.library.step_counts(t, np.rint(np.asarray(state.theta) / drive.count_angle(d)))[0])
+        else:
+            self.library.step(t, state.theta)
+            self.c_currents.append(self.library.current.copy())
         tau = self.library.tau_cmd.copy()
         self.c_torques.append(tau)
-        self.py_torques.append(self.python(t, state))
+        py = self.python(t, state)
+        self.py_torques.append(py)
+        limit = self.model.limits.torque
+        dtheta = np.zeros(6) if state.dtheta is None else state.dtheta
+        self.py_currents.append(drive.current(d, drive.motor_torque(d, np.clip(py, -limit, limit), dtheta)))
         self.statuses.append(int(self.library._status.value))
         return tau
 
@@ -189,13 +212,20 @@ class ExportedController:
         return {"exported": self.comparison()}
 
     def comparison(self) -> dict:
-        """The exported step's torques against the Python controller's on the same ticks (N m)."""
-        c, py = np.array(self.c_torques), np.array(self.py_torques)
-        largest = float(np.max(np.abs(c - py))) if len(c) else 0.0
-        scale = float(np.max(np.abs(py))) if len(py) else 0.0
+        """The exported step's torques (N m) and currents (A) against the Python controller's on the same ticks."""
+        def apart(c, py):
+            c, py = np.array(c), np.array(py)
+            largest = float(np.max(np.abs(c - py))) if len(c) else 0.0
+            scale = float(np.max(np.abs(py))) if len(py) else 0.0
+            return largest, scale, largest / scale if scale else 0.0
+
+        largest, scale, relative = apart(self.c_torques, self.py_torques)
+        amperes, current_scale, current_relative = apart(self.c_currents, self.py_currents)
         statuses = np.bitwise_or.reduce(np.array(self.statuses, dtype=np.int64)) if self.statuses else 0
-        return {"library": str(self.library.shared.path), "ticks": len(c), "largest_difference_Nm": largest,
-                "largest_abs_tau_Nm": scale, "relative": largest / scale if scale else 0.0,
+        return {"library": str(self.library.shared.path), "ticks": len(self.c_torques), "largest_difference_Nm": largest,
+                "largest_abs_tau_Nm": scale, "relative": relative, "encoder_counts": bool(drive.of(self.model).encoder_counts),
+                "largest_current_difference_A": amperes, "largest_abs_current_A": current_scale,
+                "current_relative": current_relative,
                 "status_bits_seen": [name for name, bit in STATUS_BITS.items() if statuses & bit]}
 
 

@@ -22,7 +22,8 @@ import numpy as np
 from chewbot.export.controller.layout import c_typedefs
 from chewbot.export.controller.step import (
     CONDITIONING_MIN, DISTRIBUTION_STEP_TOLERANCE, EXPORT_FORMAT, FK_RESIDUAL_TOLERANCE, FK_STEP_TOLERANCE, MAX_HOLD_TICKS, PREFIX,
-    STATUS, STATUS_BITS, TRANSMISSION_MIN, WATCHDOG_PERIODS, StepSpec, fk_function, home_angles, law_function)
+    STATUS, STATUS_BITS, TRANSMISSION_MIN, WATCHDOG_PERIODS, StepSpec, drive_config, drive_function, fk_function, home_angles,
+    law_function)
 from chewbot.files import EXPORT_FOLDER, VERSION, atomic_folder, to_json
 from chewbot.simulation.controllers.table import controller_row
 from chewbot.simulation.reference import HERMITE_COEFFICIENTS as HERMITE
@@ -79,10 +80,10 @@ def gain_description(spec: StepSpec) -> str:
 
 def dimensions(spec: StepSpec, fk: ca.Function, law: ca.Function) -> dict[str, int]:
     """The header's dimensions (``CHEWBOT_CTRL_NQ``, ...) by name: the lengths of the context's arrays and the task's."""
-    n = spec.n
+    n, graphs = spec.n, (fk, law, drive_function())
     return {"NQ": n, "NN": max(spec.n_normal, 1), "NG": len(spec.gains), "TASK_ROWS": len(spec.t), "TASK_COLUMNS": 1 + 3 * n + 3,
-            "WORK_ARG": max(fk.sz_arg(), law.sz_arg()), "WORK_RES": max(fk.sz_res(), law.sz_res()),
-            "WORK_IW": max(fk.sz_iw(), law.sz_iw(), 1), "WORK_W": max(fk.sz_w(), law.sz_w(), 1)}
+            "WORK_ARG": max(g.sz_arg() for g in graphs), "WORK_RES": max(g.sz_res() for g in graphs),
+            "WORK_IW": max(*(g.sz_iw() for g in graphs), 1), "WORK_W": max(*(g.sz_w() for g in graphs), 1)}
 
 
 def filled(spec: StepSpec) -> Mapping[str, str]:
@@ -99,7 +100,8 @@ def header(spec: StepSpec, fk: ca.Function, law: ca.Function) -> str:
 
 def step_source(spec: StepSpec) -> str:
     model = spec.model
-    return render("chewbot_ctrl.c", HOME=_array(home_angles(model)), HERMITE=", ".join("{" + _array(row) + "}" for row in HERMITE),
+    drive = {f"DRIVE_{name.upper()}": repr(float(value)) for name, value in drive_config(model).items()}
+    return render("chewbot_ctrl.c", **drive, HOME=_array(home_angles(model)), HERMITE=", ".join("{" + _array(row) + "}" for row in HERMITE),
                   GAINS=_array(spec.gains), CUTOFF=repr(float(spec.cutoff)), TORQUE_LIMIT=repr(float(model.limits.torque)),
                   RATE_LIMIT=repr(float(spec.torque_rate_limit)), WATCHDOG=repr(WATCHDOG_PERIODS / spec.rate),
                   FK_STEP=repr(FK_STEP_TOLERANCE), FK_RESIDUAL=repr(FK_RESIDUAL_TOLERANCE), CONDITIONING=repr(CONDITIONING_MIN),
@@ -122,7 +124,7 @@ def readme(spec: StepSpec, fk: ca.Function, law: ca.Function, log_rows: int) -> 
         watchdog=f"{WATCHDOG_PERIODS / spec.rate:g}", fk_iterations=str(FK_ITERATIONS), fk_step=f"{FK_STEP_TOLERANCE:g}",
         fk_residual=f"{FK_RESIDUAL_TOLERANCE:g}", conditioning=f"{CONDITIONING_MIN:g}", transmission=f"{TRANSMISSION_MIN:g}",
         dist_step=f"{DISTRIBUTION_STEP_TOLERANCE:g}", max_hold=str(MAX_HOLD_TICKS), log_rows=str(log_rows),
-        period_ms=f"{1e3 / spec.rate:g}", work_w=str(max(fk.sz_w(), law.sz_w())), version=VERSION,
+        **{name: f"{value:g}" for name, value in drive_config(spec.model).items()}, period_ms=f"{1e3 / spec.rate:g}", work_w=str(max(fk.sz_w(), law.sz_w())), version=VERSION,
         bits="\n".join(f"| `CHEWBOT_CTRL_{bit.name}` | 0x{STATUS_BITS[bit.name]:04x} | {bit.behaviour} |" for bit in STATUS))
 
 
@@ -136,6 +138,7 @@ def write_sources(spec: StepSpec, folder: Path, fk: ca.Function | None = None, l
     cg = ca.CodeGenerator(f"{PREFIX}_kernels.c", {"with_header": True})
     cg.add(fk)
     cg.add(law)
+    cg.add(drive_function())
     cg.generate(f"{folder / 'src'}/")
     kernels = folder / "src" / f"{PREFIX}_kernels.c"
     kernels.write_text(strict_c(kernels.read_text()))

@@ -1,11 +1,12 @@
 """What one exported step is (:class:`StepSpec`), its two CasADi graphs, its status bits and the defaults of its
 configuration.
 
-Two graphs carry the numerical work of the step, generated as C with the model's numbers folded in:
+Three graphs carry the numerical work of the step, the first two generated as C with the model's numbers folded in:
 :func:`fk_function` (the estimate of the pose from the angles, its residual, last step and conditioning, the pose
 X_EE, the transmission and the workspace margin) and :func:`law_function` (the torques, the HKP normal forces, the
 reference's workspace margin, for Newton-Euler the distribution's last step and how far past the actuator limits it
-is).
+is); and :func:`drive_function` (the motors' torques and currents of the output torques through the drive's loss law,
+its gear ratio, efficiency and torque constant inputs from the context's configuration).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from chewbot.compiled.cache import folded, symbols
 from chewbot.dynamics.formulations.newton_euler import coefficients_kernel, forces_sx, limit_bounds, n_unknowns
 from chewbot.dynamics.g1 import distribution_function
 from chewbot.kinematics.functions import KINEMATICS_OUTPUTS, kinematics_kernel
-from chewbot.model import Model
+from chewbot.model import Drive, Model
+from chewbot.model import drive as drive_law
 from chewbot.dynamics.registry import formulation
 from chewbot.simulation.controllers.law import CompiledLaw, control_function
 from chewbot.simulation.controllers.table import EXPORTABLE, controller_row
@@ -194,6 +196,29 @@ def law_function(spec: StepSpec) -> ca.Function:
                        [tau, ca.densify(N) if nN else ca.SX.zeros(1), ref_margin, dist_step, excess],
                        ["q", "dq", "q_ref", "dq_ref", "ddq_ref", "F_B", "gains"], ["tau", "N", "ref_margin", "dist_step", "limit_excess"],
                        {"cse": True})
+
+
+# The drive's numbers the step's configuration holds, in the order of the drive graph's input "drive".
+DRIVE_CONFIG = ("gear_ratio", "gear_efficiency", "torque_constant")
+
+
+def drive_config(model: Model) -> dict[str, float]:
+    """The configuration's drive members for ``model``: its drive's numbers (SI), the neutral law's without a drive
+    (ratio 1, loss-free, 1 N m/A: the current is the crank torque) and ``encoder_counts`` (0: no encoder)."""
+    d = drive_law.of(model)
+    return {"gear_ratio": d.gear_ratio, "gear_efficiency": d.efficiency, "torque_constant": d.torque_constant,
+            "encoder_counts": d.encoder_counts}
+
+
+def drive_function() -> ca.Function:
+    """(tau, dtheta, drive) -> tau_motor, current: the motors' torques (N m) that give the cranks' ``tau`` (N m) at the
+    crank rates ``dtheta`` (rad/s) through the drive's loss law inverted (:func:`chewbot.model.drive.motor_torque`, the
+    Python controllers' path), and their currents (A); ``drive`` holds :data:`DRIVE_CONFIG`."""
+    tau, dtheta, numbers = ca.SX.sym("tau", 6), ca.SX.sym("dtheta", 6), ca.SX.sym("drive", len(DRIVE_CONFIG))
+    d = Drive(0.0, numbers[0], numbers[1], numbers[2], 0.0)
+    tau_motor = drive_law.motor_torque(d, tau, dtheta)
+    return ca.Function(f"{PREFIX}_drive", [tau, dtheta, numbers], [tau_motor, drive_law.current(d, tau_motor)],
+                       ["tau", "dtheta", "drive"], ["tau_motor", "current"], {"cse": True})
 
 
 def home_angles(model: Model) -> np.ndarray:

@@ -3,8 +3,10 @@
     tau = ID(q, q_dot, q_ddot_ref + kd e_dot + kp e + ki int e dt, F_B),   e = q_ref - q,
 
 with kp = (2 pi f)^2, kd = 2 zeta (2 pi f) (``crosshead.frequency_Hz``, ``.damping``) and ki = kp 2 pi f_i
-(``crosshead.integral_Hz``) per independent coordinate; F_B the bite force the controller knows (none with a food: the
-sample's force is a load it holds its path against, unknown to it). Such a load is a disturbance d of the error
+(``crosshead.integral_Hz``) per independent coordinate; F_B the force observer's estimate (the observer's ``cutoff_Hz``,
+docs/bite_force.md): force feed-forward, which the inverse dynamics needs to distribute the redundant torques so that
+the condyles stay pressed on their planes while the sample pushes (the unilateral contact of ``chewbot tpa``). What the
+estimate misses (its lag, a fracture's drop) is a load the path is held against by the integral: a disturbance d of the error
 dynamics, e''' + kd e'' + kp e' + ki e = d': a constant load leaves no error, a load that rises at a constant rate (a
 sample compressed at a held speed) a constant error d'/ki and no error of speed, so the test speed is held and the
 deepest point reached within that error. Stable while ki < kd kp, i.e. ``integral_Hz`` < 2 ``damping``
@@ -85,13 +87,14 @@ class CrossheadController:
             self._kernel = native(self.kernel_spec())
             self._shared = (np.concatenate([g["kp"], g["kd"]]), model.molar(side), model.vector())
             self._ki, self._integral = np.asarray(g["ki"], float), np.zeros(n)
-        q_ref, dq_ref, ddq_ref, force = self.parts.reference.state(t)
+        assert state.force is not None, "the crosshead controller is given the force observer's estimate (its row needs it)"
+        q_ref, dq_ref, ddq_ref, _ = self.parts.reference.state(t)
         # the integral of the error up to this tick (the rectangle of the interval before: the error seen at its end)
         if self._t is not None:
             self._integral += (np.asarray(q_ref) - state.q) * (t - self._t)
         self._t = t
         return np.asarray(self._kernel(state.q, state.dq, q_ref, dq_ref, ddq_ref + self._ki * self._integral,
-                                       force if self.parts.bite_known else np.zeros_like(force),
+                                       state.force,
                                        *self._shared)[0]).ravel()
 
     def columns(self, t: np.ndarray) -> list[Column]:

@@ -44,23 +44,26 @@ def control_sizes(mechanism: str, gains: int) -> dict[str, int]:
     return dict(zip(CONTROL_INPUTS, (n, n, n, n, n, 3, gains, 3, N_P)))
 
 
-def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = None, friction: bool = False) -> ca.Function:
+def inverse_dynamics_function(mechanism: str, method: str, goal: str | None = None, friction: bool = False,
+                              contact: str | None = None) -> ca.Function:
     """The controller's inverse dynamics of one sample: (q, dq, ddq, B, F_B, p) -> tau (N m), q in Euler angles.
 
     Each formulation's own per-sample graph (:attr:`chewbot.dynamics.registry.Formulation.sample_torques`): the terms
     of Eq. (53) by the Hessian method or Liang's, Lagrange's D, J_theta, J_qEE and the minimum-norm torques, the 6RSS
     core's torques, Newton-Euler's data with the distribution of ``goal`` at a fixed cost (with the model's friction
-    when ``friction``). Built once per (mechanism, method, goal, friction).
+    when ``friction``, with N_L, N_R >= ``contact.preload_N`` when ``contact`` is ``"unilateral"``). Built once per
+    (mechanism, method, goal, friction, contact).
     """
     f = formulation(method)
-    options = {k: v for k, v in (("goal", goal), ("friction", bool(friction))) if k in f.sample_options and v is not None}
-    key = ("controller-inverse", method, *(options.get(k, dict(f.defaults).get(k)) for k in ("goal", "friction")))
+    options = {k: v for k, v in (("goal", goal), ("friction", bool(friction)), ("contact", contact))
+               if k in f.sample_options and v is not None}
+    key = ("controller-inverse", method, *(options.get(k, dict(f.defaults).get(k)) for k in ("goal", "friction", "contact")))
     return cached_graph(symbols(mechanism), key, lambda: f.sample_torques(mechanism, **options))
 
 
 def inverse_function(mechanism: str, inverse: ControllerDynamics) -> ca.Function:
     """The controller's inverse dynamics ``inverse`` on ``mechanism`` (:func:`inverse_dynamics_function`)."""
-    return inverse_dynamics_function(mechanism, inverse.method, inverse.goal, inverse.friction)
+    return inverse_dynamics_function(mechanism, inverse.method, inverse.goal, inverse.friction, inverse.contact.value)
 
 
 def task_space_sx(q: ca.SX, dq: ca.SX, B: ca.SX, p: ca.SX, mechanism: str) -> dict:

@@ -73,8 +73,8 @@ CONTROLLERS: dict[str, ControllerRow] = {row.name: row for row in (
                   needs=Needs(inverse_dynamics=True, target=True, observer=True, food=True), continuous=False,
                   force_reference=True),
     ControllerRow("crosshead", "computed torque with integral action on the independent coordinates: a texture analyser's "
-                  "crosshead that holds its path under a load it is not told (chewbot tpa's)", "crosshead", gains="crosshead",
-                  needs=Needs(inverse_dynamics=True), continuous=False, extends="computed-torque"),
+                  "crosshead that holds its path under a load, the observed force fed forward (chewbot tpa's)", "crosshead",
+                  gains="crosshead", needs=Needs(inverse_dynamics=True, observer=True), continuous=False, extends="computed-torque"),
 )}
 NAMES = tuple(CONTROLLERS)
 COMPARED = tuple(r.name for r in CONTROLLERS.values() if r.compared)

@@ -85,6 +85,10 @@ void chewbot_ctrl_init(chewbot_ctrl* ctx, double t0, const double offsets[6]) {
   ctx->config.transmission_min = ${TRANSMISSION};
   ctx->config.distribution_step_tolerance = ${DIST_STEP};
   ctx->config.max_hold_ticks = ${MAX_HOLD};
+  ctx->config.gear_ratio = ${DRIVE_GEAR_RATIO};
+  ctx->config.gear_efficiency = ${DRIVE_GEAR_EFFICIENCY};
+  ctx->config.torque_constant = ${DRIVE_TORQUE_CONSTANT};
+  ctx->config.encoder_counts = ${DRIVE_ENCODER_COUNTS};
   for (i = 0; i < 6; ++i) ctx->offsets[i] = offsets ? offsets[i] : 0.0;
   reference_at(ctx, t0, ctx->q, ctx->dq, ddq, force);
   for (i = 0; i < NQ; ++i) ctx->held_q_ref[i] = ctx->q[i];
@@ -117,6 +121,16 @@ static void fk(chewbot_ctrl* ctx, const double theta[6], const double guess[NQ])
   chewbot_ctrl_fk(ctx->arg, ctx->res, ctx->iw, ctx->w, 0);
 }
 
+/* The motors' torques and currents of the output torques at the crank rates, through the drive's loss law inverted. */
+static void drive(chewbot_ctrl* ctx) {
+  chewbot_ctrl_outputs* o = &ctx->out;
+  double numbers[3];
+  numbers[0] = ctx->config.gear_ratio; numbers[1] = ctx->config.gear_efficiency; numbers[2] = ctx->config.torque_constant;
+  ctx->arg[0] = o->tau; ctx->arg[1] = o->dtheta; ctx->arg[2] = numbers;
+  ctx->res[0] = o->tau_motor; ctx->res[1] = o->current;
+  chewbot_ctrl_drive(ctx->arg, ctx->res, ctx->iw, ctx->w, 0);
+}
+
 static void law(chewbot_ctrl* ctx) {
   chewbot_ctrl_outputs* o = &ctx->out;
   ctx->arg[0] = o->q; ctx->arg[1] = o->dq; ctx->arg[2] = o->q_ref; ctx->arg[3] = o->dq_ref; ctx->arg[4] = o->ddq_ref;
@@ -142,6 +156,13 @@ unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measu
   }
   for (i = 0; i < NQ; ++i) guess[i] = ctx->q[i];
   if (!(status & CHEWBOT_CTRL_BAD_INPUT)) {
+    /* the crank rates, which the drive's loss law takes the power's direction from: the filtered difference */
+    if (ctx->angles_known && dt > 0.0) {
+      double bf = exp(-2.0 * 3.14159265358979323846 * ctx->config.cutoff_hz * dt);
+      for (i = 0; i < 6; ++i) ctx->dtheta[i] = bf * ctx->dtheta[i] + (1.0 - bf) * (theta[i] - ctx->theta_last[i]) / dt;
+    }
+    for (i = 0; i < 6; ++i) ctx->theta_last[i] = theta[i];
+    ctx->angles_known = 1;
     fk(ctx, theta, guess);
     if (!(o->fk_step <= ctx->config.fk_step_tolerance && o->fk_residual <= ctx->config.fk_residual_tolerance))
       status |= CHEWBOT_CTRL_FK_NOT_CONVERGED;
@@ -203,10 +224,22 @@ unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measu
     }
   }
   status |= ctx->latched;
-  for (i = 0; i < 6; ++i) { tau_out[i] = o->tau[i]; ctx->tau_last[i] = o->tau[i]; }
+  for (i = 0; i < 6; ++i) { tau_out[i] = o->tau[i]; ctx->tau_last[i] = o->tau[i]; o->dtheta[i] = ctx->dtheta[i]; }
+  drive(ctx);
   if (!bad_time) ctx->t_last = t;
   ctx->started = 1;
   ctx->ticks += 1;
   if (status_out) *status_out = status;
+  return status;
+}
+
+unsigned chewbot_ctrl_step_counts(chewbot_ctrl* ctx, double t, const long counts[6], double current_out[6], unsigned* status_out) {
+  double theta[6], tau[6];
+  double rad_per_count = 2.0 * 3.14159265358979323846 / (ctx->config.encoder_counts * ctx->config.gear_ratio);
+  unsigned status;
+  int i;
+  for (i = 0; i < 6; ++i) theta[i] = rad_per_count > 0.0 && is_finite(rad_per_count) ? (double)counts[i] * rad_per_count : NAN;
+  status = chewbot_ctrl_step(ctx, t, theta, tau, status_out);
+  for (i = 0; i < 6; ++i) current_out[i] = ctx->out.current[i];
   return status;
 }

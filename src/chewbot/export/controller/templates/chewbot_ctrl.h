@@ -32,6 +32,11 @@ void chewbot_ctrl_init(chewbot_ctrl* ctx, double t0, const double offsets[6]);
 void chewbot_ctrl_home(chewbot_ctrl* ctx, const double theta_raw_at_home[6]);
 /* One tick: tau_out (N m) for the measured angles at time t (s); status_out the status bits. Returns the status. */
 unsigned chewbot_ctrl_step(chewbot_ctrl* ctx, double t, const double theta_measured[6], double tau_out[6], unsigned* status_out);
+/* One tick of a robot with a drive: the motors' currents (A) for the encoders' counts at time t (s), each counted at
+   its motor and turned into the crank's angle as counts * 2 pi / (encoder_counts * gear_ratio) of ctx->config, then
+   chewbot_ctrl_step; the torques (ctx->out.tau) become currents through the gearbox's loss law inverted at the crank
+   rates (ctx->out.dtheta). Without an encoder (encoder_counts 0) the angles are not finite: BAD_INPUT. */
+unsigned chewbot_ctrl_step_counts(chewbot_ctrl* ctx, double t, const long counts[6], double current_out[6], unsigned* status_out);
 /* The reference for the next steps, set by the caller (instead of the task table) until chewbot_ctrl_use_task. */
 void chewbot_ctrl_set_reference(chewbot_ctrl* ctx, const double q_ref[CHEWBOT_CTRL_NQ], const double dq_ref[CHEWBOT_CTRL_NQ],
                                 const double ddq_ref[CHEWBOT_CTRL_NQ], const double force[3]);
