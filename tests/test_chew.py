@@ -105,8 +105,8 @@ def test_the_plant_force_is_the_bulk_law_then_the_beds():
     assert np.allclose(broken[0][:, 0], bed_normal_force(NUMPY, bed, g["gap"], -g["rate"]), rtol=1e-12, atol=1e-9)
     assert np.allclose(broken[1][:, 2], -broken[0][:, 0], atol=1e-12)
     intact = evaluate(bolus_function("target"), q, dq, B, p, f, np.zeros(n), np.zeros(n), np.full(n, z), bed)
-    bulk = evaluate(food_function("target"), q, dq, B, p, f, np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, z))
-    assert np.allclose(intact[0][:, 0], bulk[5][:, 0], atol=1e-12) and np.allclose(intact[1], bulk[6], atol=1e-12)
+    bulk = evaluate(food_function("target"), q, dq, B, p, f, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, z))
+    assert np.allclose(intact[0][:, 0], bulk[6][:, 0], atol=1e-12) and np.allclose(intact[1], bulk[7], atol=1e-12)
 
 
 def test_the_plant_feels_the_bed_and_breaks_the_bolus(two_cycles):

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from chewbot.cli import app
 from chewbot.commands.common import EXIT_BAD_INPUT
 from chewbot.dynamics.energy import energies
-from chewbot.food.geometry import molar_path_task
+from chewbot.food.geometry import gap, molar_path_task
 from chewbot.food.law import load_food
 from chewbot.food.tpa import protocol
 from chewbot.simulation.options import resolve
@@ -102,7 +102,8 @@ def test_energy_the_food_absorbs_is_the_area_under_its_curve(tmp_path):
     """Over a two-bite test of a damped, relaxing, sticky sample, the actuators' work (torques held between ticks:
     sum tau_k (theta_k+1 - theta_k), exact) equals the robot's change of energy T + V (dynamics.energy, another
     formulation) plus the area under the food's force-compression curve (trapezoids on the rows), to 1e-3 of that
-    area (the trapezoids across the contact's kinks, 1 ms apart)."""
+    area (the trapezoids across the contact's kinks, 1 ms apart). The bite point goes straight down here: the face
+    tilts 3-4 degrees and the law integrates the compression over it."""
     m = model("target")
     f = food_file(tmp_path, damping_s_per_m=20.0, relaxation_time_s=1.0, relaxation_modulus_kPa=15.0, adhesion_N=0.05)
     p = protocol(H0_MM * 1e-3, 50, SPEED, 0.3)
@@ -113,7 +114,9 @@ def test_energy_the_food_absorbs_is_the_area_under_its_curve(tmp_path):
     work = float(np.sum(sim.tau[:-1] * np.diff(kin.theta, axis=0)))
     T, V, _ = energies(m, kin)
     change = (T[-1] + V[-1]) - (T[0] + V[0])
-    F, delta = table["food_force"], table["food_compression"]
+    # the compression at the bite point, h0 - g, unclamped: over the tilted face the sample's edge touches first, at
+    # h0 - g = -a sin(tilt) (the column food_compression is clamped at 0)
+    F, delta = table["food_force"], H0_MM * 1e-3 - gap(m, "left", sim.q)["gap"]
     area = float(np.sum(0.5 * (F[1:] + F[:-1]) * np.diff(delta)))
     loading = float(np.sum((0.5 * (F[1:] + F[:-1]) * np.diff(delta))[np.diff(delta) > 0]))
     assert area > 0.05 * loading  # the sample does absorb (dissipates) work

@@ -372,3 +372,97 @@ def test_tpa_report_renders_in_headless_chromium(tmp_path):
     finally:
         shutil.rmtree(profile, ignore_errors=True)
     assert errors == []
+
+
+# --- the food sample in the 3D view of simulate --food --------------------------------------------------------------
+
+CRUSHING = {"name": "crushing cylinder", "shape": "cylinder", "height_mm": 4.0, "diameter_mm": 10.0, "young_modulus_kPa": 100.0,
+            "fracture_strain": 0.3, "stiffness_after_fracture": 0.5, "recovery_after_fracture": 0.1, "tooth_friction": 0.3}
+
+
+@pytest.fixture(scope="session")
+def food_run_folder(tmp_path_factory):
+    """``chewbot simulate --food`` on a crushing 4 mm cylinder: two bites to half its height at 6 mm/s on the texture
+    test's path (about 2 s), its folder with report.html."""
+    from chewbot.food.geometry import face_path_task
+    from chewbot.food.tpa import Protocol
+    from chewbot.task.csvio import task_table
+
+    folder = tmp_path_factory.mktemp("food-run")
+    (folder / "crushing.toml").write_text("[food]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v}\n"
+                                                                for k, v in CRUSHING.items()))
+    profile = Protocol(pre_test_speed=4e-3, test_speed=6e-3, post_test_speed=6e-3, pause=0.1).profile(5e-3, 0.3)
+    t = profile.times()
+    task = face_path_task(model("target"), "left", t, *profile.path(t), 4e-3, 1e-3, name="two bites")
+    task_table(task).to_csv(folder / "task.csv")
+    result = runner.invoke(app, ["simulate", "--food", str(folder / "crushing.toml"), "--task", str(folder / "task.csv"),
+                                 "--out", str(folder / "run"), "--allow-violations", "-q"])
+    assert result.exit_code == 0, result.output
+    return folder / "run"
+
+
+def _food_rows(folder: Path) -> Table:
+    return Table.read_csv(folder / "results.csv")
+
+
+def test_the_food_sample_is_drawn_compressed_by_the_gap_and_crushed(food_run_folder):
+    """The sample's cylinder (report.html.sample_vertices) from results.csv: its bottom centre at the bite point, its
+    rim 5 mm around it in the lower tooth's plane; its top cut off at the upper tooth (z = B_z at home) where the
+    centre's fibre is compressed, so that the drawn height at its centre is the gap; elsewhere its height is its
+    unloaded height at the centre, h0 before the fracture and, crushed, h0 - (1 - r) delta_max after it, delta_max
+    the deepest compression of the face's centre (over the rows: to 1 um, the travel between two rows at 1 ms near
+    the turn is below 0.1 um)."""
+    from chewbot.food.geometry import gap
+
+    m = model("target")
+    rows = _food_rows(food_run_folder)
+    V = report_html.sample_vertices(m, "left", rows, 10e-3)
+    z_home = float(m.molar("left")[2])
+    q = np.column_stack([rows[c] for c in ("X", "Y", "alpha", "beta")])
+    g = gap(m, "left", q)
+    assert np.allclose(V[:, 0], g["point"], atol=1e-12)
+    rim = V[:, 2:2 + report_html.SAMPLE_SIDES] - V[:, :1]
+    assert np.allclose(np.linalg.norm(rim, axis=2), 5e-3, atol=1e-12)
+    pressed = g["gap"] < rows["food_height"]  # the centre's fibre compressed
+    assert pressed.any() and np.allclose(V[pressed, 1, 2], z_home, atol=1e-12)
+    assert np.allclose((V[pressed, 1] - V[pressed, 0])[:, 2], g["gap"][pressed], atol=1e-12)
+    assert np.allclose(np.linalg.norm(V[~pressed, 1] - V[~pressed, 0], axis=1), rows["food_height"][~pressed], atol=1e-12)
+    broken = rows["food_broken"] > 0
+    assert broken.any() and not broken[0] and np.all(rows["food_height"][~broken] == 4e-3)
+    assert rows["food_height"][-1] == pytest.approx(4e-3 - 0.9 * (4e-3 - g["gap"]).max(), abs=1e-6)
+
+
+@pytest.mark.browser
+def test_the_food_sample_shows_in_the_3d_view(food_run_folder):
+    """report.html of simulate --food opened in Chromium: no exception or console error, the robot's scene has the
+    food sample as a mesh, green before the fracture and brown after it, lower than h0 in the first compression."""
+    sync_api = _chromium()
+    errors: list[str] = []
+    profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch_persistent_context(
+                profile, executable_path=str(CHROMIUM), headless=True, viewport={"width": 1400, "height": 1000},
+                args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run"])
+            page = browser.new_page()
+            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
+            page.goto((food_run_folder / "report.html").as_uri(), timeout=120_000)
+            page.wait_for_function("document.body.dataset.plotsDrawn !== undefined", timeout=120_000)
+            sample = "gd => gd.data.find(d => d.name.startsWith('food sample'))"
+            names = page.evaluate("document.getElementById('robot')._transitionData._frames.map(f => f.name)")
+            rows = _food_rows(food_run_folder)
+            t_break = float(rows["t"][np.argmax(rows["food_broken"] > 0)])
+            for when, colour in ((0.0, report_html.SAMPLE_COLOURS[False]), (float(rows["t"][-1]), report_html.SAMPLE_COLOURS[True])):
+                name = min(names, key=lambda n: abs(float(n) - when))
+                assert (float(name) < t_break) == (colour == report_html.SAMPLE_COLOURS[False])
+                page.evaluate(f"Plotly.animate('robot', ['{name}'], {{frame: {{duration: 0, redraw: true}}, mode: 'immediate'}})")
+                page.wait_for_timeout(300)
+                drawn = page.eval_on_selector("#robot", f"el => {{ const s = ({sample})(el); return [s.type, s.color, s.z.length]; }}")
+                assert drawn == ["mesh3d", colour, 2 + 2 * report_html.SAMPLE_SIDES]
+            size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
+            assert size[0] > 300 and size[1] > 300
+            browser.close()
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)
+    assert errors == []

@@ -307,12 +307,12 @@ def test_the_steps_built_from_layouts_equal_those_of_the_former_offsets():
     assert np.all(np.isfinite(ours)) and np.array_equal(ours, np.asarray(old(*x)))
     assert [L.size for L in closed_loop_layouts(mech, ng)] == [3 * n + 6, 4 + N_P + ng + 3 + N_P + 1]
 
-    w, s = ca.SX.sym("w", 7), ca.SX.sym("s", 4 + N_P + N_FOOD + 4 + 1)
+    w, s = ca.SX.sym("w", 7), ca.SX.sym("s", 4 + N_P + N_FOOD + 5 + 1)
     B, fl, p, f = s[:3], s[3], s[4:4 + N_P], s[4 + N_P:4 + N_P + N_FOOD]
-    broken, F_m0, bFe0, delta_max0 = (s[4 + N_P + N_FOOD + i] for i in range(4))
-    delta, ddelta, bFe, velocity, _ = food_geometry_sx(mech, q, v, B, p, f, broken, s[-1], delta_max0)
+    broken, F_m0, bFe0, delta_max0, tilt_max0 = (s[4 + N_P + N_FOOD + i] for i in range(5))
+    delta, ddelta, bFe, velocity, sin_tilt = food_geometry_sx(mech, q, v, B, p, f, broken, s[-1], delta_max0, tilt_max0)
     F = _force_sx(f, delta, ddelta, broken, maxwell_force(CASADI, f, F_m0, bFe0, bFe, w[6]), ca.fmax(delta_max0, delta),
-                  velocity)[2]
+                  ca.if_else(delta > delta_max0, sin_tilt, tilt_max0), velocity, sin_tilt)[2]
     old = ca.Function("old", [q, v, a, N, w, s], [R(q, v, a, N, w[:6], B, F, fl, p)])
     food = FoodPlant(model, friction=True, food=load_food("cheddar"))
     shared = food.shared()
@@ -321,7 +321,7 @@ def test_the_steps_built_from_layouts_equal_those_of_the_former_offsets():
     x[4][6] = 1e-4  # s since the step's start
     ours = np.asarray(food_stage(mech)(*x))
     assert np.all(np.isfinite(ours)) and np.array_equal(ours, np.asarray(old(*x)))
-    assert FOOD_SHARED.size == 4 + N_P + N_FOOD + 4 + 1 and FOOD_INPUTS.size == 7
+    assert FOOD_SHARED.size == 4 + N_P + N_FOOD + 5 + 1 and FOOD_INPUTS.size == 7
 
 
 # ---------------------------------------------------------------------------------------- the options

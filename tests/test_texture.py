@@ -102,12 +102,16 @@ def test_a_lifted_condyle_fails_the_test(tmp_path):
     pull = {c["name"]: c for c in record["checks"]}["contact-pull"]
     assert pull["passed"] is False and "contact-pull" in r.output
 
+
 def test_a_crushed_sample_springs_back_by_r(tpa):
-    """Broken in the first bite, the sample is crushed to h0 - delta_max (1 - r): the second bite meets it r delta_max
-    below contact, its springiness is r (0.1) within 0.02 (measured 0.0875 with the drive: the crosshead's contact
-    found at the trigger force, a tick after the crushed top); its cohesiveness is far below an elastic sample's."""
+    """Broken in the first bite, the sample is crushed to h0 - delta_max (1 - r), its set a field over the face that
+    keeps the face's tilt at the deepest point (1.23 degrees here, past the 1 mm slide): the second bite meets it
+    nearly parallel, r delta_max below contact, and the plant's springiness is r (0.1) within 0.02 (0.0875: the
+    crosshead's contact found at the trigger force, 0.04 mm into the crushed, softer sample); its cohesiveness is far
+    below an elastic sample's."""
     r = tpa("crushing")
     assert [e["event"] for e in r.record()["events"]].count("fracture") == 1
+    assert r.record()["face"]["tilt_deg"] > 1.0
     assert r.plant.measures["springiness"] == pytest.approx(0.1, abs=0.02)
     assert r.plant.measures["cohesiveness"] < 0.2
 
@@ -115,6 +119,29 @@ def test_a_crushed_sample_springs_back_by_r(tpa):
 def test_a_crushed_sample_s_estimated_springiness_is_r(tpa):
     """The crushed sample's springiness read from the torques, as the plant's: r (0.1) within 0.02."""
     assert tpa("crushing").estimated.measures["springiness"] == pytest.approx(0.1, abs=0.02)
+
+
+def test_the_elastic_hardness_is_the_law_integrated_over_the_tilted_face(tpa):
+    """The elastic cylinder's hardness (its first peak force, no damping, no Maxwell branch) is E A / h0 times the
+    compression of its fibres averaged over its face, u + x sin(tilt) clamped at 0 (u = h0 - g at the bite point),
+    with the plant's gap and tilt at that row: summed over a 2000 x 2000 grid of the disc (independent of the law's
+    closed form), to 1e-5 of the force (the grid's error at the contact line). The face is in full contact there, so
+    this is E A (h0 - g) / h0: the tilt moves where the force acts, not its size."""
+    from chewbot.food.geometry import gap
+
+    r = tpa("elastic")
+    sim, model = r.simulation.simulation, r.simulation.plant_model
+    k = int(np.argmax(r.curves["force_plant"]))
+    g = gap(model, "left", sim.q[[k]], sim.dq[[k]])
+    u, sin_t, a = 6e-3 - float(g["gap"][0]), float(np.sin(g["tilt"][0])), 5e-3
+    x = (np.arange(2000) + 0.5) / 2000 * 2 * a - a
+    X, Y = np.meshgrid(x, x)
+    inside = X**2 + Y**2 <= a**2
+    G = (np.maximum(u + X * sin_t, 0.0) * inside).sum() / inside.sum()
+    E, A = 20e3, np.pi * 0.01**2 / 4
+    assert sin_t > 0.01 and u > a * sin_t  # tilted, in full contact
+    assert r.plant.measures["hardness_N"] == pytest.approx(E * A * G / 6e-3, rel=1e-5)
+    assert r.plant.measures["hardness_N"] == pytest.approx(E * A * u / 6e-3, rel=1e-5)
 
 
 def test_tpa_json_gives_both_readings_definitions_and_checks(tpa):
@@ -164,6 +191,7 @@ def test_a_missed_compression_exits_4(tmp_path):
     (["--compression", "50", "--distance", "3"], "give one"),
     (["--trigger-force", "0"], "--trigger-force 0"),
     (["--friction", "maybe"], "friction"),
+    (["--slide", "0"], "slide"),
 ])
 def test_tpa_refuses_bad_settings(tmp_path, args, message):
     r = runner.invoke(app, ["tpa", "--food", "cheddar", *args, "--out", str(tmp_path / "x")])

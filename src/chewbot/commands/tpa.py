@@ -37,6 +37,7 @@ def tpa(
     post_test_speed: float | None = typer.Option(None, "--post-test-speed", show_default=False, help="Speed of the withdrawals (mm/s, e.g. 2; default: the test speed)."),
     trigger_force: float = typer.Option(0.049, "--trigger-force", help="The force that finds the sample (N; 0.049 N = 5 g, a texture analyser's default): read on the plant's food force, the analyser's load cell; with --log on the estimate, raised to 5 times the estimate's noise where that is larger (tpa.json: estimator.contact_force_N)."),
     pause: float = typer.Option(5.0, "--pause", help="Pause between the two bites at the height of the trigger (s, e.g. 5)."),
+    slide: float | None = typer.Option(None, "--slide", show_default=False, help="Bound on the bite point's horizontal slide on the upper tooth from the sample's top (mm, default 1, e.g. 0.5): the path keeps the lower tooth's face parallel to the upper one as long as the slide stays within it, and tilts it no more than the gap needs beyond (tpa.json: face)."),
     side: Side = typer.Option(Side.left, "--side", help="The molar the sample sits on (left or right)."),
     model: str = typer.Option("target", "--model", help="The robot's model (built-in name or TOML file): the controller's and the estimator's, and the plant's unless --plant."),
     plant: str | None = typer.Option(None, "--plant", show_default=False, help="The simulated robot's model, if not --model (built-in name or TOML file, e.g. target or robot.toml)."),
@@ -51,12 +52,13 @@ def tpa(
 ) -> None:
     """Run texture profile analysis with the robot: two bites of a food sample, Bourne's measures.
 
-    As a texture analyser: the molar point of --side approaches the sample from h0 + 1 mm at --pre-test-speed until
+    As a texture analyser: the molar point of --side approaches the sample from 1 mm above its highest point at --pre-test-speed until
     the food's force reaches --trigger-force (the sample's height h_t is the gap there), compresses it by
     --compression % of h_t (or --distance mm) at --speed, withdraws at --post-test-speed to h_t, pauses --pause s, and
-    bites again, alpha pinned at 0. The robot, with its friction (--friction), holds the path under the crosshead
-    controller (computed torque with integral action, the force observer's estimate of the sample's force fed forward,
-    its redundant torques keeping both condyles pressed on their planes). tpa.json holds
+    bites again, its face kept as parallel to the upper tooth as a horizontal slide within --slide mm allows. The robot,
+    with its friction (--friction), holds the path under the crosshead controller (computed torque with integral
+    action, the force observer's estimate of the sample's force fed forward, its redundant torques keeping both
+    condyles pressed on their planes). tpa.json holds
     Bourne's measures twice, "plant" (the food's force in the simulation) and "estimated" (from the crank angles and
     torques through the bite-force estimator, as on the real robot), their definitions, the protocol as run and the
     checks: compression reached and speed held within 1 %, teeth met, a condyle lifted, the energy readings in [0, 1].
@@ -84,7 +86,7 @@ def tpa(
                                   distance=distance, speed=speed, pre_test_speed=pre_test_speed, post_test_speed=post_test_speed,
                                   trigger_force=trigger_force, pause=pause, side=side.value, model=model, plant_file=plant,
                                   plant_overrides=plant_overrides, friction=friction.value, gain_overrides=gains,
-                                  log=None if log is None else str(log))
+                                  log=None if log is None else str(log), slide=slide)
         except TpaError as exc:
             fail(exc, EXIT_BAD_INPUT)
     with errors_reported():
@@ -137,6 +139,11 @@ def _print(record: dict, out: Path) -> None:
         stdout.print(f"trigger {p['trigger_force_N']:g} N at t = {p['trigger_time_s']:.4g} s, height there "
                      f"{p['height_at_trigger_mm']:.4g} mm; compression {how} to a gap of {p['deepest_gap_mm']:.4g} mm at "
                      f"{p['test_speed_mm_s']:g} mm/s; friction {record['options']['friction']}", highlight=False, markup=False)
+    face = record.get("face")
+    if face:
+        stdout.print(f"faces at the deepest point: tilt {face['tilt_deg']:.3g} deg, gap spread across the sample "
+                     f"{face['spread_mm']:.3g} mm, slide {face['slide_mm']:.3g} mm (bound {face['slide_bound_mm']:g} mm)",
+                     highlight=False, markup=False)
     columns = [k for k in ("plant", "estimated") if record.get(k) is not None]
     intervals = record.get("estimated_ci95") or {}
     stdout.print("measure".ljust(20) + "".join(c.rjust(12) for c in columns) + ("  estimated 95 %" if intervals else ""),

@@ -9,8 +9,9 @@ The law, one normal force along the gap (positive when the sample pushes the tee
   written F_e = k delta^n, k the stiffness of a sample of height h0; a sample of height h has k (h / h0)^m, m = -1
   for the cylinder (E A / h) and 1/2 for the sphere (sqrt(R)).
 * the sample's own state (:data:`FOOD_STATE`, carried by the plant and by the ideal texture analyser of
-  :mod:`chewbot.food.tpa`): ``broken`` (0 or 1), ``F_m`` the Maxwell branch's force (N) and ``delta_max``, the
-  deepest compression so far (m). Its permanent set s (m, :func:`permanent_set`) follows from them:
+  :mod:`chewbot.food.tpa`): ``broken`` (0 or 1), ``F_m`` the Maxwell branch's force (N), ``delta_max``, the
+  deepest compression so far at the face's centre (m), and ``tilt_max``, sin of the lower tooth's tilt there (0 with
+  parallel teeth). Its permanent set s (m, :func:`permanent_set`, at the face's centre) follows from them:
 
   - crushed (broken): its unloaded height becomes h_c = h0 - delta_max (1 - r), r = ``recovery_after_fracture``:
     a second bite meets fragments that recovered r of the deepest compression;
@@ -20,12 +21,17 @@ The law, one normal force along the gap (positive when the sample pushes the tee
     :func:`loaded_force` gives b F_e of that sample, b = 1 intact and ``stiffness_after_fracture`` broken.
 
   With r = 1 and no yield strain (the neutral values) s = 0 and the law is that of an elastic sample that keeps its
-  height, broken or not.
+  height, broken or not. Over a tilted face (below) the set is a field over the face: each fibre keeps its share of
+  its own deepest compression, delta_max + x tilt_max at x along the face, so the set's slope across the face is
+  (1 - r) tilt_max crushed (phi tilt_max plastic, :func:`set_slope`): a crushed sample's top is inclined as the face
+  was at its deepest compression, and the next bite to the same depth at the same tilt meets it with its face nearly
+  parallel (the spread r a sin theta), r delta_max from the deepest point.
 * the face: the lower tooth may be tilted by an angle theta against the upper one. A cylinder's law is then integrated
   over its circular cross-section of radius a (:func:`face_integrals`): the fibre at x along the face, measured from
   its centre towards the side that rises to the upper tooth, is compressed by delta + x sin(theta); each fibre is a
-  uniaxial spring, none pulls. In closed form, with u = delta - s and c = a sin(theta) the half-spread of the
-  compression across the face, xi = -u / c (the edge of contact), F_e = k (h / h0)^m G:
+  uniaxial spring, none pulls. In closed form, with u = delta - s and c = a |sin(theta) - set slope| the half-spread
+  of the compression beyond the set across the face (c = a sin(theta) with no set), xi = -u / c (the edge of
+  contact), F_e = k (h / h0)^m G:
   G = u (full contact, u >= c); 0 (u <= -c); (u (acos xi - xi sqrt(1 - xi^2)) + 2/3 c (1 - xi^2)^1.5) / pi between.
   G is continuously differentiable in u, and G = max(u, 0) at theta = 0: today's law. A sphere has no face
   (a = 0) and sees the centre's compression.
@@ -37,7 +43,7 @@ The law, one normal force along the gap (positive when the sample pushes the tee
 * normal force in contact (some fibre compressed: u + c > 0): F_n = max(F_d + F_m, -adhesion_N): a sample never
   pulls, except through its damping and relaxed Maxwell branch while unloading, and then at most ``adhesion_N``. Out
   of contact F_n = 0;
-* the teeth meet at delta = h0: beyond it a stiff linear tooth contact :data:`TOOTH_STIFFNESS` acts besides the food;
+* the teeth meet at delta = h0 (at the bite point, the face's centre): beyond it a stiff linear tooth contact :data:`TOOTH_STIFFNESS` acts besides the food;
 * tangential friction of the sample on the upper tooth (the slide): F_t = -mu max(F_n, 0) v_t / sqrt(|v_t|^2 + eps^2),
   v_t the bite point's velocity in {S}'s x-y plane. This is the regularised Coulomb law of the plant's joints (below
   the speed :data:`FRICTION_SPEED` it acts as a stiff viscous damper, the regularised "stick"; above it it slides
@@ -46,9 +52,11 @@ The law, one normal force along the gap (positive when the sample pushes the tee
 How the state changes (:data:`FOOD_EVENTS`, :func:`guards`, :func:`fracture_state`):
 
 * ``F_m`` is continuous: the ODE above;
-* ``delta_max`` is continuous: max(delta_max at a step's start, delta) where delta is monotonic in the step; it
-  stops growing where the compression turns (the ``turn`` event, a kink of the force of a crushed or plastic sample);
-* ``broken`` jumps from 0 to 1 at the ``fracture`` event (delta / h0 = fracture_strain), and F_m jumps with it by
+* ``delta_max`` is continuous: max(delta_max at a step's start, delta) where delta is monotonic in the step, and
+  ``tilt_max`` follows sin theta while delta is the deepest so far; they stop where the compression turns (the
+  ``turn`` event, a kink of the force of a crushed or plastic sample);
+* ``broken`` jumps from 0 to 1 at the ``fracture`` event ((delta + a sin(theta)) / h0 = fracture_strain: the face's
+  most compressed fibre, where the sample is strained most), and F_m jumps with it by
   the ratio of b F_e after to F_e before (the factor b when r = 1);
 * the law's other kinks, located as events so that no integrator step straddles them: ``contact`` (u + c = 0),
   ``teeth`` (delta = h0), ``adhesion`` (F_d + F_m = -adhesion_N), ``yield`` (delta = yield_strain h0 while it is
@@ -99,8 +107,8 @@ class FoodError(ChewbotError):
 FOOD_PARAMETERS = ("h0", "k", "n", "m", "alpha", "fracture_strain", "broken_factor", "recovery", "yield_strain",
                    "plastic_fraction", "rho", "inv_tau", "adhesion", "mu", "k_tooth", "radius")
 N_FOOD = len(FOOD_PARAMETERS)
-# The food's state, as the plant carries it: broken (0/1), F_m (N), delta_max (m).
-FOOD_STATE = ("broken", "F_m", "delta_max")
+# The food's state, as the plant carries it: broken (0/1), F_m (N), delta_max (m), tilt_max (sin of the tilt there).
+FOOD_STATE = ("broken", "F_m", "delta_max", "tilt_max")
 # The law's events: the guards of :func:`guards`, in this order.
 FOOD_EVENTS = ("contact", "teeth", "fracture", "adhesion", "yield", "turn")
 _NEVER = 1.0e9  # a strain never reached
@@ -254,6 +262,24 @@ def permanent_set(xp, f, broken, delta_max):
     return xp.fmax(plastic, broken * delta_max * (1.0 - _p(f, "recovery")))
 
 
+def set_slope(xp, f, broken, delta_max, tilt_max):
+    """The slope of the permanent set across the face (sin of an angle): the set is a field s + x slope over the face,
+    each fibre keeping its share of its own deepest compression delta_max + x tilt_max (``tilt_max`` sin of the tilt
+    where the centre was compressed deepest): (1 - r) tilt_max where the crushed set is the larger, phi tilt_max where
+    the plastic one is (past the yield), 0 with no set."""
+    h0 = _p(f, "h0")
+    plastic = _p(f, "plastic_fraction") * xp.fmax(delta_max - _p(f, "yield_strain") * h0, 0.0)
+    crushed = broken * delta_max * (1.0 - _p(f, "recovery"))
+    return xp.where(crushed >= plastic, broken * (1.0 - _p(f, "recovery")),
+                    xp.where(plastic > 0, _p(f, "plastic_fraction"), 0.0)) * tilt_max
+
+
+def _spread(xp, f, broken, delta_max, sin_tilt, tilt_max):
+    """c = a (sin theta - set slope) (m): the half-spread across the face of the compression less the set; its sign
+    says which side is compressed more."""
+    return _p(f, "radius") * (sin_tilt - set_slope(xp, f, broken, delta_max, tilt_max))
+
+
 def face_integrals(xp, u, c):
     """(G, M) of a linear field of compression over a circular face of radius a: G = (1/A) int max(0, u + x sin(theta))
     dA (m), the compression of the face's fibres averaged over the whole face, and M = (1/(A a)) int x max(0, u + x
@@ -272,29 +298,29 @@ def face_integrals(xp, u, c):
     return G, M
 
 
-def loaded_force(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0):
-    """b F_e (N): the elastic force of the sample in its state (broken, deepest compression so far: its permanent set
-    and height), at the compression ``delta`` (m) of its face's centre and the face's tilt (sin theta), integrated
-    over the face for a cylinder (module docstring)."""
+def loaded_force(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0, tilt_max=0.0):
+    """b F_e (N): the elastic force of the sample in its state (broken, deepest compression so far and the tilt there:
+    its permanent set and height), at the compression ``delta`` (m) of its face's centre and the face's tilt (sin
+    theta), integrated over the face for a cylinder (module docstring)."""
     s = permanent_set(xp, f, broken, delta_max)
     height = _p(f, "h0") - s
     k = _p(f, "k") * (height / _p(f, "h0")) ** _p(f, "m")
     u = delta - s
-    c = _p(f, "radius") * sin_tilt
+    c = xp.fabs(_spread(xp, f, broken, delta_max, sin_tilt, tilt_max))
     G, _ = face_integrals(xp, u, c)
     spread = xp.where(c > 0, G, xp.fmax(u, 0.0) ** _p(f, "n"))
     return breaking(f, broken) * k * spread
 
 
-def pressure_centre(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0):
-    """Where the elastic force acts (m): its offset from the face's centre towards the more compressed side, along the
-    tilt's direction (0 with no tilt or no face; a^2 sin(theta) / (4 u) in full contact, a the face's radius, u
-    the compression at the centre less the permanent set)."""
+def pressure_centre(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0, tilt_max=0.0):
+    """Where the elastic force acts (m): its offset from the face's centre along the tilt's direction, positive towards
+    the side that rises (0 with no tilt or no face; a^2 sin(theta) / (4 u) in full contact with no set, a the face's
+    radius, u the compression at the centre less the permanent set)."""
     s = permanent_set(xp, f, broken, delta_max)
     a = _p(f, "radius")
-    c = a * sin_tilt
-    G, M = face_integrals(xp, delta - s, c)
-    return xp.where((c > 0) & (G > 0), a * M / xp.fmax(G, 1e-300), 0.0)
+    c = _spread(xp, f, broken, delta_max, sin_tilt, tilt_max)
+    G, M = face_integrals(xp, delta - s, xp.fabs(c))
+    return xp.where((c != 0) & (G > 0), xp.where(c > 0, 1.0, -1.0) * a * M / xp.fmax(G, 1e-300), 0.0)
 
 
 def maxwell_force(xp, f, F_m0, bFe0, bFe, t):
@@ -306,20 +332,21 @@ def maxwell_force(xp, f, F_m0, bFe0, bFe, t):
     return F_m0 * decay + _p(f, "rho") * (bFe - bFe0) * phi
 
 
-def in_contact(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0):
-    """The contact guard u + c (m): positive where some fibre of the face is compressed."""
-    return delta - permanent_set(xp, f, broken, delta_max) + _p(f, "radius") * sin_tilt
+def in_contact(xp, f, delta, broken=0.0, delta_max=0.0, sin_tilt=0.0, tilt_max=0.0):
+    """The contact guard u + |c| (m): positive where some fibre of the face is compressed beyond its set."""
+    return delta - permanent_set(xp, f, broken, delta_max) + xp.fabs(_spread(xp, f, broken, delta_max, sin_tilt, tilt_max))
 
 
-def normal_force(xp, f, delta, ddelta, broken, F_m, delta_max=0.0, sin_tilt=0.0):
+def normal_force(xp, f, delta, ddelta, broken, F_m, delta_max=0.0, sin_tilt=0.0, tilt_max=0.0):
     """The normal force F_n (N, positive pushing the teeth apart) at compression ``delta`` (m) of the face's centre,
     its rate ``ddelta`` (m/s), the state (``broken`` 0/1, the Maxwell branch's force ``F_m`` (N), the deepest
-    compression so far ``delta_max`` (m)) and the face's tilt ``sin_tilt``; and F_v = F_d + F_m before the clamp (the
-    clamp's guard). The tooth contact beyond delta = h0 included. With ``delta_max`` = 0 the sample has its full
-    height (no permanent set)."""
-    bFe = loaded_force(xp, f, delta, broken, delta_max, sin_tilt)
+    compression so far ``delta_max`` (m) and sin of the tilt there ``tilt_max``) and the face's tilt ``sin_tilt``; and
+    F_v = F_d + F_m before the clamp (the clamp's guard). The tooth contact beyond delta = h0 included. With
+    ``delta_max`` = 0 the sample has its full height (no permanent set)."""
+    bFe = loaded_force(xp, f, delta, broken, delta_max, sin_tilt, tilt_max)
     F_v = bFe * (1.0 + 1.5 * _p(f, "alpha") * ddelta) + F_m
-    food = xp.where(in_contact(xp, f, delta, broken, delta_max, sin_tilt) > 0, xp.fmax(F_v, -_p(f, "adhesion")), 0.0)
+    food = xp.where(in_contact(xp, f, delta, broken, delta_max, sin_tilt, tilt_max) > 0, xp.fmax(F_v, -_p(f, "adhesion")),
+                    0.0)
     tooth = _p(f, "k_tooth") * xp.fmax(delta - _p(f, "h0"), 0.0)
     return food + tooth, F_v
 
@@ -330,27 +357,30 @@ def tangential_force(xp, f, F_n, vx, vy):
     return scale * vx, scale * vy
 
 
-def fracture_state(xp, f, delta, F_m, delta_max, sin_tilt=0.0):
+def fracture_state(xp, f, delta, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0):
     """The state just after the fracture at compression ``delta``: (broken = 1, F_m times the ratio of b F_e after to
-    F_e before, delta_max), the sample crushed to its new height at once."""
-    before = loaded_force(xp, f, delta, 0.0, delta_max, sin_tilt)
-    after = loaded_force(xp, f, delta, 1.0, delta_max, sin_tilt)
+    F_e before, delta_max), the sample crushed to its new height at once (its tilt_max unchanged)."""
+    before = loaded_force(xp, f, delta, 0.0, delta_max, sin_tilt, tilt_max)
+    after = loaded_force(xp, f, delta, 1.0, delta_max, sin_tilt, tilt_max)
     return 1.0, F_m * after / xp.fmax(before, 1e-300), delta_max
 
 
-def guards(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0):
+def guards(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt=0.0, tilt_max=0.0):
     """The guard functions of :data:`FOOD_EVENTS` at a state, in that order (NaN: not armed there): an event is where
-    its guard changes sign. ``yield`` and ``turn`` are armed only where the compression is the deepest so far (they
-    change the permanent set), ``fracture`` while intact, ``adhesion`` in contact. ``xp``: :data:`NUMPY` (a list of
-    the six, each an array of the samples) or :data:`CASADI` (the plant's compiled step evaluates them)."""
+    its guard changes sign. ``fracture`` is read on the face's most compressed fibre, delta + a sin(theta) (the sample
+    breaks where it is strained most; delta itself with parallel faces), armed while intact; ``yield`` and ``turn``
+    at the centre, armed only where the compression is the deepest so far (they change the permanent set);
+    ``adhesion`` in contact. ``xp``: :data:`NUMPY` (a list of the six, each an array of the samples) or
+    :data:`CASADI` (the plant's compiled step evaluates them)."""
     h0, yield_depth = _p(f, "h0"), _p(f, "yield_strain") * _p(f, "h0")
-    _, F_v = normal_force(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt)
-    contact = in_contact(xp, f, delta, broken, delta_max, sin_tilt)
+    strained = delta + _p(f, "radius") * sin_tilt
+    _, F_v = normal_force(xp, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, tilt_max)
+    contact = in_contact(xp, f, delta, broken, delta_max, sin_tilt, tilt_max)
     deepest = delta >= delta_max
     plastic = _p(f, "plastic_fraction") > 0
     sets = xp.fmax(broken, plastic * (delta_max >= yield_depth)) > 0.5
     return [contact, delta - h0,
-            xp.where(broken < 0.5, delta / h0 - _p(f, "fracture_strain"), math.nan),
+            xp.where(broken < 0.5, strained / h0 - _p(f, "fracture_strain"), math.nan),
             xp.where(contact > 0, F_v + _p(f, "adhesion"), math.nan),
             xp.where(plastic * deepest > 0.5, delta - yield_depth, math.nan),
             xp.where(sets * deepest > 0.5, ddelta, math.nan)]
@@ -452,4 +482,4 @@ def food_from_dict(raw: dict, source: str = "<dict>") -> Food:
 __all__ = ["CASADI", "FOOD_EVENTS", "FOOD_PARAMETERS", "FOOD_STATE", "FRICTION_SPEED", "Food", "FoodError", "N_FOOD", "NUMPY",
            "RECOVERY_AFTER_FRACTURE", "SHAPES", "TOOTH_STIFFNESS", "breaking", "builtin_foods", "elastic_force",
            "face_integrals", "food_from_dict", "fracture_state", "guards", "in_contact", "load_food", "loaded_force",
-           "maxwell_force", "normal_force", "permanent_set", "pressure_centre", "tangential_force"]
+           "maxwell_force", "normal_force", "permanent_set", "pressure_centre", "set_slope", "tangential_force"]

@@ -547,8 +547,8 @@ def _states(f, t, delta, ddelta, broken, sin_tilt, F_m0=0.0):
     """The food's state and force along a compression imposed at times t (the fracture already placed in
     ``broken``): delta_max, b F_e, F_m (the exact step of the Maxwell branch between samples, the jump at the
     fracture), F_n."""
-    delta_max = np.maximum.accumulate(np.maximum(delta, 0.0))
-    bFe = loaded_force(NUMPY, f, delta, broken, delta_max, sin_tilt)
+    delta_max = np.maximum.accumulate(np.maximum(delta, 0.0))  # at a constant tilt, tilt_max is sin_tilt
+    bFe = loaded_force(NUMPY, f, delta, broken, delta_max, sin_tilt, sin_tilt)
     inv_tau = float(f[FOOD_PARAMETERS.index("inv_tau")])
     h = np.diff(t)
     # increments of the step formula: F_m(t+h) = F_m(t) e^(-h/tau) + rho (bFe(t+h) - bFe(t)) phi(h/tau)
@@ -558,12 +558,12 @@ def _states(f, t, delta, ddelta, broken, sin_tilt, F_m0=0.0):
         k = int(jump[0]) + 1
         F_m = np.empty_like(delta)
         F_m[:k] = _decaying_sum(t[:k], u[:k], inv_tau, F_m0)
-        _, after, _ = fracture_state(NUMPY, f, delta[k], F_m[k - 1], delta_max[k], sin_tilt)
+        _, after, _ = fracture_state(NUMPY, f, delta[k], F_m[k - 1], delta_max[k], sin_tilt, sin_tilt)
         u[k] = 0.0
         F_m[k:] = _decaying_sum(t[k:], u[k:], inv_tau, float(after))
     else:
         F_m = _decaying_sum(t, u, inv_tau, F_m0)
-    F_n, _ = normal_force(NUMPY, f, delta, ddelta, broken, F_m, delta_max, sin_tilt)
+    F_n, _ = normal_force(NUMPY, f, delta, ddelta, broken, F_m, delta_max, sin_tilt, sin_tilt)
     return delta_max, F_m, F_n
 
 
@@ -607,17 +607,18 @@ def ideal_test(food, protocol: Protocol = Protocol(), rate: float = 1000.0, tilt
     delta = h0 - g
     events = []
     broken = np.zeros(t.size)
-    if food.fracture_strain is not None:
-        strain = delta / h0 - food.fracture_strain
+    if food.fracture_strain is not None:  # on the face's most compressed fibre (chewbot.food.law.guards)
+        edge = (food.diameter or 0.0) / 2 * sin_tilt
+        strain = (delta + edge) / h0 - food.fracture_strain
         over = np.flatnonzero(strain >= 0)
         if over.size:
             j = int(over[0])
             t_f = t[j] if strain[j] == 0 or j == 0 else brentq(
-                lambda tt: (h0 - profile.path(np.array([tt]))[0][0]) / h0 - food.fracture_strain, t[j - 1], t[j],
+                lambda tt: (h0 - profile.path(np.array([tt]))[0][0] + edge) / h0 - food.fracture_strain, t[j - 1], t[j],
                 xtol=1e-13, rtol=4 * np.finfo(float).eps)
             _, dg_f, _ = profile.path(np.array([t_f]))
             t = np.concatenate([t[:j], [t_f, t_f], t[j:]])
-            g = np.concatenate([g[:j], [h0 * (1 - food.fracture_strain)] * 2, g[j:]])
+            g = np.concatenate([g[:j], [h0 * (1 - food.fracture_strain) + edge] * 2, g[j:]])
             dg = np.concatenate([dg[:j], [dg_f[0]] * 2, dg[j:]])
             delta = h0 - g
             broken = (np.arange(t.size) > j).astype(float)

@@ -195,6 +195,18 @@ def _named(key: str) -> str:
     return name.replace("_", " ") + (f" [{unit}]" if unit else "")
 
 
+def _face(face: dict | None) -> str:
+    """The faces' section: the path, the lower tooth's tilt, the spread of the gap across the sample's face and the
+    bite point's slide (a logged test has none)."""
+    if not face:
+        return ""
+    return ("<h2>The teeth's faces</h2>\n<p>The robot cannot move its lower tooth straight down with its face parallel "
+            "to the upper one: its condyles' planes make the bite point slide as the face stays parallel, or tilt the "
+            f"face where the bite point is held. {html.escape(face.get('path', '').capitalize())}. The spread is the "
+            "difference of the gap across the sample's face (its diameter x sin tilt), seen by the food's law.</p>\n"
+            + _table(["", "value", "unit"], [r for r in _unit_rows(face) if r[0] != "path"]))
+
+
 def tpa_html(record: dict) -> str:
     """A food scientist's report: the measures of both readings side by side with their definitions, the checks, the
     protocol as run, the sample, and the force-time (anchors and areas shaded) and force-displacement figures."""
@@ -238,6 +250,7 @@ bite (A2). The plant's force is the solid line, the estimate the dashed one over
 {_table(["check", "verdict", "what was found"], checks)}
 <h2>The protocol as run</h2>
 {_table(["setting", "value", "unit"], _unit_rows(record.get("protocol") or {}))}
+{_face(record.get("face"))}
 <h2>The sample</h2>
 {_table(["property", "value", "unit"], _unit_rows(food))}
 <h2>The force estimate</h2>

@@ -194,6 +194,42 @@ def _moving_traces(model: Model, side: str, body: np.ndarray, S: np.ndarray, F: 
     return [cranks, couplers, mandible, points, ends, force]
 
 
+# The food sample's cylinder is drawn with this many sides; intact and crushed in these colours.
+SAMPLE_SIDES = 32
+SAMPLE_COLOURS = {False: "#5a9e3a", True: "#8b5a2b"}
+
+
+def sample_vertices(model: Model, side: str, rows: Table, diameter: float) -> np.ndarray:
+    """The food sample's cylinder at the samples of ``rows`` (n, 2 + 2 SAMPLE_SIDES, 3; m, {S}): the centres of its
+    bottom and top faces, then its bottom and top rims. It stands on the lower tooth at the bite point of ``side``, its
+    bottom face in the tooth's plane (tilted with the mandible), its axis along the tooth's normal, ``diameter`` (m)
+    across and ``food_height`` (its unloaded height, crushed once broken) tall; each of its fibres is cut off at the
+    upper tooth, the plane z = B_z at home ({M} = {S} there): compressed by the gap, as the food's law has it."""
+    X = np.column_stack([rows[name] for name in POSE_NAMES])
+    R = matrix_from_euler_angles(X[:, 3:6])
+    B = X[:, :3] + R @ np.asarray(model.molar(side), float)
+    angle = 2 * np.pi * np.arange(SAMPLE_SIDES) / SAMPLE_SIDES
+    rim = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(SAMPLE_SIDES)]) * diameter / 2
+    bottom = np.concatenate([B[:, None], B[:, None] + np.einsum("nij,kj->nki", R, rim)], axis=1)
+    top = bottom + rows["food_height"][:, None, None] * R[:, None, :, 2]
+    top[..., 2] = np.minimum(top[..., 2], float(np.asarray(model.molar(side), float)[2]))
+    return np.concatenate([bottom[:, :1], top[:, :1], bottom[:, 1:], top[:, 1:]], axis=1)
+
+
+def _sample_trace(vertices: np.ndarray, broken: bool) -> dict:
+    """The food sample at one frame (:func:`sample_vertices`): its caps and its side as one mesh."""
+    n = SAMPLE_SIDES
+    k = np.arange(n)
+    nxt = (k + 1) % n
+    b, t = 2 + k, 2 + n + k
+    i = np.concatenate([np.zeros(n, int), np.ones(n, int), b, 2 + nxt])
+    j = np.concatenate([b, t, 2 + nxt, 2 + n + nxt])
+    kk = np.concatenate([2 + nxt, 2 + n + nxt, t, t])
+    return {"type": "mesh3d", **_xyz(vertices), "i": i.tolist(), "j": j.tolist(), "k": kk.tolist(),
+            "color": SAMPLE_COLOURS[bool(broken)], "opacity": 0.85, "flatshading": True,
+            "name": "food sample (green intact, brown crushed)", "showlegend": True, "hoverinfo": "name"}
+
+
 def _static_traces(model: Model, paths: Table) -> list[dict]:
     """Base points, the sockets' planes (target only) and the paths of incisor and condyles over the task."""
     traces = [{"type": "scatter3d", **_xyz(model.G), "mode": "markers+text", "text": [f"G{i}" for i in range(1, 7)],
@@ -221,19 +257,24 @@ def _static_traces(model: Model, paths: Table) -> list[dict]:
     return traces
 
 
-def robot_figure(model: Model, view: RunView, side: str) -> dict:
-    """The robot in 3D (mm, {S}), animated along the task with a time slider and play/pause buttons."""
+def robot_figure(model: Model, view: RunView, side: str, sample_diameter: float | None = None) -> dict:
+    """The robot in 3D (mm, {S}), animated along the task with a time slider and play/pause buttons; with
+    ``sample_diameter`` (m) the food sample too (:func:`sample_vertices`, from the rows' ``food_height`` and
+    ``food_broken``)."""
     rows = view.at(view.frames)
     pos = robot_positions(model, rows)
     force = np.column_stack([rows[name] for name in ("Fx", "Fy", "Fz")])
     static = _static_traces(model, view.at(view.paths))
-    moving = list(range(len(static), len(static) + 6))
+    sample = None if sample_diameter is None else sample_vertices(model, side, rows, sample_diameter)
+    moving = list(range(len(static), len(static) + 6 + (sample is not None)))
     t = rows["t"]
-    frames = [{"name": f"{t[f]:.3f}", "data": _moving_traces(model, side, pos["body"][f], pos["S"][f], force[f]), "traces": moving}
+    frames = [{"name": f"{t[f]:.3f}", "data": _moving_traces(model, side, pos["body"][f], pos["S"][f], force[f])
+               + ([] if sample is None else [_sample_trace(sample[f], rows["food_broken"][f] > 0)]), "traces": moving}
               for f in range(len(t))]
     names, _ = mandible_body_points(model)
     arrows = pos["body"][:, names.index(_bite_point(side))] / MM + force * FORCE_SCALE_MM_PER_N
-    everything = np.vstack([model.G / MM, pos["S"].reshape(-1, 3) / MM, pos["body"].reshape(-1, 3) / MM, arrows.reshape(-1, 3)])
+    everything = np.vstack([model.G / MM, pos["S"].reshape(-1, 3) / MM, pos["body"].reshape(-1, 3) / MM, arrows.reshape(-1, 3)]
+                           + ([] if sample is None else [sample.reshape(-1, 3) / MM]))
     lo, hi = everything.min(axis=0) - 8, everything.max(axis=0) + 8
     span = hi - lo
     axis = lambda name, j: {"title": {"text": f"{name}<sub>S</sub> [mm]"}, "range": [lo[j], hi[j]],  # noqa: E731

@@ -59,16 +59,31 @@ def _switch(on: bool) -> str:
 
 def _robots_section(result, view: RunView, figures: dict) -> str:
     side = result.task.side
-    figures["robot"] = robot_figure(result.plant_model, view, side)
+    food = result.info.get("food")
+    figures["robot"] = robot_figure(result.plant_model, view, side, None if food is None else sample_diameter(food["food"]))
     figures["robot_reference"] = robot_figure(result.plant_model, _view(kinematics_table(result.reference_kinematics)), side)
     stopped = result.simulation.stopped
     note = (f' <span class="warn">The robot left the workspace at t = {stopped["t"]:.4g} s ({escape(stopped["reason"])}): the motion ends '
             "at the last pose inside.</span>" if stopped else "")
     return ('<section id="robot-section"><h2>The simulated robot beside the reference</h2>'
             '<p class="note">{S} coordinates in mm, both on the plant\'s model; left the simulated motion, right the reference '
-            f"(the task), each with its own time slider.{note}</p>"
+            f"(the task), each with its own time slider.{_sample_note(food)}{note}</p>"
             '<div class="grid"><div><h3>simulated</h3><div id="robot" class="plot"></div></div>'
             '<div><h3>reference</h3><div id="robot_reference" class="plot" style="height: 720px"></div></div></div></section>')
+
+
+def sample_diameter(food: dict) -> float:
+    """The diameter (m) the food sample is drawn with: a cylinder's, or a sphere's (its height) drawn as a cylinder."""
+    return food.get("diameter_mm", food["height_mm"]) * factor("mm")
+
+
+def _sample_note(food: dict | None) -> str:
+    if food is None:
+        return ""
+    sphere = "" if "diameter_mm" in food["food"] else " (a sphere, drawn as a cylinder as wide as it is tall)"
+    return (f" The {escape(food['food']['name'])}{sphere} stands on the lower molar at the bite point, its bottom face on "
+            "the lower tooth's, its fibres cut off at the upper tooth: compressed with the gap, green while intact, "
+            "brown and crushed to its new unloaded height once broken (results.csv: food_height, food_broken).")
 
 
 def metrics_rows(results: dict) -> list[list[str]]:

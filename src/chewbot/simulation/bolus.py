@@ -36,7 +36,7 @@ from chewbot.compiled.cache import cached_graph, symbols
 from chewbot.compiled.kernels import KernelSpec, evaluate
 from chewbot.compiled.layout import Layout
 from chewbot.food.bolus import BED_PARAMETERS, NUMPY, Bolus, bed_force, bed_normal_force, comminution_of
-from chewbot.food.law import CASADI, N_FOOD, maxwell_force, normal_force, tangential_force
+from chewbot.food.law import CASADI, FOOD_PARAMETERS, N_FOOD, maxwell_force, normal_force, tangential_force
 from chewbot.simulation.food import EVENTS, FOOD_SHARED, FoodPlant, FoodSolved, food_ended, food_geometry_sx, stage_with_food
 from chewbot.simulation.food import build as food_plant
 from chewbot.simulation.forward import n_coordinates
@@ -59,7 +59,7 @@ def bolus_stage(mechanism: str) -> ca.Function:
     """The stage residual of the plant with a bolus: (q, v, a, N, w, s), w laid out as
     :data:`~chewbot.simulation.food.FOOD_INPUTS` and s as :data:`BOLUS_SHARED`."""
     return stage_with_food(mechanism, "bolus_stage", BOLUS_SHARED,
-                           lambda f, delta, ddelta, F_m, velocity, shared: _bolus_force_sx(
+                           lambda f, delta, ddelta, F_m, velocity, sin_tilt, shared: _bolus_force_sx(
                                f, delta, ddelta, shared["broken"], F_m, velocity, shared["bed"])[2])
 
 
@@ -127,6 +127,8 @@ class BolusPlant(FoodPlant):
 
     def __post_init__(self):
         super().__post_init__()
+        # the bulk law at the face's centre, as its stage integrates it: a face of radius 0 takes no tilt
+        self._f[FOOD_PARAMETERS.index("radius")] = 0.0
         self.table = comminution_of(self.food)
         if self.bolus is None:
             self.bolus = Bolus.portion(self.table)

@@ -141,7 +141,8 @@ def simulate(plant: Plant, controller: Controller, reference: Reference, rate: f
         observer.start(times[0], q_ref[0], dq_ref[0])
     tau_k = np.zeros(6)
     if drives is not None:
-        tick, numbers = native(drive_tick_kernel()), [DRIVE.pack(**{name: getattr(d, name) for name in DRIVE.names}) for d in drives]
+        tick, numbers = native(drive_tick_kernel()), [DRIVE.pack(gear_ratio=d.gear_ratio, efficiency=d.efficiency,
+                                                                  torque_constant=d.torque_constant) for d in drives]
     current, applied, dtheta = np.zeros((K, 6)), np.zeros((K, 6)), np.zeros((K, 6))
     stopped, last = None, K - 1
     if not continuous:  # the bite force at the stages of each tick's step, all at once

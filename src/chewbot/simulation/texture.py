@@ -4,9 +4,11 @@ in the plant, its measures and its validity checks.
 :func:`resolve_tpa` resolves the test's options once (:class:`TpaOptions`: the protocol of a texture analyser, the
 robot's models, the plant's friction, the gains, a log). :func:`run_tpa` runs it as a texture analyser does:
 
-1. **The trigger.** The molar point approaches from rest at h0 + ``approach`` along {S}'s z at the pre-test speed
-   (alpha pinned at 0: :func:`chewbot.food.geometry.molar_path_task`) until the plant's food force (the analyser's
-   load cell) reaches the trigger force; the gap there, the reference's, is the sample's height h_t as the analyser
+1. **The trigger.** The molar point approaches from rest ``approach`` above the sample's highest point
+   (:func:`start_gap`) along {S}'s z at the pre-test speed
+   on the path that keeps the lower tooth's face as parallel to the upper one as a horizontal slide of at most
+   ``slide`` from the sample's top allows (:func:`chewbot.food.geometry.face_path_task`) until the plant's food force
+   (the analyser's load cell, the law integrated over the tilted face) reaches the trigger force; the gap there, the reference's, is the sample's height h_t as the analyser
    measures it. The approach is simulated until the trigger, the time of the trigger interpolated between the ticks.
 2. **The test.** The profile from the trigger on (:class:`chewbot.food.tpa.Profile`: test speed to h_t (1 -
    compression), post-test speed back to h_t, pause, again, back to the start) is simulated from the start: the
@@ -35,7 +37,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from chewbot.dynamics.options import Contact
-from chewbot.food.geometry import gap, largest_height, molar_path_task
+from chewbot.food.geometry import face_path_task, gap, largest_height
 from chewbot.food.law import Food, load_food
 from chewbot.food.tpa import HOLD, MEASURES, Profile, Protocol, TpaAnalysis, TpaError, analyse, protocol_checks, settings
 from chewbot.model import Model
@@ -44,6 +46,12 @@ from chewbot.simulation.options import SimulationOptions, resolve
 from chewbot.simulation.run import SimulateResult, build, compute, load_models
 from chewbot.simulation.simulator import simulate
 
+# The bound on the bite point's horizontal slide from the sample's top (m), where --slide does not give one: a tenth
+# of a 10 mm sample's face. The target's condyles' planes make the bite point slide about 0.9 mm per mm down while the
+# face stays parallel: within 1 mm the first 1.1 mm of a stroke keep the faces parallel (where the sockets allow), and
+# a 10 mm sample at 50 % tilts 3.1 degrees at its top and 0.1 at the deepest point instead of 6.4 and 3.2 with the
+# bite point held still (docs/food.md).
+SLIDE = 1e-3
 # The test's position loop and its inverse dynamics: Newton-Euler, with the model's friction where the robot has it.
 TPA_CONTROLLER = controller_row(TEXTURE_CONTROLLER)
 TPA_METHOD = "newton-euler"
@@ -69,7 +77,8 @@ class TpaOptions:
     none), the ``protocol`` (:class:`chewbot.food.tpa.Protocol`, SI), ``side``, ``model`` (the controller's and the
     estimator's), ``plant_file`` (the plant's; None: the model's) and ``plant_overrides``, ``friction`` (the robot's:
     the plant's, the controller's model's and the estimator's), ``gain_overrides``, ``rate`` (Hz), ``log`` (a robot's
-    logged test: no simulation) and ``simulation`` (the simulation's options, None with a log)."""
+    logged test: no simulation), ``simulation`` (the simulation's options, None with a log) and ``slide`` (m, the
+    bound on the bite point's horizontal slide from the sample's top: :func:`chewbot.food.geometry.face_path_task`)."""
 
     food: str | None
     protocol: Protocol
@@ -82,24 +91,28 @@ class TpaOptions:
     rate: float = 1000.0
     log: str | None = None
     simulation: SimulationOptions | None = None
+    slide: float = SLIDE
 
     def record(self) -> dict:
         """tpa.json's ``"options"``."""
         return {"food": self.food, "side": self.side, "model": self.model, "plant": self.plant_file,
                 "plant_overrides": dict(self.plant_overrides), "friction": "on" if self.friction else "off",
                 "gain_overrides": dict(self.gain_overrides), "rate_Hz": self.rate, "log": self.log,
-                "controller": None if self.log else TPA_CONTROLLER.name, "method": None if self.log else TPA_METHOD}
+                "controller": None if self.log else TPA_CONTROLLER.name, "method": None if self.log else TPA_METHOD,
+                "slide_mm": None if self.log else self.slide * 1e3}
 
 
 def resolve_tpa(food: str | None = None, *, compression: float | None = None, distance: float | None = None,
                 speed: float = 2.0, pre_test_speed: float = 1.0, post_test_speed: float | None = None,
                 trigger_force: float | None = None, pause: float = 5.0, side: str = "left", model: str = "target",
                 plant_file: str | None = None, plant_overrides: dict | None = None, friction: bool | str = True,
-                gain_overrides: dict | None = None, rate: float = 1000.0, log: str | None = None) -> TpaOptions:
+                gain_overrides: dict | None = None, rate: float = 1000.0, log: str | None = None,
+                slide: float | None = None) -> TpaOptions:
     """The options of ``chewbot tpa``, every rule written here once (the command line's units: %, mm, mm/s, N, s).
     :class:`TpaError` or :class:`chewbot.run.options.OptionError` name the option: a compression below 1 % (a
     fraction meant as a percentage), a compression with a distance, a food missing without a log, gains or a plant
-    with a log (nothing is simulated). ``compression`` defaults to 50 % unless ``distance`` is given."""
+    with a log (nothing is simulated), a slide bound that is not positive. ``compression`` defaults to 50 % unless
+    ``distance`` is given; ``slide`` (mm) to :data:`SLIDE`."""
     from chewbot.food.tpa import TRIGGER_FORCE
     from chewbot.run.options import OptionError
 
@@ -113,18 +126,22 @@ def resolve_tpa(food: str | None = None, *, compression: float | None = None, di
                         trigger_force_N=TRIGGER_FORCE if trigger_force is None else trigger_force, distance_mm=distance)
     gain_overrides, plant_overrides = dict(gain_overrides or {}), dict(plant_overrides or {})
     if log is not None:
-        for option, given in (("gain", gain_overrides), ("plant", plant_file), ("plant-set", plant_overrides)):
+        for option, given in (("gain", gain_overrides), ("plant", plant_file), ("plant-set", plant_overrides),
+                              ("slide", slide)):
             if given:
                 raise OptionError(option, "does not apply to --log: a logged test is not simulated")
         return TpaOptions(food, protocol, side, model, None, {}, bool(friction), {}, rate, str(log))
     if food is None:
         raise OptionError("food", "required (the sample to test), unless --log gives a robot's logged test")
+    if slide is not None and not slide > 0:
+        raise OptionError("slide", f"must be a positive distance (mm), not {slide:g}")
     sim = resolve(TPA_CONTROLLER, model=model, side=side, method=TPA_METHOD, friction=bool(friction), rate=rate,
                   plant_file=plant_file, plant_overrides=plant_overrides, gain_overrides=gain_overrides, food=food,
                   contact=TPA_CONTACT)
     # the condyles rest on their planes: the controller distributes its redundant torques to keep them pressed
     sim = replace(sim, inverse=replace(sim.inverse, contact=TPA_CONTACT))
-    return TpaOptions(food, protocol, side, model, plant_file, plant_overrides, bool(friction), gain_overrides, rate, None, sim)
+    return TpaOptions(food, protocol, side, model, plant_file, plant_overrides, bool(friction), gain_overrides, rate, None, sim,
+                      SLIDE if slide is None else slide * 1e-3)
 
 
 @dataclass
@@ -159,21 +176,26 @@ class TpaResult:
 
 
     def face(self) -> dict:
-        """The lower tooth's face at the deepest point of the first bite: its tilt against the upper tooth, the spread
-        of the gap across the sample's face (its diameter x sin tilt) and the bite point's horizontal slide from
-        where the test started (mm, deg)."""
-        from chewbot.compiled.kernels import evaluate, native
-        from chewbot.food.geometry import bite_point_kernel
-
+        """The lower tooth's face in the test (mm, deg): its tilt against the upper tooth at the deepest point of the
+        first bite and the largest while the sample is loaded, the spread of the gap across the sample's face there
+        (its diameter x sin tilt), and the bite point's horizontal slide from where the trigger found the sample (at
+        the deepest point, and the largest while loaded), beside the path's slide bound."""
         sim, model = self.simulation.simulation, self.simulation.plant_model
+        g = gap(model, self.options.side, sim.q, sim.dq)
+        loaded = np.flatnonzero(self.curves["force_plant"] > 0)
         k = int(np.argmin(self.curves["gap_plant"]))
-        point, _, cos_tilt = evaluate(native(bite_point_kernel(model.mechanism)), sim.q[[0, k]], sim.dq[[0, k]],
-                                      np.asarray(model.molar(self.options.side), float), model.vector())
-        tilt = float(np.arccos(np.clip(cos_tilt[1, 0], -1.0, 1.0)))
+        j = int(np.searchsorted(self.curves["t"], self.profile.trigger_time))
+        slide = np.linalg.norm(g["point"][:, :2] - g["point"][j, :2], axis=1)
         diameter = 0.0 if self.food.diameter is None else self.food.diameter
-        return {"path": "the bite point straight down along {S}'s z, alpha pinned at 0: no slide commanded, the face "
-                        "tilts with beta", "tilt_deg": float(np.degrees(tilt)),
-                "spread_mm": diameter * np.sin(tilt) * 1e3, "slide_mm": float(np.linalg.norm(point[1, :2] - point[0, :2]) * 1e3)}
+        worst = loaded[np.argmax(g["tilt"][loaded])] if loaded.size else k
+        return {"path": "the lower tooth translated (its face parallel to the upper tooth) while the bite point's "
+                        "slide from the sample's top stays within the bound, then held at the bound with the tilt "
+                        "the gap needs (chewbot.food.geometry.face_path_task)",
+                "slide_bound_mm": self.options.slide * 1e3,
+                "tilt_deg": float(np.degrees(g["tilt"][k])), "spread_mm": float(diameter * np.sin(g["tilt"][k]) * 1e3),
+                "slide_mm": float(slide[k] * 1e3), "largest_tilt_loaded_deg": float(np.degrees(g["tilt"][worst])),
+                "largest_spread_loaded_mm": float(diameter * np.sin(g["tilt"][worst]) * 1e3),
+                "largest_slide_loaded_mm": float(np.max(slide[loaded]) * 1e3) if loaded.size else 0.0}
 
 
 def check_height(model: Model, food: Food, side: str) -> float:
@@ -186,15 +208,32 @@ def check_height(model: Model, food: Food, side: str) -> float:
     return h_max
 
 
-def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
-    """The time (s) the plant's food force first reaches the trigger force on the approach from h0 + approach at the
-    pre-test speed, interpolated between the ticks (the approach simulated until then)."""
+def start_gap(options: TpaOptions, model: Model, food: Food) -> float:
+    """The gap (m) the test starts from: ``approach`` above the sample's highest point. Where the path tilts the face
+    at the sample's top by theta, the face's edge stands a sin(theta) above its centre (a the face's radius), so the
+    start is h0 + approach + a sin(theta), theta the path's tilt at h0 + approach (once: the tilt changes by about
+    0.64 degrees per mm of gap, the edge's height then by a hundredth of a millimetre per millimetre of a 10 mm
+    face, well inside the approach)."""
     p = options.protocol
     start = food.height + p.approach
+    if food.diameter is None:
+        return start
+    deepest = p.target_gap(food.height)
+    task = face_path_task(model, options.side, np.array([0.0, 1.0]), np.array([start, deepest]), np.zeros(2), np.zeros(2),
+                          food.height, options.slide)
+    return start + food.diameter / 2 * float(np.sin(gap(model, options.side, task.q[:1])["tilt"][0]))
+
+
+def find_trigger(options: TpaOptions, model: Model, food: Food, check=None) -> float:
+    """The time (s) the plant's food force first reaches the trigger force on the approach from :func:`start_gap` at
+    the pre-test speed, interpolated between the ticks (the approach simulated until then)."""
+    p = options.protocol
+    start = start_gap(options, model, food)
     reach = p.approach + TRIGGER_SEARCH
     while True:
         t = np.arange(int(np.ceil((HOLD + p.blend + reach / p.pre_test_speed) * options.rate)) + 1) / options.rate
-        task = molar_path_task(model, options.side, t, *p.approach_path(start, t), name=f"approach to the {food.name}")
+        task = face_path_task(model, options.side, t, *p.approach_path(start, t), food.height, options.slide,
+                              name=f"approach to the {food.name}")
         parts = build(options.simulation, task)  # the loop alone: the approach's rows are not kept
         sim = simulate(parts.plant, parts.controller, parts.reference, options.rate, parts.sensor, check=check,
                        observer=parts.observer)
@@ -220,9 +259,10 @@ def run_tpa(options: TpaOptions, progress=None, check=None, simulated=None) -> T
     h_max = check_height(plant_model, food, options.side)
     step("the approach, until the trigger", stage="simulation")
     t_trigger = find_trigger(options, model, food, check)
-    profile = options.protocol.profile(food.height + options.protocol.approach, t_trigger, options.rate)
+    profile = options.protocol.profile(start_gap(options, model, food), t_trigger, options.rate)
     t = profile.times()
-    task = molar_path_task(model, options.side, t, *profile.path(t), name=f"texture test of the {food.name}")
+    task = face_path_task(model, options.side, t, *profile.path(t), food.height, options.slide,
+                          name=f"texture test of the {food.name}")
     result = compute(options.simulation, progress=step, check=check, task=task)
     if simulated is not None:
         simulated(result)
@@ -332,7 +372,7 @@ def tpa_from_log(options: TpaOptions) -> tuple[TpaAnalysis, dict, dict]:
     return analyse_estimate(curve, estimator["contact_force_N"]), curve, estimator
 
 
-__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult",
-           "analyse_estimate", "check_height",
+__all__ = ["CONTACT_HOLD", "NOISE_FACTOR", "SLIDE", "TPA_CONTROLLER", "TPA_METHOD", "TpaError", "TpaOptions", "TpaResult",
+           "analyse_estimate", "check_height", "start_gap",
            "estimate_from_log", "estimate_trigger", "find_trigger", "resolve_tpa", "run_tpa", "simulated_log",
            "texture_checks", "tpa_from_log"]
