@@ -548,3 +548,24 @@ def to_json(obj) -> str:
         return o
 
     return json.dumps(clean(obj), indent=2, allow_nan=False) + "\n"
+
+
+def reap(pid: int, report: int, failure: str) -> None:
+    """Wait for the forked process ``pid`` and read what it wrote to the pipe ``report`` (closed here); a process that
+    did not exit 0 raises RuntimeError, ``failure`` followed by what it wrote (its traceback)."""
+    _, status = os.waitpid(pid, 0)
+    message = b""
+    while chunk := os.read(report, 65536):
+        message += chunk
+    os.close(report)
+    if status != 0:
+        raise RuntimeError(f"{failure}:\n" + message.decode(errors="replace"))
+
+
+def kill(pid: int) -> None:
+    """Stop the forked process ``pid`` at once and reap it (gone already: nothing to do)."""
+    try:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    except (ProcessLookupError, ChildProcessError):
+        pass

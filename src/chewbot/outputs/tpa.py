@@ -19,7 +19,7 @@ import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from chewbot.files import Marker, atomic_folder, to_json
+from chewbot.files import Marker, atomic_folder, kill, reap, to_json
 from chewbot.food.tpa import MEASURES
 from chewbot.progress import SILENT, Progress
 
@@ -84,24 +84,13 @@ class TpaFolder:
         """Wait for the writing process; its failure raised here (RuntimeError with its traceback)."""
         if self.pid is None:
             return
-        _, status = os.waitpid(self.pid, 0)
-        self.pid = None
-        message = b""
-        while chunk := os.read(self.report, 65536):
-            message += chunk
-        os.close(self.report)
-        self.report = None
-        if status != 0:
-            raise RuntimeError("writing the simulation's files failed in the writing process:\n" + message.decode(errors="replace"))
+        pid, report, self.pid, self.report = self.pid, self.report, None, None
+        reap(pid, report, "writing the simulation's files failed in the writing process")
 
     def stop(self) -> None:
         """Stop the writing process at once (an error or a signal here)."""
         if self.pid is not None:
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-                os.waitpid(self.pid, 0)
-            except (ProcessLookupError, ChildProcessError):
-                pass
+            kill(self.pid)
             self.pid = None
         if self.report is not None:
             os.close(self.report)

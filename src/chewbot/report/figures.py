@@ -19,6 +19,7 @@ from typing import Callable
 
 import numpy as np
 
+from chewbot.files import kill, reap
 from chewbot.progress import SILENT, Progress
 from chewbot.report.plotting import save, subplots
 from chewbot.table import Table
@@ -225,21 +226,12 @@ class Drawer:
     def wait(self) -> None:
         os.close(self.go)
         self.go = None
-        _, status = os.waitpid(self.pid, 0)
-        self.pid = None
-        message = b""
-        while chunk := os.read(self.report, 65536):
-            message += chunk
-        if status != 0:
-            raise RuntimeError("drawing the figures failed in the drawing process:\n" + message.decode(errors="replace"))
+        pid, report, self.pid, self.report = self.pid, self.report, None, None
+        reap(pid, report, "drawing the figures failed in the drawing process")
 
     def stop(self) -> None:
         if self.pid is not None:
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-                os.waitpid(self.pid, 0)
-            except (ProcessLookupError, ChildProcessError):
-                pass
+            kill(self.pid)
             self.pid = None
         for fd in (self.tokens, self.fill, self.go, self.report):
             if fd is not None:
