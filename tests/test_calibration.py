@@ -142,6 +142,7 @@ def test_identify_recovers_every_combination_from_an_excitation_log_of_a_plant_t
     assert any("identified: J_1" in line and "shaft 1" in line for line in result.summary())
 
 
+@pytest.mark.slow  # a study over noise seeds (about 80 s); one noisy draw within its standard errors stays in the suite (test_identification -k with_noise)
 def test_the_standard_errors_match_the_spread_of_the_estimates_over_noise_seeds(folder):
     """Torque noise of 2 mN*m, five seeds: the estimates' deviations from the plant's values over the reported standard
     errors have a mean square near 1."""
