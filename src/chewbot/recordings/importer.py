@@ -338,7 +338,7 @@ def point_path(model: Model, b: np.ndarray, points: np.ndarray, names: tuple[str
     the fit (:data:`POINT_ORIENTATION_WEIGHT`); the pose puts b on the point. The rigid-fit residual is the markers'
     distances from the rigid body they form in the first frame, fitted to every frame (they keep their distances, as
     a face-bow triangle does); that they turn little against the excursion is the detection's rule
-    (:func:`~chewbot.recordings.anatomy.detect`), not a residual: issue 28's analyser, turning up to 1.4 deg, moves
+    (:func:`~chewbot.recordings.anatomy.detect`), not a residual: a wide-opening analyser recording turning up to 1.4 deg moves
     its points up to 1.65 mm from moving in parallel with their mean. One marker has none; two, or markers on one line, the change of each
     one's distance from their mean (a line's turn keeps those)."""
     mean = points.mean(axis=1)

@@ -75,8 +75,8 @@ PENALTY = 1e3
 REACH_UNIT = 0.01
 PROJECTION_ITERATIONS = 40
 _SQP = {
-    # qpOASES (an active-set solver for small dense QPs, bundled with CasADi): on the frames of the analyser like
-    # issue 28's that end 10-40 mm beyond the reach, qrqp took up to 5 ms per QP and left 12 of 141 frames
+    # qpOASES (an active-set solver for small dense QPs, bundled with CasADi): on the frames of
+    # the wide-opening analyser recording's that end 10-40 mm beyond the reach, qrqp took up to 5 ms per QP and left 12 of 141 frames
     # unconverged (stalled at costs up to 78 higher); qpOASES solved all 141 to a stationary point, ten times
     # faster, never at a higher cost (to 4e-12). Eigenvalues clipped where the Hessian is indefinite: qpOASES wants
     # a convex QP, and clipping keeps 3 iterations where "regularize" took ten times more
