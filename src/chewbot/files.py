@@ -30,9 +30,11 @@ import secrets
 import shutil
 import signal
 import threading
+import traceback
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from chewbot.errors import ChewbotError
 
@@ -548,6 +550,29 @@ def to_json(obj) -> str:
         return o
 
     return json.dumps(clean(obj), indent=2, allow_nan=False) + "\n"
+
+
+def forked(work: Callable[[], None], close: tuple[int, ...] = ()) -> tuple[int, int]:
+    """Run ``work`` in a forked process (POSIX) that stops at Ctrl-C or SIGTERM as the process group gets them and
+    closes the descriptors ``close`` it does not use: its id, and the read end of a pipe on which it writes its
+    traceback if ``work`` raises (read by :func:`reap`). The process never returns into the caller's frames."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        code = 0
+        try:
+            signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C reaches the process group: just stop
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            for fd in (read, *close):
+                os.close(fd)
+            work()
+        except BaseException:
+            code = 1
+            os.write(write, traceback.format_exc().encode()[-20000:])
+        finally:
+            os._exit(code)
+    os.close(write)
+    return pid, read
 
 
 def reap(pid: int, report: int, failure: str) -> None:

@@ -14,12 +14,10 @@ from __future__ import annotations
 
 import html
 import os
-import signal
-import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from chewbot.files import Marker, atomic_folder, kill, reap, to_json
+from chewbot.files import Marker, atomic_folder, forked, kill, reap, to_json
 from chewbot.food.tpa import MEASURES
 from chewbot.progress import SILENT, Progress
 
@@ -63,22 +61,7 @@ class TpaFolder:
             write_simulation_files(simulation, self.path, self.progress)
             return
         self.progress("writing the simulation's files (results.csv, run.json, figures, report.html) beside the estimate")
-        read, write = os.pipe()
-        self.pid = os.fork()
-        if self.pid == 0:  # the writing process: never returns into the caller's frames
-            code = 0
-            try:
-                signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C reaches the process group: just stop
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
-                os.close(read)
-                write_simulation_files(simulation, self.path)
-            except BaseException:
-                code = 1
-                os.write(write, traceback.format_exc().encode()[-20000:])
-            finally:
-                os._exit(code)
-        os.close(write)
-        self.report = read
+        self.pid, self.report = forked(lambda: write_simulation_files(simulation, self.path))
 
     def wait(self) -> None:
         """Wait for the writing process; its failure raised here (RuntimeError with its traceback)."""

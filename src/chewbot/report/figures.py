@@ -7,11 +7,9 @@ from __future__ import annotations
 import io
 import os
 import pickle
-import signal
 import struct
 import sys
 import tempfile
-import traceback
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -19,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from chewbot.files import kill, reap
+from chewbot.files import forked, kill, reap
 from chewbot.progress import SILENT, Progress
 from chewbot.report.plotting import save, subplots
 from chewbot.table import Table
@@ -178,28 +176,17 @@ class Drawer:
         self.data = tempfile.TemporaryFile()
         self.tokens, self.fill = os.pipe()
         self.go_read, self.go = os.pipe()
-        self.report, report = os.pipe()
-        self.pid = os.fork()
-        if self.pid == 0:  # the drawing process: never returns into the caller's frames
-            code = 0
-            try:
-                signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C reaches the process group: just stop
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
-                for fd in (self.fill, self.go, self.report):
-                    os.close(fd)
-                _warm_up()
-                if os.read(self.go_read, 1):
-                    self.data.seek(0)
-                    jobs = figure_jobs(*pickle.load(self.data))
-                    for _, draw in self.remaining(jobs):
-                        draw()
-            except BaseException:
-                code = 1
-                os.write(report, traceback.format_exc().encode()[-20000:])
-            finally:
-                os._exit(code)
-        for fd in (self.go_read, report):
-            os.close(fd)
+        self.pid, self.report = forked(self._draw, close=(self.fill, self.go))
+        os.close(self.go_read)
+
+    def _draw(self) -> None:
+        """The drawing process: matplotlib loaded, then the figures drawn as they are taken, once started."""
+        _warm_up()
+        if os.read(self.go_read, 1):
+            self.data.seek(0)
+            jobs = figure_jobs(*pickle.load(self.data))
+            for _, draw in self.remaining(jobs):
+                draw()
 
     def start(self, series: Table, method: str | None, folder: Path, contact: str, order: list[int]) -> None:
         """Hand the figures of :func:`figure_jobs` with these arguments to both processes, in ``order`` (their
