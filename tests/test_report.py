@@ -8,6 +8,7 @@ import os
 import re
 import shutil
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -250,12 +251,12 @@ def _chromium():
     return sync_api
 
 
-def _check_report_in_chromium(report: Path, screenshots: bool = False) -> None:
-    """Open ``report`` from disk in headless Chromium and assert: no exception thrown by the page, no console error,
-    no network request, every plot drawn, the 3D robot animated. An exception thrown by the page ends the wait at
-    once (it is caught by a listener installed before the page's own scripts run)."""
+@contextmanager
+def _browser_page(errors: list[str]):
+    """A page of headless Chromium (a fresh profile, removed after) whose thrown exceptions (also as
+    ``window.__thrown``, caught by a listener installed before the page's own scripts run), console errors and
+    network requests other than file: and data: are appended to ``errors``; the browser closed after."""
     sync_api = _chromium()
-    errors: list[str] = []
     profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
     try:
         with sync_api.sync_playwright() as p:
@@ -263,38 +264,49 @@ def _check_report_in_chromium(report: Path, screenshots: bool = False) -> None:
                 profile, executable_path=str(CHROMIUM), headless=True, viewport={"width": 1400, "height": 1000},
                 args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
                       "--disable-component-update", "--disable-sync"])
-            page = browser.new_page()
-            page.add_init_script("window.addEventListener('error', e => { window.__thrown = String(e.message); });")
-            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
-            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
-            page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
-            page.goto(report.as_uri())
-            page.wait_for_function("document.body && (document.body.dataset.plotsDrawn !== undefined || window.__thrown !== undefined)",
-                                   timeout=60_000)
-            thrown = page.evaluate("window.__thrown === undefined ? null : window.__thrown")
-            assert thrown is None and errors == [], (thrown, errors)
-            drawn = int(page.get_attribute("body", "data-plots-drawn"))
-            plots = page.eval_on_selector_all(".js-plotly-plot", "els => els.map(e => e.id)")
-            assert drawn == len(plots) >= 7  # robot, task space, joint space, bite force, transmission, tau, MCI
-            # each 2D plot has drawn its lines as SVG paths with data
-            lines = page.eval_on_selector_all(".js-plotly-plot:not(#robot)",
-                                              "els => els.map(e => e.querySelectorAll('.scatterlayer .trace path.js-line').length)")
-            assert all(n > 0 for n in lines), lines
-            # the 3D scene is a WebGL canvas of real size, with its animation frames
-            size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
-            assert size[0] > 300 and size[1] > 300
-            frames = page.evaluate("document.getElementById('robot')._transitionData._frames.length")
-            assert frames > 100
-            # jump to a frame inside a bite-force burst (the arrow shows) and keep a picture
-            assert page.evaluate("Plotly.animate('robot', ['1.640'], {frame: {duration: 0, redraw: true}, mode: 'immediate'}).then(() => 'shown')") == 'shown'
-            page.wait_for_timeout(500)
-            if screenshots:
-                ARTIFACTS.mkdir(exist_ok=True)
-                page.screenshot(path=str(ARTIFACTS / "report.png"))
-                page.screenshot(path=str(ARTIFACTS / "report-full.png"), full_page=True)
-            browser.close()
+            try:
+                page = browser.new_page()
+                page.add_init_script("window.addEventListener('error', e => { window.__thrown = String(e.message); });")
+                page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+                page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
+                page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
+                yield page
+            finally:
+                browser.close()
     finally:
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def _check_report_in_chromium(report: Path, screenshots: bool = False) -> None:
+    """Open ``report`` from disk in headless Chromium and assert: no exception thrown by the page, no console error,
+    no network request, every plot drawn, the 3D robot animated. An exception thrown by the page ends the wait at
+    once (it is caught by a listener installed before the page's own scripts run)."""
+    errors: list[str] = []
+    with _browser_page(errors) as page:
+        page.goto(report.as_uri())
+        page.wait_for_function("document.body && (document.body.dataset.plotsDrawn !== undefined || window.__thrown !== undefined)",
+                               timeout=60_000)
+        thrown = page.evaluate("window.__thrown === undefined ? null : window.__thrown")
+        assert thrown is None and errors == [], (thrown, errors)
+        drawn = int(page.get_attribute("body", "data-plots-drawn"))
+        plots = page.eval_on_selector_all(".js-plotly-plot", "els => els.map(e => e.id)")
+        assert drawn == len(plots) >= 7  # robot, task space, joint space, bite force, transmission, tau, MCI
+        # each 2D plot has drawn its lines as SVG paths with data
+        lines = page.eval_on_selector_all(".js-plotly-plot:not(#robot)",
+                                          "els => els.map(e => e.querySelectorAll('.scatterlayer .trace path.js-line').length)")
+        assert all(n > 0 for n in lines), lines
+        # the 3D scene is a WebGL canvas of real size, with its animation frames
+        size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
+        assert size[0] > 300 and size[1] > 300
+        frames = page.evaluate("document.getElementById('robot')._transitionData._frames.length")
+        assert frames > 100
+        # jump to a frame inside a bite-force burst (the arrow shows) and keep a picture
+        assert page.evaluate("Plotly.animate('robot', ['1.640'], {frame: {duration: 0, redraw: true}, mode: 'immediate'}).then(() => 'shown')") == 'shown'
+        page.wait_for_timeout(500)
+        if screenshots:
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "report.png"))
+            page.screenshot(path=str(ARTIFACTS / "report-full.png"), full_page=True)
     assert errors == []
 
 
@@ -351,26 +363,15 @@ def test_tpa_report_is_tables_and_figures_not_raw_json(tmp_path):
 @pytest.mark.browser
 def test_tpa_report_renders_in_headless_chromium(tmp_path):
     """tpa.html opened from disk: no exception or console error, no network request, both figures loaded."""
-    sync_api = _chromium()
+    _chromium()
     report = _tpa_folder(tmp_path) / "tpa.html"
     errors: list[str] = []
-    profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
-    try:
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch_persistent_context(profile, executable_path=str(CHROMIUM), headless=True,
-                                                           args=["--headless", "--no-sandbox", "--disable-gpu"])
-            page = browser.new_page()
-            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
-            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
-            page.on("request", lambda req: errors.append(f"network request {req.url}") if not req.url.startswith(("file:", "data:")) else None)
-            page.goto(report.as_uri())
-            page.wait_for_load_state("load")
-            widths = page.eval_on_selector_all("img", "els => els.map(e => e.naturalWidth)")
-            assert len(widths) == 2 and all(w > 300 for w in widths), widths
-            assert page.eval_on_selector_all("table", "els => els.length") >= 4
-            browser.close()
-    finally:
-        shutil.rmtree(profile, ignore_errors=True)
+    with _browser_page(errors) as page:
+        page.goto(report.as_uri())
+        page.wait_for_load_state("load")
+        widths = page.eval_on_selector_all("img", "els => els.map(e => e.naturalWidth)")
+        assert len(widths) == 2 and all(w > 300 for w in widths), widths
+        assert page.eval_on_selector_all("table", "els => els.length") >= 4
     assert errors == []
 
 
@@ -436,33 +437,21 @@ def test_the_food_sample_is_drawn_compressed_by_the_gap_and_crushed(food_run_fol
 def test_the_food_sample_shows_in_the_3d_view(food_run_folder):
     """report.html of simulate --food opened in Chromium: no exception or console error, the robot's scene has the
     food sample as a mesh, green before the fracture and brown after it, lower than h0 in the first compression."""
-    sync_api = _chromium()
     errors: list[str] = []
-    profile = tempfile.mkdtemp(prefix="chewbot-chromium-")
-    try:
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch_persistent_context(
-                profile, executable_path=str(CHROMIUM), headless=True, viewport={"width": 1400, "height": 1000},
-                args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run"])
-            page = browser.new_page()
-            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
-            page.on("pageerror", lambda exc: errors.append(f"the page threw: {exc}"))
-            page.goto((food_run_folder / "report.html").as_uri(), timeout=120_000)
-            page.wait_for_function("document.body.dataset.plotsDrawn !== undefined", timeout=120_000)
-            sample = "gd => gd.data.find(d => d.name.startsWith('food sample'))"
-            names = page.evaluate("document.getElementById('robot')._transitionData._frames.map(f => f.name)")
-            rows = _food_rows(food_run_folder)
-            t_break = float(rows["t"][np.argmax(rows["food_broken"] > 0)])
-            for when, colour in ((0.0, report_html.SAMPLE_COLOURS[False]), (float(rows["t"][-1]), report_html.SAMPLE_COLOURS[True])):
-                name = min(names, key=lambda n: abs(float(n) - when))
-                assert (float(name) < t_break) == (colour == report_html.SAMPLE_COLOURS[False])
-                page.evaluate(f"Plotly.animate('robot', ['{name}'], {{frame: {{duration: 0, redraw: true}}, mode: 'immediate'}})")
-                page.wait_for_timeout(300)
-                drawn = page.eval_on_selector("#robot", f"el => {{ const s = ({sample})(el); return [s.type, s.color, s.z.length]; }}")
-                assert drawn == ["mesh3d", colour, 2 + 2 * report_html.SAMPLE_SIDES]
-            size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
-            assert size[0] > 300 and size[1] > 300
-            browser.close()
-    finally:
-        shutil.rmtree(profile, ignore_errors=True)
+    with _browser_page(errors) as page:
+        page.goto((food_run_folder / "report.html").as_uri(), timeout=120_000)
+        page.wait_for_function("document.body.dataset.plotsDrawn !== undefined", timeout=120_000)
+        sample = "gd => gd.data.find(d => d.name.startsWith('food sample'))"
+        names = page.evaluate("document.getElementById('robot')._transitionData._frames.map(f => f.name)")
+        rows = _food_rows(food_run_folder)
+        t_break = float(rows["t"][np.argmax(rows["food_broken"] > 0)])
+        for when, colour in ((0.0, report_html.SAMPLE_COLOURS[False]), (float(rows["t"][-1]), report_html.SAMPLE_COLOURS[True])):
+            name = min(names, key=lambda n: abs(float(n) - when))
+            assert (float(name) < t_break) == (colour == report_html.SAMPLE_COLOURS[False])
+            page.evaluate(f"Plotly.animate('robot', ['{name}'], {{frame: {{duration: 0, redraw: true}}, mode: 'immediate'}})")
+            page.wait_for_timeout(300)
+            drawn = page.eval_on_selector("#robot", f"el => {{ const s = ({sample})(el); return [s.type, s.color, s.z.length]; }}")
+            assert drawn == ["mesh3d", colour, 2 + 2 * report_html.SAMPLE_SIDES]
+        size = page.eval_on_selector("#robot canvas", "c => [c.width, c.height]")
+        assert size[0] > 300 and size[1] > 300
     assert errors == []
