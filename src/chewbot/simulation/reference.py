@@ -38,6 +38,11 @@ class Reference:
     force: np.ndarray
     side: str
     _grid: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    # the force's three components each contiguous (interpolating a strided column copies it whole at every call)
+    _force_columns: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "_force_columns", np.ascontiguousarray(np.asarray(self.force, float).T))
 
     @classmethod
     def from_task(cls, model: Model, task: Task) -> Reference:
@@ -90,4 +95,4 @@ class Reference:
     def force_at(self, times) -> np.ndarray:
         """The bite force (M, 3) at ``times``, linear between the samples."""
         times = np.atleast_1d(np.asarray(times, float))
-        return np.stack([np.interp(times, self.t, self.force[:, j]) for j in range(3)], axis=1)
+        return np.stack([np.interp(times, self.t, column) for column in self._force_columns], axis=1)

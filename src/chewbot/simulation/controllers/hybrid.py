@@ -184,7 +184,6 @@ class HybridController:
     _moments: np.ndarray = field(default=None, init=False, repr=False)
     _z: float | None = field(default=None, init=False, repr=False)
     _t: float | None = field(default=None, init=False, repr=False)
-    _fz: np.ndarray = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         self._k = self.parts.section.stiffness_max_N_per_m
@@ -199,7 +198,6 @@ class HybridController:
         if not self._kernels:
             self._kernels = tuple(native(k) for k in self.kernels())
             self._shared = (self.parts.gains_vector(), model.molar(reference.side), model.vector())
-            self._fz = np.ascontiguousarray(reference.force[:, 2])  # the force reference's rate from one np.interp
         law, task = self._kernels
         gains, B, p = self._shared
         q_ref, dq_ref, ddq_ref, force = reference.state(t)
@@ -231,7 +229,7 @@ class HybridController:
                 linear = cov[0] ** 2 / var_u[0] >= cov[1] ** 2 / var_u[1]  # the law that fits better (R^2)
                 self._k = float(np.clip(slope[0] if linear else f * slope[1], g.stiffness_min_N_per_m, g.stiffness_max_N_per_m))
             dt = 1e-3
-            before, after = np.interp((t - dt / 2, t + dt / 2), reference.t, self._fz)
+            before, after = reference.force_at((t - dt / 2, t + dt / 2))[:, 2]
             df_ref = -(after - before) / dt
             w_f = 2 * np.pi * g.force_frequency_Hz
             kv, kp = 2 * g.force_damping * w_f, w_f**2
